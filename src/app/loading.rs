@@ -1,0 +1,193 @@
+//! Getting a scene into the page: which URL (the page's `#scene=` fragment or the demo next to
+//! the page), a streamed fetch that reports progress, and decoding.
+//!
+//! Decoding runs on the page's only thread in one go, after a repaint that shows "decoding".
+//! That is quick for the demo scene (a fraction of a second) but freezes the page for a few
+//! seconds on archives of hundreds of frames; chunked decoding belongs with the full annotator.
+use std::cell::RefCell;
+use std::rc::Rc;
+
+use wasm_bindgen::JsCast;
+use wasm_bindgen::prelude::*;
+use wasm_bindgen_futures::JsFuture;
+
+use crate::scene::{Scene, SceneError, read_archive};
+
+/// Loaded when the page names no scene.
+pub const DEFAULT_SCENE_URL: &str = "demo.scene.zip";
+
+/// Largest archive the page will download. wasm32 memory ends at 4 GiB and the decoded scene
+/// takes several times the archive's size, so more than this cannot be opened anyway.
+pub const MAX_ARCHIVE_BYTES: u64 = 1 << 30;
+
+/// The scene to load: `scene=<url>` from the page's fragment (`#scene=...&other=...`,
+/// URI-encoded), else [`DEFAULT_SCENE_URL`]. A relative URL is relative to the page.
+pub fn scene_url_from_page() -> String {
+    let hash = web_sys::window().and_then(|w| w.location().hash().ok()).unwrap_or_default();
+    scene_url_from_fragment(&hash).unwrap_or_else(|| DEFAULT_SCENE_URL.to_string())
+}
+
+fn scene_url_from_fragment(fragment: &str) -> Option<String> {
+    let fragment = fragment.strip_prefix('#').unwrap_or(fragment);
+    let value = fragment.split('&').find_map(|pair| pair.strip_prefix("scene="))?;
+    // An undecodable value is used as written: the fetch will then report what is wrong with it.
+    let url = js_sys::decode_uri_component(value).map(String::from).unwrap_or_else(|_| value.to_string());
+    (!url.trim().is_empty()).then_some(url)
+}
+
+/// Why a scene could not be loaded; each message names the URL.
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    #[error(
+        "{url}: cannot fetch ({detail}). The server may be unreachable, or it does not allow \
+         this page to read the file (CORS)"
+    )]
+    Network { url: String, detail: String },
+    #[error("{url}: the server answered HTTP {status} {status_text}")]
+    Http { url: String, status: u16, status_text: String },
+    #[error("{url}: the server sent an HTML page, not a scene archive (is the URL right?)")]
+    Html { url: String },
+    #[error("{url}: {bytes} bytes is more than this page can hold ({MAX_ARCHIVE_BYTES} bytes at most)")]
+    TooLarge { url: String, bytes: u64 },
+    #[error("{url}: the download broke off after {received} bytes: {detail}")]
+    Interrupted { url: String, received: u64, detail: String },
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+}
+
+/// Where a load stands; the UI draws it.
+#[derive(Debug)]
+pub enum LoadPhase {
+    Connecting,
+    /// `total` is the Content-Length when the server sent one (compressed size if encoded).
+    Downloading {
+        received: u64,
+        total: Option<u64>,
+    },
+    Decoding {
+        bytes: u64,
+    },
+    Finished(Result<Box<Scene>, LoadError>),
+    /// The result has been handed to the app.
+    Taken,
+}
+
+/// A scene load running in the background of the page.
+pub struct SceneLoad {
+    url: String,
+    phase: Rc<RefCell<LoadPhase>>,
+}
+
+impl SceneLoad {
+    /// Starts fetching `url`; `ctx` is asked to repaint whenever there is progress to show.
+    pub fn start(url: String, ctx: egui::Context) -> SceneLoad {
+        let phase = Rc::new(RefCell::new(LoadPhase::Connecting));
+        let task_phase = phase.clone();
+        let task_url = url.clone();
+        wasm_bindgen_futures::spawn_local(async move {
+            let result = load(&task_url, &task_phase, &ctx).await;
+            *task_phase.borrow_mut() = LoadPhase::Finished(result);
+            ctx.request_repaint();
+        });
+        SceneLoad { url, phase }
+    }
+
+    pub fn url(&self) -> &str {
+        &self.url
+    }
+
+    /// Runs `f` on the current phase (the phase stays shared with the loading task).
+    pub fn with_phase<R>(&self, f: impl FnOnce(&LoadPhase) -> R) -> R {
+        f(&self.phase.borrow())
+    }
+
+    /// The outcome, once: later calls return `None`.
+    pub fn take_result(&self) -> Option<Result<Box<Scene>, LoadError>> {
+        let mut phase = self.phase.borrow_mut();
+        if !matches!(*phase, LoadPhase::Finished(_)) {
+            return None;
+        }
+        match std::mem::replace(&mut *phase, LoadPhase::Taken) {
+            LoadPhase::Finished(result) => Some(result),
+            _ => None,
+        }
+    }
+}
+
+async fn load(url: &str, phase: &RefCell<LoadPhase>, ctx: &egui::Context) -> Result<Box<Scene>, LoadError> {
+    let bytes = download(url, phase, ctx).await?;
+    *phase.borrow_mut() = LoadPhase::Decoding { bytes: bytes.len() as u64 };
+    ctx.request_repaint();
+    // Let the page paint "decoding" before the thread is busy decoding.
+    sleep_ms(50).await;
+    let name = url.rsplit('/').next().filter(|n| !n.is_empty()).unwrap_or(url);
+    Ok(Box::new(read_archive(&bytes, name)?))
+}
+
+async fn download(url: &str, phase: &RefCell<LoadPhase>, ctx: &egui::Context) -> Result<Vec<u8>, LoadError> {
+    let network = |e: JsValue| LoadError::Network { url: url.into(), detail: js_error_text(&e) };
+    let window = web_sys::window().ok_or_else(|| network(JsValue::from_str("no window")))?;
+    let response: web_sys::Response = JsFuture::from(window.fetch_with_str(url)).await.map_err(network)?.unchecked_into();
+    if !response.ok() {
+        return Err(LoadError::Http { url: url.into(), status: response.status(), status_text: response.status_text() });
+    }
+    let headers = response.headers();
+    let content_type = headers.get("content-type").ok().flatten().unwrap_or_default();
+    if content_type.to_ascii_lowercase().starts_with("text/html") {
+        return Err(LoadError::Html { url: url.into() });
+    }
+    let total = headers.get("content-length").ok().flatten().and_then(|v| v.trim().parse::<u64>().ok());
+    if let Some(bytes) = total.filter(|&t| t > MAX_ARCHIVE_BYTES) {
+        return Err(LoadError::TooLarge { url: url.into(), bytes });
+    }
+    *phase.borrow_mut() = LoadPhase::Downloading { received: 0, total };
+    ctx.request_repaint();
+
+    let mut bytes = Vec::with_capacity(total.unwrap_or(0) as usize);
+    let Some(body) = response.body() else { return Ok(bytes) };
+    let reader = web_sys::ReadableStreamDefaultReader::new(&body).map_err(network)?;
+    let interrupted = |received: usize, e: JsValue| LoadError::Interrupted {
+        url: url.into(),
+        received: received as u64,
+        detail: js_error_text(&e),
+    };
+    loop {
+        let chunk: web_sys::ReadableStreamReadResult =
+            JsFuture::from(reader.read()).await.map_err(|e| interrupted(bytes.len(), e))?.unchecked_into();
+        if chunk.get_done().unwrap_or(false) {
+            break;
+        }
+        let data: js_sys::Uint8Array = chunk.get_value().unchecked_into();
+        let received = bytes.len() as u64 + data.length() as u64;
+        if received > MAX_ARCHIVE_BYTES {
+            let _ = reader.cancel();
+            return Err(LoadError::TooLarge { url: url.into(), bytes: received });
+        }
+        let start = bytes.len();
+        bytes.resize(start + data.length() as usize, 0);
+        data.copy_to(&mut bytes[start..]);
+        *phase.borrow_mut() = LoadPhase::Downloading { received, total };
+        ctx.request_repaint();
+    }
+    Ok(bytes)
+}
+
+/// Yields to the browser for `ms` milliseconds.
+async fn sleep_ms(ms: i32) {
+    let promise = js_sys::Promise::new(&mut |resolve, _reject| {
+        if let Some(window) = web_sys::window() {
+            let _ = window.set_timeout_with_callback_and_timeout_and_arguments_0(&resolve, ms);
+        } else {
+            let _ = resolve.call0(&JsValue::NULL);
+        }
+    });
+    let _ = JsFuture::from(promise).await;
+}
+
+/// The readable text of a JS exception or rejection value.
+pub fn js_error_text(value: &JsValue) -> String {
+    if let Some(error) = value.dyn_ref::<js_sys::Error>() {
+        return String::from(error.message());
+    }
+    value.as_string().unwrap_or_else(|| format!("{value:?}"))
+}

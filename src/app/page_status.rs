@@ -1,0 +1,30 @@
+//! A one-line status on `<body data-status="...">` for scripts and tests to read: the canvas
+//! itself cannot be inspected from outside. Forms: `loading`, `decoding`,
+//! `ready frames=N size=WxH frame=I`, `error: <message>` (shown in the app too), and
+//! `crashed: <message>` (the app is gone; `index.html` shows the message over the canvas).
+use std::cell::RefCell;
+
+thread_local! {
+    // Writing the DOM every frame is cheap but pointless; remember what is already there.
+    static LAST: RefCell<String> = const { RefCell::new(String::new()) };
+}
+
+/// Sets `document.body.dataset.status` when it differs from what was last set.
+pub fn set(status: &str) {
+    let unchanged = LAST.with(|last| match last.try_borrow_mut() {
+        Ok(last) if *last == status => true,
+        Ok(mut last) => {
+            status.clone_into(&mut last);
+            false
+        }
+        // Only when called re-entrantly from the panic hook: write through.
+        Err(_) => false,
+    });
+    if unchanged {
+        return;
+    }
+    if let Some(body) = web_sys::window().and_then(|w| w.document()).and_then(|d| d.body()) {
+        // Only fails for an invalid attribute name, and this one is a constant.
+        let _ = body.set_attribute("data-status", status);
+    }
+}

@@ -1,0 +1,72 @@
+//! Subcommands of the `scribblefield` binary, one module each.
+mod demo;
+mod info;
+mod pack;
+mod progress;
+
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand};
+
+pub type CliResult = Result<(), Box<dyn std::error::Error>>;
+
+#[derive(Parser)]
+#[command(name = "scribblefield", version, about = "Scribbles on a few RGB-D frames, propagated to dense masks by a neural field")]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Pack a capture (autolabel scene directory, 7-Scenes/TUM folder, or NeRF transforms.json) into a scene archive.
+    Pack(pack::PackArgs),
+    /// Print what a scene archive holds.
+    Info {
+        /// The `*.scene.zip` to inspect.
+        archive: PathBuf,
+    },
+    /// Render the built-in demo scene into a scene archive.
+    DemoScene(demo::DemoArgs),
+    /// Serve a directory (the web app) over HTTP on localhost.
+    Serve {
+        /// Directory to serve, e.g. `www`.
+        dir: PathBuf,
+        #[arg(long, default_value_t = 8080)]
+        port: u16,
+        /// Address to bind; the default only accepts connections from this machine.
+        #[arg(long, default_value = "127.0.0.1")]
+        bind: std::net::IpAddr,
+    },
+}
+
+pub fn run(cli: Cli) -> CliResult {
+    match cli.command {
+        Command::Pack(args) => pack::run(args),
+        Command::Info { archive } => info::run(&archive),
+        Command::DemoScene(args) => demo::run(args),
+        Command::Serve { dir, port, bind } => {
+            if !dir.is_dir() {
+                return Err(format!("{}: not a directory to serve", dir.display()).into());
+            }
+            println!("serving {} at http://{}:{port}/", dir.display(), bind);
+            scribblefield::serve::serve(&dir, std::net::SocketAddr::new(bind, port))
+                .map_err(|e| format!("serving {} on {bind}:{port}: {e}", dir.display()))?;
+            Ok(())
+        }
+    }
+}
+
+/// Refuses to overwrite an input or write an archive without the expected extension by mistake.
+fn check_output(out: &std::path::Path) -> CliResult {
+    let name = out.file_name().and_then(|n| n.to_str()).unwrap_or("");
+    if !name.ends_with(".zip") {
+        return Err(format!("{}: output must be a .scene.zip file", out.display()).into());
+    }
+    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        if !parent.is_dir() {
+            return Err(format!("{}: output directory does not exist", parent.display()).into());
+        }
+    }
+    Ok(())
+}

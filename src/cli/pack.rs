@@ -1,0 +1,43 @@
+use std::path::PathBuf;
+
+use clap::Args;
+use scribblefield::scene::import::{ImportOptions, import};
+use scribblefield::scene::write_archive_path;
+
+use super::{CliResult, check_output, progress};
+
+#[derive(Args)]
+pub struct PackArgs {
+    /// Capture folder (autolabel scene, 7-Scenes/TUM) or a NeRF `transforms.json` (or its folder).
+    input: PathBuf,
+    /// Output archive, e.g. `scene.scene.zip`.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Downscale so the longest image side is at most this many pixels (intrinsics follow).
+    #[arg(long)]
+    max_size: Option<u32>,
+    /// Keep every k-th frame.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    every: u32,
+    /// Keep at most this many frames (after --every).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    max_frames: Option<u32>,
+}
+
+pub fn run(args: PackArgs) -> CliResult {
+    check_output(&args.output)?;
+    let opts = ImportOptions { max_size: args.max_size, every: args.every, max_frames: args.max_frames };
+    let bar = progress::bar("loading");
+    let imported = import(&args.input, &opts, &mut |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })?;
+    bar.finish_and_clear();
+    for w in &imported.warnings {
+        eprintln!("warning: {w}");
+    }
+    write_archive_path(&imported.scene, &args.output)?;
+    println!("packed {} ({:?} layout) into {}", args.input.display(), imported.layout, args.output.display());
+    print!("{}", imported.scene.summary());
+    Ok(())
+}

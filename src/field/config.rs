@@ -1,0 +1,438 @@
+//! The field's configuration: architecture, sampling, losses and optimiser (DESIGN §5).
+//!
+//! Every size the CPU reference and the GPU kernels need is derived from here (see the
+//! `*_dims` methods), so the two cannot disagree about a shape. Deserialising fills missing
+//! fields with the defaults and rejects unknown ones, so a `--config` file may name only what
+//! it changes and a typo fails loudly; `validate` then checks every value.
+use serde::{Deserialize, Serialize};
+
+/// How a normalized position p ∈ [0,1]³ is encoded before the density MLP.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Encoding {
+    /// Multiresolution hash grid concatenated with a sin/cos encoding of `frequencies`
+    /// octaves (the paper's choice; 16·2 + 6·2 = 44 values by default).
+    HashFreq { frequencies: u32 },
+    /// Sin/cos encoding only (the NeRF-style baseline; 6·L values).
+    FreqOnly { frequencies: u32 },
+    /// Hash grid only (the instant-ngp baseline).
+    HashOnly,
+}
+
+impl Encoding {
+    pub fn uses_hash_grid(&self) -> bool {
+        !matches!(self, Encoding::FreqOnly { .. })
+    }
+
+    /// Octaves of the frequency encoding; 0 when it is not used.
+    pub fn frequencies(&self) -> u32 {
+        match *self {
+            Encoding::HashFreq { frequencies } | Encoding::FreqOnly { frequencies } => frequencies,
+            Encoding::HashOnly => 0,
+        }
+    }
+
+    /// The paper's frequency-only baseline (L = 10).
+    pub fn freq_only_baseline() -> Encoding {
+        Encoding::FreqOnly { frequencies: 10 }
+    }
+}
+
+impl Default for Encoding {
+    fn default() -> Self {
+        Encoding::HashFreq { frequencies: 2 }
+    }
+}
+
+/// Weights of the four loss terms (DESIGN §5).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LossWeights {
+    pub rgb: f32,
+    pub depth: f32,
+    pub semantic: f32,
+    pub feature: f32,
+}
+
+impl Default for LossWeights {
+    fn default() -> Self {
+        LossWeights {
+            rgb: 1.0,
+            depth: 0.1,
+            semantic: 1.0,
+            feature: 0.5,
+        }
+    }
+}
+
+/// Adam with bias correction (see `reference::adam` for the exact update the GPU must match).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AdamConfig {
+    pub beta1: f32,
+    pub beta2: f32,
+    pub epsilon: f32,
+    /// Learning rate while warming up on colour, depth and features without labels.
+    pub lr_warmup: f32,
+    /// Learning rate once the user annotates (smaller, so the geometry learned so far stays).
+    pub lr_annotating: f32,
+}
+
+impl Default for AdamConfig {
+    fn default() -> Self {
+        AdamConfig {
+            beta1: 0.9,
+            beta2: 0.99,
+            epsilon: 1e-15,
+            lr_warmup: 5e-3,
+            lr_annotating: 1e-3,
+        }
+    }
+}
+
+/// The whole model configuration. `Default` is DESIGN §5 (hash table 2^19 per level).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FieldConfig {
+    pub encoding: Encoding,
+    /// Hash-grid levels (ignored by `FreqOnly`).
+    pub hash_levels: u32,
+    pub hash_features_per_level: u32,
+    /// Entries per level = 2^log2_hash_table_size.
+    pub log2_hash_table_size: u32,
+    /// Cells per axis of the coarsest level.
+    pub hash_base_resolution: u32,
+    /// Growth of the resolution from one level to the next.
+    pub hash_level_scale: f32,
+    /// Hidden width and number of hidden layers of the density MLP.
+    pub density_width: u32,
+    pub density_layers: u32,
+    /// Geometry feature passed on from the density MLP (its output is 1 + this: h₀ gives σ).
+    pub geometry_dim: u32,
+    pub color_width: u32,
+    pub color_layers: u32,
+    pub feature_width: u32,
+    pub feature_layers: u32,
+    /// Dimension of the rendered feature f (and of the archive's codes).
+    pub feature_dim: u32,
+    /// Hidden width of the semantic head (one hidden layer).
+    pub semantic_width: u32,
+    pub num_classes: u32,
+    /// Whether the 0.5·|f̂ − code|₁ term is trained. Off keeps the architecture unchanged
+    /// and only drops the loss term, so the ablation measures the supervision alone.
+    pub feature_supervision: bool,
+    /// Samples spread stratified over the whole clipped ray [near, far].
+    pub samples_coarse: u32,
+    /// Samples stratified in the band around the measured depth (spread over [near, far] too
+    /// when the ray has no valid depth, so every ray has the same sample count).
+    pub samples_fine: u32,
+    /// Half-width of the band around the measured surface, as a fraction of the scene box
+    /// diagonal (0.02 of a 1.5 m box is 3 cm, a few times the sensor noise).
+    pub surface_band_fraction: f32,
+    pub loss: LossWeights,
+    pub adam: AdamConfig,
+    pub batch_rays: u32,
+}
+
+impl Default for FieldConfig {
+    fn default() -> Self {
+        FieldConfig {
+            encoding: Encoding::default(),
+            hash_levels: 16,
+            hash_features_per_level: 2,
+            log2_hash_table_size: 19,
+            hash_base_resolution: 16,
+            hash_level_scale: 2.0,
+            density_width: 128,
+            density_layers: 2,
+            geometry_dim: 15,
+            color_width: 128,
+            color_layers: 2,
+            feature_width: 64,
+            feature_layers: 2,
+            feature_dim: 64,
+            semantic_width: 64,
+            num_classes: 2,
+            feature_supervision: true,
+            samples_coarse: 16,
+            samples_fine: 48,
+            surface_band_fraction: 0.02,
+            loss: LossWeights::default(),
+            adam: AdamConfig::default(),
+            batch_rays: 4096,
+        }
+    }
+}
+
+/// A configuration value that cannot work, named by its field.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("field config: `{field}` = {value}: {problem}")]
+pub struct ConfigError {
+    pub field: &'static str,
+    pub value: String,
+    pub problem: String,
+}
+
+/// Finest hash-grid resolution allowed: cell coordinates must stay exact in f32 positions
+/// (p·res keeps ~2^-4 of a cell at 2^20) and in u32 hash arithmetic.
+const MAX_HASH_RESOLUTION: f64 = (1u32 << 20) as f64;
+
+/// Size of the output of the first density layer etc. is bounded so a bad config fails here
+/// rather than as an allocation failure on the GPU.
+const MAX_WIDTH: u32 = 1024;
+
+impl FieldConfig {
+    /// A small model for tests and quick browser sessions: 2^14 entries, 8 levels, width 32.
+    pub fn small() -> FieldConfig {
+        FieldConfig {
+            hash_levels: 8,
+            log2_hash_table_size: 14,
+            density_width: 32,
+            color_width: 32,
+            feature_width: 32,
+            semantic_width: 32,
+            samples_coarse: 8,
+            samples_fine: 24,
+            batch_rays: 1024,
+            ..FieldConfig::default()
+        }
+    }
+
+    pub fn hash_table_size(&self) -> usize {
+        1usize << self.log2_hash_table_size
+    }
+
+    pub fn samples_per_ray(&self) -> usize {
+        (self.samples_coarse + self.samples_fine) as usize
+    }
+
+    /// Values produced by the hash grid (0 without one).
+    pub fn hash_encoding_dim(&self) -> usize {
+        if self.encoding.uses_hash_grid() {
+            (self.hash_levels * self.hash_features_per_level) as usize
+        } else {
+            0
+        }
+    }
+
+    /// Values produced by the frequency encoding: sin and cos per octave per axis.
+    pub fn frequency_encoding_dim(&self) -> usize {
+        6 * self.encoding.frequencies() as usize
+    }
+
+    /// Input of the density MLP: [hash grid values, frequency values].
+    pub fn encoding_dim(&self) -> usize {
+        self.hash_encoding_dim() + self.frequency_encoding_dim()
+    }
+
+    /// Layer sizes [in, hidden…, out] of the density MLP; out = [h₀, geometry feature].
+    pub fn density_dims(&self) -> Vec<usize> {
+        mlp_dims(
+            self.encoding_dim(),
+            self.density_width,
+            self.density_layers,
+            1 + self.geometry_dim as usize,
+        )
+    }
+
+    /// Colour MLP: [SH degree 4 (16), geometry feature] → hidden… → 3.
+    pub fn color_dims(&self) -> Vec<usize> {
+        mlp_dims(16 + self.geometry_dim as usize, self.color_width, self.color_layers, 3)
+    }
+
+    /// Feature MLP: geometry feature → hidden… → f.
+    pub fn feature_dims(&self) -> Vec<usize> {
+        mlp_dims(
+            self.geometry_dim as usize,
+            self.feature_width,
+            self.feature_layers,
+            self.feature_dim as usize,
+        )
+    }
+
+    /// Semantic head: [relu(f), geometry feature] → width → classes.
+    pub fn semantic_dims(&self) -> Vec<usize> {
+        mlp_dims(
+            (self.feature_dim + self.geometry_dim) as usize,
+            self.semantic_width,
+            1,
+            self.num_classes as usize,
+        )
+    }
+
+    /// Checks every value; the error names the first bad field and its value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let c = self;
+        match c.encoding {
+            Encoding::HashFreq { frequencies } | Encoding::FreqOnly { frequencies } => {
+                in_range("encoding.frequencies", frequencies, 1, 16)?
+            }
+            Encoding::HashOnly => {}
+        }
+        if c.encoding.uses_hash_grid() {
+            in_range("hash_levels", c.hash_levels, 1, 32)?;
+            in_range("hash_features_per_level", c.hash_features_per_level, 1, 8)?;
+            in_range("log2_hash_table_size", c.log2_hash_table_size, 4, 24)?;
+            in_range("hash_base_resolution", c.hash_base_resolution, 1, 1 << 16)?;
+            if !(c.hash_level_scale.is_finite() && c.hash_level_scale >= 1.0) {
+                return Err(bad(
+                    "hash_level_scale",
+                    c.hash_level_scale,
+                    "must be a finite number >= 1",
+                ));
+            }
+            let finest = c.hash_base_resolution as f64 * (c.hash_level_scale as f64).powi(c.hash_levels as i32 - 1);
+            if finest > MAX_HASH_RESOLUTION {
+                return Err(bad(
+                    "hash_levels",
+                    c.hash_levels,
+                    &format!(
+                        "finest level would have {finest:.0} cells per axis, above the limit {MAX_HASH_RESOLUTION}"
+                    ),
+                ));
+            }
+        }
+        in_range("density_width", c.density_width, 1, MAX_WIDTH)?;
+        in_range("density_layers", c.density_layers, 1, 8)?;
+        in_range("geometry_dim", c.geometry_dim, 1, MAX_WIDTH)?;
+        in_range("color_width", c.color_width, 1, MAX_WIDTH)?;
+        in_range("color_layers", c.color_layers, 1, 8)?;
+        in_range("feature_width", c.feature_width, 1, MAX_WIDTH)?;
+        in_range("feature_layers", c.feature_layers, 1, 8)?;
+        in_range("feature_dim", c.feature_dim, 1, MAX_WIDTH)?;
+        in_range("semantic_width", c.semantic_width, 1, MAX_WIDTH)?;
+        // Class ids share u8 masks with the void id 255.
+        in_range("num_classes", c.num_classes, 1, 255)?;
+        in_range("samples_coarse", c.samples_coarse, 1, 1024)?;
+        in_range("samples_fine", c.samples_fine, 0, 1024)?;
+        if !(c.surface_band_fraction.is_finite() && c.surface_band_fraction > 0.0 && c.surface_band_fraction < 1.0) {
+            return Err(bad(
+                "surface_band_fraction",
+                c.surface_band_fraction,
+                "must be in (0, 1)",
+            ));
+        }
+        let weights = [
+            ("loss.rgb", c.loss.rgb),
+            ("loss.depth", c.loss.depth),
+            ("loss.semantic", c.loss.semantic),
+            ("loss.feature", c.loss.feature),
+        ];
+        for (field, w) in weights {
+            if !(w.is_finite() && w >= 0.0) {
+                return Err(bad(field, w, "must be a finite number >= 0"));
+            }
+        }
+        for (field, beta) in [("adam.beta1", c.adam.beta1), ("adam.beta2", c.adam.beta2)] {
+            if !(0.0..1.0).contains(&beta) {
+                return Err(bad(field, beta, "must be in [0, 1)"));
+            }
+        }
+        let positive = [
+            ("adam.epsilon", c.adam.epsilon),
+            ("adam.lr_warmup", c.adam.lr_warmup),
+            ("adam.lr_annotating", c.adam.lr_annotating),
+        ];
+        for (field, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(bad(field, v, "must be a finite number > 0"));
+            }
+        }
+        in_range("batch_rays", c.batch_rays, 1, 1 << 22)?;
+        Ok(())
+    }
+}
+
+fn mlp_dims(input: usize, width: u32, hidden_layers: u32, output: usize) -> Vec<usize> {
+    let mut dims = vec![input];
+    dims.extend(std::iter::repeat_n(width as usize, hidden_layers as usize));
+    dims.push(output);
+    dims
+}
+
+fn bad(field: &'static str, value: impl std::fmt::Display, problem: &str) -> ConfigError {
+    ConfigError {
+        field,
+        value: value.to_string(),
+        problem: problem.to_string(),
+    }
+}
+
+fn in_range(field: &'static str, value: u32, min: u32, max: u32) -> Result<(), ConfigError> {
+    if value < min || value > max {
+        return Err(bad(field, value, &format!("must be between {min} and {max}")));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_follow_the_design() {
+        let c = FieldConfig::default();
+        c.validate().unwrap();
+        assert_eq!(c.encoding_dim(), 44);
+        assert_eq!(c.density_dims(), vec![44, 128, 128, 16]);
+        assert_eq!(c.color_dims(), vec![31, 128, 128, 3]);
+        assert_eq!(c.feature_dims(), vec![15, 64, 64, 64]);
+        assert_eq!(c.semantic_dims(), vec![79, 64, 2]);
+        FieldConfig::small().validate().unwrap();
+    }
+
+    #[test]
+    fn baseline_encodings_change_the_input_width() {
+        let freq = FieldConfig {
+            encoding: Encoding::freq_only_baseline(),
+            ..FieldConfig::default()
+        };
+        assert_eq!(freq.encoding_dim(), 60);
+        let hash = FieldConfig {
+            encoding: Encoding::HashOnly,
+            ..FieldConfig::default()
+        };
+        assert_eq!(hash.encoding_dim(), 32);
+    }
+
+    #[test]
+    fn partial_json_fills_defaults_and_typos_fail() {
+        let c: FieldConfig =
+            serde_json::from_str(r#"{"log2_hash_table_size": 14, "encoding": {"kind": "hash_only"}}"#).unwrap();
+        assert_eq!(c.log2_hash_table_size, 14);
+        assert_eq!(c.encoding, Encoding::HashOnly);
+        assert_eq!(c.density_width, 128);
+        let back: FieldConfig = serde_json::from_str(&serde_json::to_string(&c).unwrap()).unwrap();
+        assert_eq!(back, c);
+        assert!(serde_json::from_str::<FieldConfig>(r#"{"hash_level": 3}"#).is_err());
+    }
+
+    #[test]
+    fn errors_name_the_field_and_value() {
+        let c = FieldConfig {
+            num_classes: 0,
+            ..FieldConfig::default()
+        };
+        let e = c.validate().unwrap_err();
+        assert_eq!(e.field, "num_classes");
+        assert!(e.to_string().contains("`num_classes` = 0"), "{e}");
+        let c = FieldConfig {
+            hash_levels: 24,
+            ..FieldConfig::default()
+        };
+        assert_eq!(c.validate().unwrap_err().field, "hash_levels");
+        let c = FieldConfig {
+            adam: AdamConfig {
+                beta2: 1.0,
+                ..AdamConfig::default()
+            },
+            ..FieldConfig::default()
+        };
+        assert_eq!(c.validate().unwrap_err().field, "adam.beta2");
+        let c = FieldConfig {
+            encoding: Encoding::FreqOnly { frequencies: 0 },
+            ..FieldConfig::default()
+        };
+        assert_eq!(c.validate().unwrap_err().field, "encoding.frequencies");
+    }
+}

@@ -1,0 +1,16 @@
+//! The neural field: config, parameter layout, CPU reference, GPU trainer, renderer.
+//!
+//! `reference` is the plain-Rust spec of every stage of the training step (forward and
+//! backward); the GPU kernels are tested against it, and it is proved by finite differences.
+//!
+//! Size of the default model (`FieldConfig::default()`, C classes): hash table 16 × 2^19 × 2 =
+//! 16,777,216 values + MLPs 24,064 (density) + 20,736 (colour) + 9,152 (feature) +
+//! 5,056 + 64·C (semantic), i.e. 16,836,352 f32 (≈ 64 MiB) for C = 2. The trainer keeps four
+//! buffers of that length (parameters, gradient, Adam m and v).
+pub mod config;
+pub mod params;
+pub mod reference;
+pub mod rng;
+
+pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LossWeights};
+pub use params::{MlpLayout, ParamLayout};

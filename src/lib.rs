@@ -1,0 +1,11 @@
+//! scribblefield: scribbles on a few RGB-D frames, propagated to dense masks by a neural field.
+#[cfg(target_arch = "wasm32")]
+pub mod app;
+pub mod field;
+pub mod gpu;
+pub mod labels;
+pub mod scene;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod serve;
+#[cfg(target_arch = "wasm32")]
+mod web;

@@ -1,0 +1,247 @@
+//! The part every importer shares once it knows which files make up each frame: choosing the
+//! frames to keep, decoding them, checking their sizes agree, and downscaling consistently.
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use super::ImportOptions;
+use super::images::{load_depth, load_gt, load_rgb};
+use super::resize::{resize_nearest, resize_rgb, same_aspect, target_size};
+use crate::scene::archive::limits;
+use crate::scene::camera::Pose;
+use crate::scene::error::{Result, SceneError};
+use crate::scene::scene::Frame;
+
+/// The files and pose of one frame of a capture.
+pub(super) struct FrameFiles {
+    /// How the capture names the frame (a file stem), kept as `Frame::source`.
+    pub name: String,
+    pub rgb: PathBuf,
+    pub depth: Option<PathBuf>,
+    pub gt: Option<PathBuf>,
+    /// Camera-to-world, OpenCV axes.
+    pub pose: Pose,
+}
+
+/// The files directly in `dir` whose extension is one of `exts` (lower case; matched ignoring
+/// case), keyed by the rest of the name. Two files for the same frame are an error.
+pub(super) fn files_by_stem(dir: &Path, exts: &[&str], suffix: &str) -> Result<BTreeMap<String, PathBuf>> {
+    let entries = std::fs::read_dir(dir).map_err(|e| SceneError::io(dir, e))?;
+    let mut out = BTreeMap::new();
+    for entry in entries {
+        let path = entry.map_err(|e| SceneError::io(dir, e))?.path();
+        let Some(file_name) = path.file_name().and_then(|n| n.to_str()) else { continue };
+        let Some((stem, ext)) = file_name.rsplit_once('.') else { continue };
+        let Some(stem) = stem.strip_suffix(suffix) else { continue };
+        if stem.is_empty() || !exts.contains(&ext.to_ascii_lowercase().as_str()) || !path.is_file() {
+            continue;
+        }
+        if let Some(other) = out.insert(stem.to_string(), path.clone()) {
+            return Err(SceneError::invalid(
+                path.display().to_string(),
+                format!("two files for frame {stem:?} (also {}); remove one", other.display()),
+            ));
+        }
+    }
+    Ok(out)
+}
+
+/// Frame names in capture order: numerically when all names are numbers (so frame 10 follows
+/// frame 9 even without zero padding), otherwise alphabetically.
+pub(super) fn frame_order<'a>(names: impl IntoIterator<Item = &'a String>) -> Vec<String> {
+    let mut names: Vec<String> = names.into_iter().cloned().collect();
+    if names.iter().all(|n| n.parse::<u64>().is_ok()) {
+        names.sort_by_key(|n| (n.parse::<u64>().unwrap_or(u64::MAX), n.clone()));
+    } else {
+        names.sort();
+    }
+    names
+}
+
+/// How a layout marks missing depth besides 0.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(super) enum InvalidDepth {
+    /// Only 0 means "no reading".
+    ZeroOnly,
+    /// 65535 also means "no reading" (7-Scenes); it is stored as 0.
+    ZeroAndMax,
+}
+
+pub(super) struct Loaded {
+    pub frames: Vec<Frame>,
+    /// Size of the capture's colour images.
+    pub native: (u32, u32),
+    /// Size of the imported frames.
+    pub size: (u32, u32),
+    pub notes: Vec<String>,
+}
+
+/// The indices of frames to keep out of `count`: every `every`-th, then at most `max_frames`.
+/// Returns notes describing what was dropped.
+pub(super) fn select(count: usize, opts: &ImportOptions) -> Result<(Vec<usize>, Vec<String>)> {
+    if opts.every == 0 {
+        return Err(SceneError::invalid("options", "--every must be at least 1"));
+    }
+    if opts.max_frames == Some(0) {
+        return Err(SceneError::invalid("options", "--max-frames must be at least 1"));
+    }
+    if opts.max_size == Some(0) {
+        return Err(SceneError::invalid("options", "--max-size must be at least 1"));
+    }
+    let mut keep: Vec<usize> = (0..count).step_by(opts.every as usize).collect();
+    let mut notes = Vec::new();
+    if opts.every > 1 {
+        notes.push(format!("kept one frame in {} ({} of {}, --every)", opts.every, keep.len(), count));
+    }
+    if let Some(m) = opts.max_frames {
+        if keep.len() > m as usize {
+            notes.push(format!("kept the first {m} of {} selected frames (--max-frames)", keep.len()));
+            keep.truncate(m as usize);
+        }
+    }
+    if keep.len() > limits::MAX_FRAMES as usize {
+        return Err(SceneError::invalid(
+            "options",
+            format!(
+                "{} frames exceed the archive limit of {}; use --every or --max-frames",
+                keep.len(),
+                limits::MAX_FRAMES
+            ),
+        ));
+    }
+    Ok((keep, notes))
+}
+
+/// Decodes the frames, downscaling to at most `max_size` on the longest side. Depth and ground
+/// truth of a different size than the colour image are resampled onto it (nearest) when the
+/// aspect ratios agree, since some RGB-D sensors record depth at a lower resolution of the same
+/// field of view; a different aspect ratio means the images do not cover the same view: error.
+pub(super) fn load_frames(
+    files: Vec<FrameFiles>,
+    max_size: Option<u32>,
+    invalid: InvalidDepth,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Loaded> {
+    let total = files.len();
+    progress(0, total);
+    let mut frames = Vec::with_capacity(total);
+    let mut sizes: Option<((u32, u32), (u32, u32))> = None;
+    let mut notes = Vec::new();
+    let mut resampled_depth = false;
+    for (i, f) in files.into_iter().enumerate() {
+        let rgb = load_rgb(&f.rgb)?;
+        let (native, size) = match sizes {
+            Some(s) => s,
+            None => {
+                let native = rgb.dimensions();
+                let size = target_size(native, max_size);
+                check_pixel_budget(size, total, &f.rgb.display().to_string())?;
+                if size != native {
+                    notes.push(format!(
+                        "resized from {}x{} to {}x{} (longest side {}); intrinsics scaled to match",
+                        native.0, native.1, size.0, size.1, size.0.max(size.1)
+                    ));
+                }
+                sizes = Some((native, size));
+                (native, size)
+            }
+        };
+        if rgb.dimensions() != native {
+            return Err(SceneError::invalid(
+                f.rgb.display().to_string(),
+                format!(
+                    "image is {}x{}, but the capture's first image is {}x{} (all colour images must have the same size)",
+                    rgb.width(),
+                    rgb.height(),
+                    native.0,
+                    native.1
+                ),
+            ));
+        }
+        let rgb = resize_rgb(&rgb, size);
+        let depth = match &f.depth {
+            Some(path) => {
+                let mut d = load_depth(path)?;
+                if d.dimensions() != native {
+                    check_resamplable(d.dimensions(), native, &path.display().to_string(), "depth")?;
+                    resampled_depth = true;
+                }
+                if invalid == InvalidDepth::ZeroAndMax {
+                    d.pixels_mut().filter(|p| p.0[0] == u16::MAX).for_each(|p| p.0[0] = 0);
+                }
+                Some(resize_nearest(&d, size))
+            }
+            None => None,
+        };
+        let gt = match &f.gt {
+            Some(path) => {
+                let g = load_gt(path)?;
+                if g.dimensions() != native {
+                    check_resamplable(g.dimensions(), native, &path.display().to_string(), "ground truth")?;
+                }
+                Some(resize_nearest(&g, size))
+            }
+            None => None,
+        };
+        frames.push(Frame { pose: f.pose, rgb, depth, gt, source: Some(f.name) });
+        progress(i + 1, total);
+    }
+    let (native, size) = sizes.ok_or_else(|| SceneError::invalid("capture", "no frames to import"))?;
+    if resampled_depth {
+        notes.push("depth recorded at a different resolution was resampled (nearest) onto the colour images".into());
+    }
+    Ok(Loaded { frames, native, size, notes })
+}
+
+fn check_resamplable(got: (u32, u32), native: (u32, u32), file: &str, what: &str) -> Result<()> {
+    if same_aspect(got, native) {
+        return Ok(());
+    }
+    Err(SceneError::invalid(
+        file,
+        format!(
+            "{what} is {}x{}, which does not match the colour image's {}x{} (nor its aspect ratio)",
+            got.0, got.1, native.0, native.1
+        ),
+    ))
+}
+
+/// Fails early, before decoding thousands of frames, when the result could not be archived.
+fn check_pixel_budget(size: (u32, u32), frames: usize, first: &str) -> Result<()> {
+    let total = size.0 as u64 * size.1 as u64 * frames as u64;
+    if total > limits::MAX_TOTAL_PIXELS {
+        return Err(SceneError::invalid(
+            first,
+            format!(
+                "{frames} frames of {}x{} are {total} pixels, over the archive limit of {}; use --max-size, --every or --max-frames",
+                size.0,
+                size.1,
+                limits::MAX_TOTAL_PIXELS
+            ),
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_sort_numerically() {
+        let names: Vec<String> = ["10", "9", "011", "2"].iter().map(|s| s.to_string()).collect();
+        assert_eq!(frame_order(&names), vec!["2", "9", "10", "011"]);
+        let mixed: Vec<String> = ["2", "10", "1a"].iter().map(|s| s.to_string()).collect();
+        assert_eq!(frame_order(&mixed), vec!["10", "1a", "2"]);
+    }
+
+    #[test]
+    fn selection_applies_every_then_max() {
+        let opts = ImportOptions { every: 3, max_frames: Some(2), ..Default::default() };
+        let (keep, notes) = select(10, &opts).unwrap();
+        assert_eq!(keep, vec![0, 3]);
+        assert_eq!(notes.len(), 2);
+        assert_eq!(select(5, &ImportOptions::default()).unwrap().0, vec![0, 1, 2, 3, 4]);
+        let zero = ImportOptions { every: 0, ..Default::default() };
+        assert!(select(5, &zero).unwrap_err().to_string().contains("--every"));
+    }
+}

@@ -1,0 +1,107 @@
+//! Decoding a capture's image files with size limits, checking each is the kind of image its
+//! role needs (colour, 16-bit depth, 8-bit class ids) and naming the file when it is not.
+use std::path::Path;
+
+use image::{DynamicImage, GrayImage, ImageReader, RgbImage};
+
+use super::resize::Mask16;
+use crate::scene::archive::limits;
+use crate::scene::error::{Result, SceneError};
+use crate::scene::scene::DepthImage;
+
+/// Bytes searched at the end of a JPEG for its end-of-image marker.
+const JPEG_TAIL: usize = 1024;
+
+fn name(path: &Path) -> String {
+    path.display().to_string()
+}
+
+/// Decodes any supported image, refusing absurd sizes before allocating.
+pub(super) fn decode(path: &Path) -> Result<DynamicImage> {
+    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    if bytes.is_empty() {
+        return Err(SceneError::invalid(name(path), "image file is empty"));
+    }
+    let mut reader = ImageReader::new(std::io::Cursor::new(&bytes[..]))
+        .with_guessed_format()
+        .map_err(|e| SceneError::io(path, e))?;
+    if reader.format() == Some(image::ImageFormat::Jpeg) {
+        check_jpeg_complete(&bytes, path)?;
+    }
+    let mut lim = image::Limits::default();
+    lim.max_image_width = Some(limits::MAX_SIDE);
+    lim.max_image_height = Some(limits::MAX_SIDE);
+    lim.max_alloc = Some(limits::MAX_SIDE as u64 * limits::MAX_SIDE as u64 * 8);
+    reader.limits(lim);
+    reader.decode().map_err(|source| SceneError::Image { file: name(path), source })
+}
+
+/// The JPEG decoder fills a cut-off file with grey instead of failing, so a truncated JPEG
+/// (a copy interrupted half way) would be imported silently; its missing end marker gives it away.
+fn check_jpeg_complete(bytes: &[u8], path: &Path) -> Result<()> {
+    let tail = &bytes[bytes.len().saturating_sub(JPEG_TAIL)..];
+    if tail.windows(2).any(|w| w == [0xFF, 0xD9]) {
+        Ok(())
+    } else {
+        Err(SceneError::invalid(name(path), "JPEG is truncated (no end-of-image marker)"))
+    }
+}
+
+/// Width and height from the image header, without decoding the pixels.
+pub(super) fn dimensions(path: &Path) -> Result<(u32, u32)> {
+    let reader = ImageReader::open(path).map_err(|e| SceneError::io(path, e))?;
+    let reader = reader.with_guessed_format().map_err(|e| SceneError::io(path, e))?;
+    reader.into_dimensions().map_err(|source| SceneError::Image { file: name(path), source })
+}
+
+/// Colour image as 8-bit RGB; transparent pixels are composited over white (the convention of
+/// NeRF's synthetic scenes, whose backgrounds are transparent).
+pub(super) fn load_rgb(path: &Path) -> Result<RgbImage> {
+    let img = decode(path)?;
+    if !img.color().has_alpha() {
+        return Ok(img.into_rgb8());
+    }
+    let rgba = img.into_rgba8();
+    Ok(RgbImage::from_fn(rgba.width(), rgba.height(), |x, y| {
+        let p = rgba.get_pixel(x, y).0;
+        let a = p[3] as u32;
+        let over_white = |c: u8| ((c as u32 * a + 255 * (255 - a) + 127) / 255) as u8;
+        image::Rgb([over_white(p[0]), over_white(p[1]), over_white(p[2])])
+    }))
+}
+
+/// Depth must be a 16-bit single-channel image: an 8-bit one has lost its millimetres.
+pub(super) fn load_depth(path: &Path) -> Result<DepthImage> {
+    match decode(path)? {
+        DynamicImage::ImageLuma16(d) => Ok(d),
+        other => Err(SceneError::invalid(
+            name(path),
+            format!("depth must be a 16-bit single-channel PNG (millimetres), got {:?}", other.color()),
+        )),
+    }
+}
+
+/// Dense ground truth: 8-bit single-channel class ids.
+pub(super) fn load_gt(path: &Path) -> Result<GrayImage> {
+    match decode(path)? {
+        DynamicImage::ImageLuma8(g) => Ok(g),
+        other => Err(SceneError::invalid(
+            name(path),
+            format!("ground truth must be an 8-bit single-channel PNG of class ids, got {:?}", other.color()),
+        )),
+    }
+}
+
+/// A label mask of 8- or 16-bit single-channel values, widened to u16.
+pub(super) fn load_mask(path: &Path) -> Result<Mask16> {
+    match decode(path)? {
+        DynamicImage::ImageLuma8(g) => {
+            Ok(image::ImageBuffer::from_fn(g.width(), g.height(), |x, y| image::Luma([g.get_pixel(x, y).0[0] as u16])))
+        }
+        DynamicImage::ImageLuma16(g) => Ok(g),
+        other => Err(SceneError::invalid(
+            name(path),
+            format!("label mask must be an 8- or 16-bit single-channel PNG, got {:?}", other.color()),
+        )),
+    }
+}

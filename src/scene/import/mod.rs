@@ -1,0 +1,151 @@
+//! Importers: build a Scene from captures in other layouts (autolabel scene directories,
+//! 7-Scenes folders, NeRF-style `transforms.json`). Each layout has its own module; they share
+//! decoding, resizing, frame selection and bounds estimation.
+use std::path::Path;
+
+use crate::scene::error::{Result, SceneError};
+use crate::scene::manifest::Provenance;
+use crate::scene::scene::Scene;
+
+mod autolabel;
+mod bounds;
+mod classes;
+mod frames;
+mod images;
+mod resize;
+mod seven_scenes;
+mod text;
+mod transforms;
+
+/// What to keep of a capture.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ImportOptions {
+    /// Longest image side in pixels; larger captures are downscaled (never upscaled) and their
+    /// intrinsics scaled with `Intrinsics::scaled`.
+    pub max_size: Option<u32>,
+    /// Keep every k-th frame (k >= 1).
+    pub every: u32,
+    /// Keep at most this many frames (after `every`).
+    pub max_frames: Option<u32>,
+}
+
+impl Default for ImportOptions {
+    fn default() -> Self {
+        ImportOptions { max_size: None, every: 1, max_frames: None }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layout {
+    /// autolabel scene directory: rgb/ depth/ pose/ intrinsics.txt bbox.txt [semantic/ gt/].
+    Autolabel,
+    /// 7-Scenes folder: frame-NNNNNN.color.jpg / .depth.png / .pose.txt.
+    SevenScenes,
+    /// NeRF / instant-ngp / nerfstudio transforms.json.
+    Transforms,
+}
+
+impl Layout {
+    pub fn name(self) -> &'static str {
+        match self {
+            Layout::Autolabel => "autolabel",
+            Layout::SevenScenes => "7-scenes",
+            Layout::Transforms => "transforms.json",
+        }
+    }
+}
+
+/// A scene built from a capture, with what the user should know about how.
+#[derive(Debug)]
+pub struct Imported {
+    pub scene: Scene,
+    pub layout: Layout,
+    /// Things that were guessed, ignored or skipped (also recorded in the provenance notes).
+    pub warnings: Vec<String>,
+}
+
+/// Names the capture layout at `input` (a folder, or a `.json` file for transforms).
+pub fn detect_layout(input: &Path) -> Result<Layout> {
+    let meta = std::fs::metadata(input).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => SceneError::missing(input.display().to_string(), "the capture to import"),
+        _ => SceneError::io(input, e),
+    })?;
+    if meta.is_file() {
+        if input.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) {
+            return Ok(Layout::Transforms);
+        }
+        return Err(SceneError::invalid(
+            input.display().to_string(),
+            "is a file; expected a capture folder or a transforms.json",
+        ));
+    }
+    if input.join(transforms::FILE).is_file() {
+        return Ok(Layout::Transforms);
+    }
+    if input.join(autolabel::RGB_DIR).is_dir() {
+        return Ok(Layout::Autolabel);
+    }
+    if seven_scenes::looks_like(input)? {
+        return Ok(Layout::SevenScenes);
+    }
+    Err(SceneError::invalid(
+        input.display().to_string(),
+        "not a capture layout scribblefield knows; expected one of: an autolabel scene folder \
+         (rgb/, depth/, pose/, intrinsics.txt, bbox.txt), a 7-Scenes folder (frame-000000.color.jpg, \
+         frame-000000.depth.png, frame-000000.pose.txt, ...), or a folder with a transforms.json",
+    ))
+}
+
+/// Imports the capture at `input`, calling `progress(done, total)` as frames load.
+pub fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Imported> {
+    let layout = detect_layout(input)?;
+    let built = match layout {
+        Layout::Autolabel => autolabel::import(input, opts, progress)?,
+        Layout::SevenScenes => seven_scenes::import(input, opts, progress)?,
+        Layout::Transforms => transforms::import(input, opts, progress)?,
+    };
+    check_scene(&built.scene, input)?;
+    Ok(built.finish(input))
+}
+
+/// What every importer returns before provenance is filled in.
+struct Built {
+    scene: Scene,
+    layout: Layout,
+    warnings: Vec<String>,
+    notes: Vec<String>,
+}
+
+impl Built {
+    /// Records where the scene came from and how it was changed on the way.
+    fn finish(mut self, input: &Path) -> Imported {
+        let mut notes = self.notes;
+        notes.extend(self.warnings.iter().cloned());
+        self.scene.provenance = Provenance {
+            source: input.display().to_string(),
+            importer: self.layout.name().into(),
+            tool: format!("scribblefield {}", env!("CARGO_PKG_VERSION")),
+            notes,
+        };
+        Imported { scene: self.scene, layout: self.layout, warnings: self.warnings }
+    }
+}
+
+/// Final checks shared by all layouts, so a scene that imports also archives.
+fn check_scene(scene: &Scene, input: &Path) -> Result<()> {
+    let at = input.display().to_string();
+    if scene.frames.is_empty() {
+        return Err(SceneError::invalid(at, "the capture has no frames"));
+    }
+    scene.intrinsics.check().map_err(|p| SceneError::invalid(&at, format!("intrinsics: {p}")))?;
+    scene.bounds.check().map_err(|p| SceneError::invalid(&at, format!("bounds: {p}")))?;
+    if let Some(labels) = &scene.labels {
+        labels.check(&format!("{at}: imported labels"), scene.frames.len() as u32)?;
+    }
+    Ok(())
+}
+
+/// Display name of a path for messages.
+fn shown(path: &Path) -> String {
+    path.display().to_string()
+}

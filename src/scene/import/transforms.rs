@@ -1,0 +1,294 @@
+//! NeRF / instant-ngp / nerfstudio `transforms.json`: shared pinhole intrinsics (`fl_x`, `fl_y`,
+//! `cx`, `cy`, `w`, `h`, or `camera_angle_x` [+ `camera_angle_y`]), and per frame an image
+//! `file_path` (relative to the json, extension optional) and a camera-to-world
+//! `transform_matrix` in OpenGL camera axes. Optional nerfstudio `depth_file_path` (uint16 mm).
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use super::bounds::{from_cameras, from_depth};
+use super::frames::{FrameFiles, InvalidDepth, load_frames, select};
+use super::images::dimensions;
+use super::text::pose_from_numbers;
+use super::{Built, ImportOptions, Layout, shown};
+use crate::scene::archive::limits;
+use crate::scene::camera::{Intrinsics, Pose};
+use crate::scene::error::{Result, SceneError};
+use crate::scene::scene::Scene;
+
+pub(super) const FILE: &str = "transforms.json";
+/// Extensions tried, in order, for a `file_path` given without one (NeRF synthetic scenes).
+const IMAGE_EXTS: &[&str] = &["png", "jpg", "jpeg", "PNG", "JPG", "JPEG"];
+const DEPTH_SCALE: f64 = 0.001;
+/// Relative difference under which two per-frame intrinsics values count as the same.
+const SAME_VALUE: f64 = 1e-6;
+/// Missing images listed by name in the warning; the rest are counted.
+const LISTED_MISSING: usize = 5;
+
+/// Camera fields, which nerfstudio allows both at the top level and per frame.
+#[derive(Deserialize, Default, Clone, Copy, Debug)]
+struct Camera {
+    fl_x: Option<f64>,
+    fl_y: Option<f64>,
+    cx: Option<f64>,
+    cy: Option<f64>,
+    w: Option<f64>,
+    h: Option<f64>,
+    camera_angle_x: Option<f64>,
+    camera_angle_y: Option<f64>,
+}
+
+#[derive(Deserialize, Default, Debug)]
+struct Distortion {
+    camera_model: Option<String>,
+    k1: Option<f64>,
+    k2: Option<f64>,
+    k3: Option<f64>,
+    k4: Option<f64>,
+    p1: Option<f64>,
+    p2: Option<f64>,
+}
+
+#[derive(Deserialize, Debug)]
+struct TransformsFile {
+    #[serde(flatten)]
+    camera: Camera,
+    #[serde(flatten)]
+    distortion: Distortion,
+    frames: Vec<FrameEntry>,
+}
+
+#[derive(Deserialize, Debug)]
+struct FrameEntry {
+    file_path: String,
+    transform_matrix: Vec<Vec<f64>>,
+    depth_file_path: Option<String>,
+    #[serde(flatten)]
+    camera: Camera,
+}
+
+pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Built> {
+    let json_path = if input.is_dir() { input.join(FILE) } else { input.to_path_buf() };
+    let file = shown(&json_path);
+    let base = json_path.parent().unwrap_or(Path::new("."));
+    let meta = std::fs::metadata(&json_path).map_err(|e| SceneError::io(&json_path, e))?;
+    if meta.len() > limits::MAX_JSON_BYTES {
+        return Err(SceneError::invalid(&file, format!("{} bytes is too large for a transforms file", meta.len())));
+    }
+    let bytes = std::fs::read(&json_path).map_err(|e| SceneError::io(&json_path, e))?;
+    let parsed: TransformsFile =
+        serde_json::from_slice(&bytes).map_err(|source| SceneError::Json { file: file.clone(), source })?;
+    if parsed.frames.is_empty() {
+        return Err(SceneError::invalid(&file, "\"frames\" is empty: the scene has no frames"));
+    }
+    let mut warnings = Vec::new();
+    warnings.extend(distortion_warning(&parsed.distortion, &file)?);
+    let camera = shared_camera(&parsed, &file)?;
+
+    // Frames whose image is missing are skipped (exports often list frames that were culled).
+    let mut present = Vec::new();
+    let mut missing = Vec::new();
+    for (i, f) in parsed.frames.iter().enumerate() {
+        match resolve_image(base, &f.file_path) {
+            Some(path) => present.push((i, f, path)),
+            None => missing.push(f.file_path.clone()),
+        }
+    }
+    if !missing.is_empty() {
+        let mut listed = missing.iter().take(LISTED_MISSING).cloned().collect::<Vec<_>>().join(", ");
+        if missing.len() > LISTED_MISSING {
+            listed.push_str(&format!(" and {} more", missing.len() - LISTED_MISSING));
+        }
+        warnings.push(format!("{file}: skipped {} frames whose image is missing: {listed}", missing.len()));
+    }
+    if present.is_empty() {
+        return Err(SceneError::invalid(
+            &file,
+            format!("none of the {} frames' images exist (file_path is relative to {})", missing.len(), shown(base)),
+        ));
+    }
+
+    let first_image = &present[0].2;
+    let image_size = dimensions(first_image)?;
+    let native = match (camera.w, camera.h) {
+        (Some(w), Some(h)) => {
+            let stated = (pixels(w, "w", &file)?, pixels(h, "h", &file)?);
+            if stated != image_size {
+                return Err(SceneError::invalid(
+                    shown(first_image),
+                    format!(
+                        "image is {}x{}, but {file} says w = {}, h = {}",
+                        image_size.0, image_size.1, stated.0, stated.1
+                    ),
+                ));
+            }
+            stated
+        }
+        _ => image_size,
+    };
+    let k = intrinsics(&camera, native, &file)?;
+
+    let (keep, mut notes) = select(present.len(), opts)?;
+    let mut files = Vec::with_capacity(keep.len());
+    for &j in &keep {
+        let (i, entry, path) = &present[j];
+        let at = format!("{file}: frames[{i}] ({})", entry.file_path);
+        let numbers: Vec<f64> = entry.transform_matrix.iter().flatten().copied().collect();
+        let gl = pose_from_numbers(&numbers, &format!("{at}: transform_matrix"))?;
+        let depth = match &entry.depth_file_path {
+            Some(d) => {
+                let p = base.join(d);
+                if !p.is_file() {
+                    return Err(SceneError::missing(shown(&p), format!("depth of {at}")));
+                }
+                Some(p)
+            }
+            None => None,
+        };
+        files.push(FrameFiles {
+            name: entry.file_path.clone(),
+            rgb: path.clone(),
+            depth,
+            gt: None,
+            // OpenGL camera axes (y up, z backward) to the scene's OpenCV axes.
+            pose: Pose::from_opengl(gl.0),
+        });
+    }
+
+    let loaded = load_frames(files, opts.max_size, InvalidDepth::ZeroOnly, progress)?;
+    notes.extend(loaded.notes);
+    let intrinsics = k.scaled(loaded.native, loaded.size);
+    let bounds = match from_depth(&loaded.frames, &intrinsics, DEPTH_SCALE) {
+        Some(b) => {
+            notes.push("bounds: central 98 % of back-projected depth and all camera centres, padded by 5 %".into());
+            b
+        }
+        None => {
+            let poses: Vec<Pose> = loaded.frames.iter().map(|f| f.pose).collect();
+            notes.push(
+                "bounds: estimated from camera positions and view frustums (no depth; the capture's scale is unknown)"
+                    .into(),
+            );
+            from_cameras(&poses, &intrinsics, loaded.size)
+                .ok_or_else(|| SceneError::invalid(&file, "no cameras to estimate the scene's bounds from"))?
+        }
+    };
+
+    let (width, height) = loaded.size;
+    let scene = Scene {
+        width,
+        height,
+        intrinsics,
+        depth_scale: DEPTH_SCALE,
+        bounds,
+        frames: loaded.frames,
+        classes: vec![],
+        features: None,
+        labels: None,
+        provenance: Default::default(),
+    };
+    Ok(Built { scene, layout: Layout::Transforms, warnings, notes })
+}
+
+/// The image a `file_path` names: as given, or with an image extension appended.
+fn resolve_image(base: &Path, file_path: &str) -> Option<PathBuf> {
+    let direct = base.join(file_path);
+    if direct.is_file() {
+        return Some(direct);
+    }
+    IMAGE_EXTS.iter().map(|ext| base.join(format!("{file_path}.{ext}"))).find(|p| p.is_file())
+}
+
+/// The one camera all frames share: top-level values, filled in from the first frame that has
+/// them. Frames may repeat a value but not change it (a single pinhole camera is assumed).
+fn shared_camera(t: &TransformsFile, file: &str) -> Result<Camera> {
+    let mut cam = t.camera;
+    type Field = fn(&mut Camera) -> &mut Option<f64>;
+    let fields: [(&str, Field); 8] = [
+        ("fl_x", |c| &mut c.fl_x),
+        ("fl_y", |c| &mut c.fl_y),
+        ("cx", |c| &mut c.cx),
+        ("cy", |c| &mut c.cy),
+        ("w", |c| &mut c.w),
+        ("h", |c| &mut c.h),
+        ("camera_angle_x", |c| &mut c.camera_angle_x),
+        ("camera_angle_y", |c| &mut c.camera_angle_y),
+    ];
+    for (i, f) in t.frames.iter().enumerate() {
+        let mut frame_cam = f.camera;
+        for (name, field) in &fields {
+            let Some(v) = *field(&mut frame_cam) else { continue };
+            let shared = field(&mut cam);
+            match *shared {
+                None => *shared = Some(v),
+                Some(s) if (s - v).abs() <= SAME_VALUE * s.abs().max(1.0) => {}
+                Some(s) => {
+                    return Err(SceneError::invalid(
+                        file,
+                        format!(
+                            "frames[{i}] ({}) has {name} = {v}, but another value is {s}: per-frame intrinsics are not supported (all frames must share one camera)",
+                            f.file_path
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(cam)
+}
+
+fn pixels(v: f64, name: &str, file: &str) -> Result<u32> {
+    if v.is_finite() && v >= 1.0 && v.fract() == 0.0 && v <= limits::MAX_SIDE as f64 {
+        Ok(v as u32)
+    } else {
+        Err(SceneError::invalid(file, format!("{name} = {v} is not an image size in pixels (1..={})", limits::MAX_SIDE)))
+    }
+}
+
+/// Pinhole intrinsics in the scene's convention. transforms.json measures the principal point
+/// with pixel centres at +0.5 (instant-ngp and nerfstudio cast rays through `x + 0.5`), the scene
+/// at integer coordinates, hence the half-pixel shift; a missing one is the image centre.
+fn intrinsics(c: &Camera, (w, h): (u32, u32), file: &str) -> Result<Intrinsics> {
+    let from_angle = |angle: f64, side: u32, name: &str| {
+        if angle.is_finite() && angle > 0.0 && angle < std::f64::consts::PI {
+            Ok(0.5 * side as f64 / (0.5 * angle).tan())
+        } else {
+            Err(SceneError::invalid(file, format!("{name} = {angle} is not a field of view in radians (0..pi)")))
+        }
+    };
+    let fx = match (c.fl_x, c.camera_angle_x) {
+        (Some(f), _) => f,
+        (None, Some(a)) => from_angle(a, w, "camera_angle_x")?,
+        (None, None) => {
+            return Err(SceneError::invalid(file, "no focal length: expected fl_x (pixels) or camera_angle_x (radians)"));
+        }
+    };
+    let fy = match (c.fl_y, c.camera_angle_y, c.fl_x) {
+        (Some(f), _, _) => f,
+        (None, Some(a), _) => from_angle(a, h, "camera_angle_y")?,
+        // Square pixels unless stated otherwise.
+        (None, None, _) => fx,
+    };
+    let k = Intrinsics {
+        fx,
+        fy,
+        cx: c.cx.unwrap_or(w as f64 / 2.0) - 0.5,
+        cy: c.cy.unwrap_or(h as f64 / 2.0) - 0.5,
+    };
+    k.check().map_err(|p| SceneError::invalid(file, p))?;
+    Ok(k)
+}
+
+/// Lens distortion cannot be represented by the scene's pinhole model: say it is ignored.
+fn distortion_warning(d: &Distortion, file: &str) -> Result<Option<String>> {
+    let model = d.camera_model.as_deref().unwrap_or("PINHOLE");
+    if model.eq_ignore_ascii_case("EQUIRECTANGULAR") {
+        return Err(SceneError::invalid(file, "camera_model EQUIRECTANGULAR is not a pinhole camera; not supported"));
+    }
+    let coefficients = [d.k1, d.k2, d.k3, d.k4, d.p1, d.p2];
+    let distorted = coefficients.iter().flatten().any(|v| *v != 0.0);
+    let fisheye = model.to_ascii_uppercase().contains("FISHEYE");
+    Ok((distorted || fisheye).then(|| {
+        format!("{file}: camera_model {model} with lens distortion; distortion is ignored (images are used as pinhole)")
+    }))
+}

@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# Browser end-to-end test: builds the web app, serves it on a free localhost port, and runs
+# smoke.mjs in headless Chromium (WebGPU on SwiftShader). Installs Chromium (apt) and the node
+# modules (npm ci) when they are missing. Screenshots go to $E2E_OUT (default /tmp/e2e).
+set -euo pipefail
+HERE="$(cd "$(dirname "$0")" && pwd)"
+ROOT="$(cd "$HERE/../.." && pwd)"
+cd "$ROOT"
+
+CHROMIUM=${CHROMIUM:-/usr/bin/chromium}
+if [ ! -x "$CHROMIUM" ]; then
+  echo "==> installing chromium"
+  SUDO=""
+  [ "$(id -u)" -ne 0 ] && SUDO=sudo
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq chromium
+fi
+if ! command -v node >/dev/null 2>&1; then
+  echo "error: node (>= 20) is needed for the browser test" >&2
+  exit 1
+fi
+if [ ! -d "$HERE/node_modules/playwright-core" ]; then
+  echo "==> npm ci"
+  (cd "$HERE" && npm ci --no-audit --no-fund)
+fi
+
+scripts/build-web.sh
+cargo build --release --quiet
+
+# A free port: bind port 0, note what the kernel chose, release it for the server.
+PORT=$(node -e 'const s=require("net").createServer().listen(0,"127.0.0.1",()=>{console.log(s.address().port);s.close()})')
+LOG=$(mktemp)
+target/release/scribblefield serve www --port "$PORT" >"$LOG" 2>&1 &
+SERVER=$!
+trap 'kill "$SERVER" 2>/dev/null || true; wait "$SERVER" 2>/dev/null || true; rm -f "$LOG"' EXIT
+
+URL="http://127.0.0.1:$PORT/"
+for _ in $(seq 1 100); do
+  if node -e 'fetch(process.argv[1]).then(r=>process.exit(r.ok?0:1),()=>process.exit(1))' "$URL"; then
+    break
+  fi
+  if ! kill -0 "$SERVER" 2>/dev/null; then
+    echo "error: the server exited:" >&2
+    cat "$LOG" >&2
+    exit 1
+  fi
+  sleep 0.1
+done
+
+E2E_URL="$URL" CHROMIUM="$CHROMIUM" node "$HERE/smoke.mjs"
