@@ -38,7 +38,9 @@ fn read_shader_files(dir: &Path) -> Result<BTreeMap<String, String>, String> {
     let entries = std::fs::read_dir(dir).map_err(|error| format!("cannot list {}: {error}", dir.display()))?;
     let mut files = BTreeMap::new();
     for entry in entries {
-        let path = entry.map_err(|error| format!("cannot list {}: {error}", dir.display()))?.path();
+        let path = entry
+            .map_err(|error| format!("cannot list {}: {error}", dir.display()))?
+            .path();
         if path.extension().is_none_or(|extension| extension != "wgsl") {
             continue;
         }
@@ -48,7 +50,8 @@ fn read_shader_files(dir: &Path) -> Result<BTreeMap<String, String>, String> {
             .and_then(|name| name.to_str())
             .ok_or_else(|| format!("{}: shader file names must be UTF-8", path.display()))?
             .to_string();
-        let text = std::fs::read_to_string(&path).map_err(|error| format!("cannot read {}: {error}", path.display()))?;
+        let text =
+            std::fs::read_to_string(&path).map_err(|error| format!("cannot read {}: {error}", path.display()))?;
         files.insert(name, text);
     }
     Ok(files)
@@ -73,9 +76,16 @@ fn generate_constants(stages: &[shader_check::ExpandedShader]) -> String {
         let _ = writeln!(out, "/// `shaders/{}` with its includes expanded.", stage.file);
         let _ = writeln!(out, "pub const {name}: &str = {:?};\n", stage.source);
     }
-    out.push_str("/// Every stage as (file name, expanded source), sorted by file name.\npub const ALL: &[(&str, &str)] = &[\n");
+    out.push_str(
+        "/// Every stage as (file name, expanded source), sorted by file name.\npub const ALL: &[(&str, &str)] = &[\n",
+    );
     for stage in stages {
-        let _ = writeln!(out, "    ({:?}, {}),", stage.file, shader_check::constant_name(&stage.file));
+        let _ = writeln!(
+            out,
+            "    ({:?}, {}),",
+            stage.file,
+            shader_check::constant_name(&stage.file)
+        );
     }
     out.push_str("];\n");
     out

@@ -35,14 +35,18 @@ wasm-bindgen --target web --no-typescript --out-dir "$OUT" "target/$TARGET/relea
 
 WASM="$OUT/scribblefield_bg.wasm"
 if command -v wasm-opt >/dev/null 2>&1; then
-  echo "==> wasm-opt -Oz"
-  # The features rustc enables by default for wasm32 must be allowed, or wasm-opt rejects them.
-  wasm-opt -Oz --enable-bulk-memory --enable-nontrapping-float-to-int --enable-sign-ext \
+  echo "==> wasm-opt -Oz (takes a minute or two)"
+  # Allow the features rustc enables by default for wasm32, or wasm-opt rejects the module.
+  if wasm-opt -Oz --enable-bulk-memory --enable-nontrapping-float-to-int --enable-sign-ext \
     --enable-mutable-globals --enable-reference-types --enable-multivalue \
-    "$WASM" -o "$WASM.opt"
-  mv "$WASM.opt" "$WASM"
+    "$WASM" -o "$WASM.opt"; then
+    mv "$WASM.opt" "$WASM"
+  else
+    rm -f "$WASM.opt"
+    echo "warning: wasm-opt failed (too old for this module?); keeping the unoptimised build" >&2
+  fi
 else
-  echo "(wasm-opt not found: skipping size optimisation; install binaryen for a smaller download)"
+  echo "(wasm-opt not found: skipping size optimisation; binaryen's wasm-opt makes the download smaller)"
 fi
 
 echo "==> demo scene"

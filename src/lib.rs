@@ -1,6 +1,8 @@
 //! scribblefield: scribbles on a few RGB-D frames, propagated to dense masks by a neural field.
 #[cfg(target_arch = "wasm32")]
 pub mod app;
+pub mod eval;
+pub mod export;
 pub mod field;
 pub mod gpu;
 pub mod labels;

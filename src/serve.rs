@@ -45,16 +45,27 @@ impl Server {
             .canonicalize()
             .map_err(|e| io::Error::new(e.kind(), format!("{}: cannot serve this directory: {e}", dir.display())))?;
         if !root.is_dir() {
-            return Err(io::Error::new(io::ErrorKind::NotADirectory, format!("{}: not a directory", dir.display())));
+            return Err(io::Error::new(
+                io::ErrorKind::NotADirectory,
+                format!("{}: not a directory", dir.display()),
+            ));
         }
-        let listener = TcpListener::bind(addr).map_err(|e| io::Error::new(e.kind(), format!("cannot listen on {addr}: {e}")))?;
+        let listener =
+            TcpListener::bind(addr).map_err(|e| io::Error::new(e.kind(), format!("cannot listen on {addr}: {e}")))?;
         let addr = listener.local_addr()?;
         let stopping = Arc::new(AtomicBool::new(false));
         let accept_thread = {
             let (root, stopping) = (root.clone(), stopping.clone());
-            std::thread::Builder::new().name("serve-accept".into()).spawn(move || accept_loop(listener, root, stopping))?
+            std::thread::Builder::new()
+                .name("serve-accept".into())
+                .spawn(move || accept_loop(listener, root, stopping))?
         };
-        Ok(Server { addr, root, stopping, accept_thread: Some(accept_thread) })
+        Ok(Server {
+            addr,
+            root,
+            stopping,
+            accept_thread: Some(accept_thread),
+        })
     }
 
     pub fn addr(&self) -> SocketAddr {
@@ -74,7 +85,9 @@ impl Server {
     /// Blocks until the server stops (it only stops when told to, so in practice: forever).
     pub fn wait(mut self) -> io::Result<()> {
         if let Some(thread) = self.accept_thread.take() {
-            thread.join().map_err(|_| io::Error::other("the server's accept thread panicked"))?;
+            thread
+                .join()
+                .map_err(|_| io::Error::other("the server's accept thread panicked"))?;
         }
         Ok(())
     }
@@ -104,7 +117,11 @@ impl Drop for Server {
 
 /// An address that reaches a listener bound to `addr` (a wildcard address cannot be dialled).
 fn wake_address(addr: SocketAddr) -> SocketAddr {
-    if addr.ip().is_unspecified() { localhost(addr.port()) } else { addr }
+    if addr.ip().is_unspecified() {
+        localhost(addr.port())
+    } else {
+        addr
+    }
 }
 
 fn accept_loop(listener: TcpListener, root: PathBuf, stopping: Arc<AtomicBool>) {
@@ -155,7 +172,15 @@ fn handle_connection(stream: TcpStream, root: &Path) -> io::Result<()> {
     let head_only = match request.method.as_str() {
         "GET" => false,
         "HEAD" => true,
-        _ => return send_error(&mut out, 405, "Method Not Allowed", "only GET and HEAD are served", false),
+        _ => {
+            return send_error(
+                &mut out,
+                405,
+                "Method Not Allowed",
+                "only GET and HEAD are served",
+                false,
+            );
+        }
     };
     let status = respond(&mut out, root, &request.target, head_only)?;
     eprintln!("{status} {} {}", request.method, request.target);
@@ -180,16 +205,20 @@ fn read_request_head(reader: &mut impl BufRead) -> Result<Option<Request>, Strin
     }
     let mut parts = request_line.split_whitespace();
     match (parts.next(), parts.next(), parts.next()) {
-        (Some(method), Some(target), Some(version)) if version.starts_with("HTTP/1.") => {
-            Ok(Some(Request { method: method.to_string(), target: target.to_string() }))
-        }
+        (Some(method), Some(target), Some(version)) if version.starts_with("HTTP/1.") => Ok(Some(Request {
+            method: method.to_string(),
+            target: target.to_string(),
+        })),
         _ => Err(format!("malformed request line {:?}", request_line.trim_end())),
     }
 }
 
 fn read_limited_line(reader: &mut impl BufRead, line: &mut String, total: &mut usize) -> Result<usize, String> {
     let budget = MAX_HEAD_BYTES.saturating_sub(*total) as u64 + 1;
-    let n = reader.take(budget).read_line(line).map_err(|e| format!("cannot read the request: {e}"))?;
+    let n = reader
+        .take(budget)
+        .read_line(line)
+        .map_err(|e| format!("cannot read the request: {e}"))?;
     *total += n;
     if *total > MAX_HEAD_BYTES {
         return Err(format!("request head longer than {MAX_HEAD_BYTES} bytes"));
@@ -261,9 +290,12 @@ enum Refusal {
 fn resolve_target(root: &Path, target: &str) -> Result<PathBuf, Refusal> {
     let path = target.split(['?', '#']).next().unwrap_or("");
     if !path.starts_with('/') {
-        return Err(Refusal::BadPath(format!("request target {target:?} is not an absolute path")));
+        return Err(Refusal::BadPath(format!(
+            "request target {target:?} is not an absolute path"
+        )));
     }
-    let decoded = percent_decode(path).ok_or_else(|| Refusal::BadPath(format!("bad percent-encoding in {target:?}")))?;
+    let decoded =
+        percent_decode(path).ok_or_else(|| Refusal::BadPath(format!("bad percent-encoding in {target:?}")))?;
     let mut relative = PathBuf::new();
     for segment in decoded.split('/') {
         match segment {
@@ -349,9 +381,16 @@ mod tests {
         std::fs::write(root.join("sub/a b.txt"), "x").unwrap();
 
         assert_eq!(resolve_target(&root, "/"), Ok(root.join("index.html")));
-        assert_eq!(resolve_target(&root, "/index.html?v=2#top"), Ok(root.join("index.html")));
+        assert_eq!(
+            resolve_target(&root, "/index.html?v=2#top"),
+            Ok(root.join("index.html"))
+        );
         assert_eq!(resolve_target(&root, "/sub/a%20b.txt"), Ok(root.join("sub/a b.txt")));
-        assert_eq!(resolve_target(&root, "/sub"), Err(Refusal::NotFound), "a folder without index.html");
+        assert_eq!(
+            resolve_target(&root, "/sub"),
+            Err(Refusal::NotFound),
+            "a folder without index.html"
+        );
         assert_eq!(resolve_target(&root, "/missing.js"), Err(Refusal::NotFound));
         assert_eq!(resolve_target(&root, "/../etc/passwd"), Err(Refusal::Outside));
         assert_eq!(resolve_target(&root, "/sub/%2e%2e/%2e%2e/x"), Err(Refusal::Outside));

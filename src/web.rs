@@ -26,7 +26,9 @@ pub async fn start(canvas_id: String) -> Result<(), JsValue> {
 }
 
 async fn run(canvas_id: &str) -> Result<(), JsValue> {
-    let document = web_sys::window().and_then(|w| w.document()).ok_or("no document: not running in a page")?;
+    let document = web_sys::window()
+        .and_then(|w| w.document())
+        .ok_or("no document: not running in a page")?;
     let canvas = document
         .get_element_by_id(canvas_id)
         .ok_or_else(|| format!("no element with id {canvas_id:?} in the page"))?
@@ -36,7 +38,11 @@ async fn run(canvas_id: &str) -> Result<(), JsValue> {
 
     // The runner lives on in the event handlers it installs; this handle may go.
     eframe::WebRunner::new()
-        .start(canvas, web_options(), Box::new(move |cc| Ok(Box::new(App::new(cc, scene_url)))))
+        .start(
+            canvas,
+            web_options(),
+            Box::new(move |cc| Ok(Box::new(App::new(cc, scene_url)))),
+        )
         .await
 }
 

@@ -20,40 +20,95 @@ fn tiny_scene() -> Scene {
                 DQuat::from_rotation_y(0.3 * i as f64),
                 DVec3::new(i as f64 * 0.1, -0.2, 1.5),
             )),
-            rgb: RgbImage::from_fn(W, H, |x, y| image::Rgb([(x * 20) as u8, (y * 25) as u8, (i * 70) as u8])),
-            depth: Some(ImageBuffer::from_fn(W, H, |x, y| image::Luma([(1000 + x * 37 + y * 101 + i) as u16]))),
-            gt: Some(GrayImage::from_fn(W, H, |x, _| image::Luma([if x == 0 { 255 } else { (x % 3) as u8 }]))),
+            rgb: RgbImage::from_fn(W, H, |x, y| {
+                image::Rgb([(x * 20) as u8, (y * 25) as u8, (i * 70) as u8])
+            }),
+            depth: Some(ImageBuffer::from_fn(W, H, |x, y| {
+                image::Luma([(1000 + x * 37 + y * 101 + i) as u16])
+            })),
+            gt: Some(GrayImage::from_fn(W, H, |x, _| {
+                image::Luma([if x == 0 { 255 } else { (x % 3) as u8 }])
+            })),
             source: Some(format!("frame-{i}")),
         })
         .collect();
     let dim = 4u32;
     let (fw, fh) = (3u32, 2u32);
-    let data = (0..3 * fw * fh * dim).map(|v| f16::from_f32(v as f32 * 0.125 - 3.0)).collect();
+    let data = (0..3 * fw * fh * dim)
+        .map(|v| f16::from_f32(v as f32 * 0.125 - 3.0))
+        .collect();
     let pca = Pca {
         mean: vec![0.5; dim as usize],
-        components: [vec![1.0, 0.0, 0.0, 0.0], vec![0.0, 1.0, 0.0, 0.0], vec![0.0, 0.0, 1.0, 0.0]],
+        components: [
+            vec![1.0, 0.0, 0.0, 0.0],
+            vec![0.0, 1.0, 0.0, 0.0],
+            vec![0.0, 0.0, 1.0, 0.0],
+        ],
         lo: [-1.0; 3],
         hi: [1.0; 3],
     };
     let classes = vec![
-        ClassInfo { name: "floor".into(), color: [10, 20, 30] },
-        ClassInfo { name: "box".into(), color: [200, 0, 0] },
-        ClassInfo { name: "mug".into(), color: [0, 200, 0] },
+        ClassInfo {
+            name: "floor".into(),
+            color: [10, 20, 30],
+        },
+        ClassInfo {
+            name: "box".into(),
+            color: [200, 0, 0],
+        },
+        ClassInfo {
+            name: "mug".into(),
+            color: [0, 200, 0],
+        },
     ];
     let mut labels = LabelSet::new(classes.clone());
-    labels.push_stroke(1, Stroke { class: Some(2), radius: 1.5, points: vec![[2.0, 2.0], [5.5, 3.25]] });
-    labels.push_stroke(1, Stroke { class: None, radius: 1.0, points: vec![[3.0, 2.0]] });
+    labels.push_stroke(
+        1,
+        Stroke {
+            class: Some(2),
+            radius: 1.5,
+            points: vec![[2.0, 2.0], [5.5, 3.25]],
+        },
+    );
+    labels.push_stroke(
+        1,
+        Stroke {
+            class: None,
+            radius: 1.0,
+            points: vec![[3.0, 2.0]],
+        },
+    );
     Scene {
         width: W,
         height: H,
-        intrinsics: Intrinsics { fx: 10.5, fy: 10.25, cx: 5.5, cy: 4.0 },
+        intrinsics: Intrinsics {
+            fx: 10.5,
+            fy: 10.25,
+            cx: 5.5,
+            cy: 4.0,
+        },
         depth_scale: 0.001,
-        bounds: Bounds { min: [-1.0, -1.0, 0.0], max: [1.0, 0.5, 3.0] },
+        bounds: Bounds {
+            min: [-1.0, -1.0, 0.0],
+            max: [1.0, 0.5, 3.0],
+        },
         frames,
         classes,
-        features: Some(FeatureCodes { height: fh, width: fw, dim, extractor: "test codes".into(), data, pca }),
+        features: Some(FeatureCodes {
+            height: fh,
+            width: fw,
+            dim,
+            extractor: "test codes".into(),
+            data,
+            pca,
+        }),
         labels: Some(labels),
-        provenance: Provenance { source: "tests".into(), importer: "hand".into(), tool: "t".into(), notes: vec!["n".into()] },
+        provenance: Provenance {
+            source: "tests".into(),
+            importer: "hand".into(),
+            tool: "t".into(),
+            notes: vec!["n".into()],
+        },
     }
 }
 
@@ -192,14 +247,18 @@ fn manifest_and_content_must_agree() {
 fn depth_must_be_sixteen_bit_and_gt_eight_bit() {
     let eight_bit = {
         let mut out = Cursor::new(Vec::new());
-        GrayImage::new(W, H).write_to(&mut out, image::ImageFormat::Png).unwrap();
+        GrayImage::new(W, H)
+            .write_to(&mut out, image::ImageFormat::Png)
+            .unwrap();
         out.into_inner()
     };
     let err = error_after(|e| e.iter_mut().find(|(n, _)| n == "depth/00000.png").unwrap().1 = eight_bit.clone());
     assert_mentions(&err, &["depth/00000.png", "16-bit"]);
     let sixteen = {
         let mut out = Cursor::new(Vec::new());
-        image::DynamicImage::ImageLuma16(ImageBuffer::new(W, H)).write_to(&mut out, image::ImageFormat::Png).unwrap();
+        image::DynamicImage::ImageLuma16(ImageBuffer::new(W, H))
+            .write_to(&mut out, image::ImageFormat::Png)
+            .unwrap();
         out.into_inner()
     };
     let err = error_after(|e| e.iter_mut().find(|(n, _)| n == "gt/00000.png").unwrap().1 = sixteen);
@@ -214,7 +273,9 @@ fn poses_must_be_finite_and_rigid() {
     let err = error_after(|e| {
         edit_manifest(e, |_| {}); // re-serialize compactly so the text edit below finds its place
         let m = e.iter_mut().find(|(n, _)| n == "scene.json").unwrap();
-        let text = String::from_utf8(m.1.clone()).unwrap().replacen("\"pose\":[", "\"pose\":[1e999,", 1);
+        let text = String::from_utf8(m.1.clone())
+            .unwrap()
+            .replacen("\"pose\":[", "\"pose\":[1e999,", 1);
         m.1 = text.into_bytes();
     });
     assert_mentions(&err, &["scene.json"]);
@@ -279,5 +340,10 @@ fn writer_refuses_inconsistent_scenes() {
     assert!(write_archive_bytes(&scene).unwrap_err().to_string().contains("frame 1"));
     let mut scene = tiny_scene();
     scene.frames[2].pose = Pose(DMat4::from_scale(DVec3::splat(3.0)));
-    assert!(write_archive_bytes(&scene).unwrap_err().to_string().contains("not rigid"));
+    assert!(
+        write_archive_bytes(&scene)
+            .unwrap_err()
+            .to_string()
+            .contains("not rigid")
+    );
 }

@@ -8,7 +8,10 @@ use scribblefield::gpu::shaders;
 use scribblefield::gpu::test_support::gpu_for_tests;
 
 fn files(pairs: &[(&str, &str)]) -> BTreeMap<String, String> {
-    pairs.iter().map(|(name, text)| (name.to_string(), text.to_string())).collect()
+    pairs
+        .iter()
+        .map(|(name, text)| (name.to_string(), text.to_string()))
+        .collect()
 }
 
 const GOOD_STAGE: &str = "@group(0) @binding(0) var<storage, read_write> out: array<f32>;\n\
@@ -30,7 +33,10 @@ fn the_real_shaders_pass_and_are_all_embedded() {
     let checked: Vec<&str> = stages.iter().map(|stage| stage.file.as_str()).collect();
     assert_eq!(embedded, checked);
     assert!(embedded.contains(&"matmul.wgsl") && !embedded.iter().any(|f| f.starts_with('_')));
-    assert_eq!(shaders::MATMUL, stages.iter().find(|s| s.file == "matmul.wgsl").unwrap().source);
+    assert_eq!(
+        shaders::MATMUL,
+        stages.iter().find(|s| s.file == "matmul.wgsl").unwrap().source
+    );
     // The include was pasted, the directive line is gone.
     assert!(shaders::IOTA.contains("fn linear_item_index") && !shaders::IOTA.contains("//!include"));
 }
@@ -66,8 +72,20 @@ fn native_only_capabilities_are_rejected() {
     let problems = check_all(&files(&[("wide.wgsl", needs_f64)])).unwrap_err();
     assert_eq!(problems[0].file, "wide.wgsl", "{}", problems[0]);
     // naga gives type errors no source span; the file and message must still say it all.
-    assert!(problems[0].to_string().starts_with("shaders/wide.wgsl: "), "{}", problems[0]);
+    assert!(
+        problems[0].to_string().starts_with("shaders/wide.wgsl: "),
+        "{}",
+        problems[0]
+    );
     assert!(problems[0].message.contains("FLOAT64"), "{}", problems[0]);
+}
+
+#[test]
+fn webgpu_core_builtins_that_naga_gates_are_accepted() {
+    // unpack2x16float is core WGSL but needs a naga capability: the baseline must include it.
+    let unpacks = "@group(0) @binding(0) var<storage, read_write> out: array<f32>;\n\
+@compute @workgroup_size(1)\nfn main() {\n    out[0] = unpack2x16float(0x3c00u).x;\n}\n";
+    check_all(&files(&[("unpack.wgsl", unpacks)])).unwrap_or_else(|problems| panic!("{problems:#?}"));
 }
 
 #[test]
@@ -76,7 +94,10 @@ fn errors_inside_snippets_point_at_the_snippet() {
     let stage = format!("//!include _helpers.wgsl\n{GOOD_STAGE}");
     let problems = check_all(&files(&[("_helpers.wgsl", snippet), ("stage.wgsl", &stage)])).unwrap_err();
     let problem = &problems[0];
-    assert_eq!((problem.file.as_str(), problem.line, problem.stage.as_str()), ("_helpers.wgsl", 6, "stage.wgsl"));
+    assert_eq!(
+        (problem.file.as_str(), problem.line, problem.stage.as_str()),
+        ("_helpers.wgsl", 6, "stage.wgsl")
+    );
     assert!(problem.to_string().contains("while checking stage stage.wgsl"));
 }
 
@@ -86,14 +107,23 @@ fn includes_paste_once_and_reject_cycles_and_missing_files() {
     let a = "//!include _shared.wgsl\nconst A: f32 = SHARED;\n";
     let b = "//!include _shared.wgsl\n//!include _a.wgsl\nconst B: f32 = SHARED + A;\n";
     let stage = format!("//!include _a.wgsl\n//!include _b.wgsl\n{GOOD_STAGE}");
-    let all = files(&[("_shared.wgsl", shared), ("_a.wgsl", a), ("_b.wgsl", b), ("stage.wgsl", &stage)]);
+    let all = files(&[
+        ("_shared.wgsl", shared),
+        ("_a.wgsl", a),
+        ("_b.wgsl", b),
+        ("stage.wgsl", &stage),
+    ]);
     let expanded = expand_includes("stage.wgsl", &all).unwrap();
     assert_eq!(expanded.source.matches("const SHARED").count(), 1);
     validate(&expanded).unwrap();
     // Line 1 of the expansion is the first line of _shared.wgsl, pasted through _a.wgsl.
     assert_eq!(expanded.origin_of_line(1), ("_shared.wgsl", 1));
 
-    let cyclic = files(&[("_x.wgsl", "//!include _y.wgsl\n"), ("_y.wgsl", "//!include _x.wgsl\n"), ("s.wgsl", "//!include _x.wgsl\n")]);
+    let cyclic = files(&[
+        ("_x.wgsl", "//!include _y.wgsl\n"),
+        ("_y.wgsl", "//!include _x.wgsl\n"),
+        ("s.wgsl", "//!include _x.wgsl\n"),
+    ]);
     let problem = expand_includes("s.wgsl", &cyclic).unwrap_err();
     assert!(problem.message.contains("cycle"), "{problem}");
 
@@ -117,19 +147,28 @@ fn constant_names_are_rust_identifiers_and_clashes_are_caught() {
 
 #[test]
 fn every_embedded_stage_compiles_on_the_device() {
-    let Some(ctx) = gpu_for_tests("every_embedded_stage_compiles_on_the_device") else { return };
+    let Some(ctx) = gpu_for_tests("every_embedded_stage_compiles_on_the_device") else {
+        return;
+    };
     for (file, source) in shaders::ALL {
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(file),
             source: wgpu::ShaderSource::Wgsl((*source).into()),
         });
         let info = pollster::block_on(module.get_compilation_info());
-        let errors: Vec<_> =
-            info.messages.iter().filter(|m| m.message_type == wgpu::CompilationMessageType::Error).collect();
+        let errors: Vec<_> = info
+            .messages
+            .iter()
+            .filter(|m| m.message_type == wgpu::CompilationMessageType::Error)
+            .collect();
         assert!(errors.is_empty(), "{file}: {errors:#?}");
     }
     // And a broken shader surfaces as an error value, not a panic.
-    let broken = KernelSpec::new("broken", "@compute @workgroup_size(1) fn main() { let x: f32 = 1i; }", "main");
+    let broken = KernelSpec::new(
+        "broken",
+        "@compute @workgroup_size(1) fn main() { let x: f32 = 1i; }",
+        "main",
+    );
     let result = pollster::block_on(create_compute_pipeline(&ctx, &broken));
     assert!(result.is_err());
 }

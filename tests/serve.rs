@@ -11,10 +11,19 @@ fn request(addr: SocketAddr, raw: &str) -> (u16, String, Vec<u8>) {
     stream.write_all(raw.as_bytes()).unwrap();
     let mut response = Vec::new();
     stream.read_to_end(&mut response).unwrap();
-    let split = response.windows(4).position(|w| w == b"\r\n\r\n").expect("a response head");
-    let head = String::from_utf8(response[..split].to_vec()).unwrap().to_ascii_lowercase();
+    let split = response
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .expect("a response head");
+    let head = String::from_utf8(response[..split].to_vec())
+        .unwrap()
+        .to_ascii_lowercase();
     let body = response[split + 4..].to_vec();
-    let code = head.split_whitespace().nth(1).and_then(|c| c.parse().ok()).expect("a status code");
+    let code = head
+        .split_whitespace()
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .expect("a status code");
     (code, head, body)
 }
 
@@ -85,7 +94,10 @@ fn paths_that_escape_the_directory_are_refused() {
     for target in ["/../Cargo.toml", "/%2e%2e/Cargo.toml", "/x/../../Cargo.toml"] {
         let (code, _, body) = get(server.addr(), target);
         assert_eq!(code, 403, "{target} must be refused");
-        assert!(!String::from_utf8_lossy(&body).contains("[package]"), "{target} leaked Cargo.toml");
+        assert!(
+            !String::from_utf8_lossy(&body).contains("[package]"),
+            "{target} leaked Cargo.toml"
+        );
     }
 }
 
@@ -101,7 +113,9 @@ fn other_methods_and_garbage_are_rejected() {
 #[test]
 fn a_file_cannot_be_served_as_a_directory() {
     let file = tempfile::NamedTempFile::new().unwrap();
-    let err = Server::start(file.path(), localhost(0)).err().expect("serving a plain file must fail");
+    let err = Server::start(file.path(), localhost(0))
+        .err()
+        .expect("serving a plain file must fail");
     assert!(err.to_string().contains("not a directory"), "{err}");
 }
 
@@ -110,5 +124,8 @@ fn stopping_frees_the_port() {
     let (_dir, server) = served_dir();
     let addr = server.addr();
     server.stop();
-    assert!(TcpStream::connect(addr).is_err(), "still accepting on {addr} after stop");
+    assert!(
+        TcpStream::connect(addr).is_err(),
+        "still accepting on {addr} after stop"
+    );
 }

@@ -23,14 +23,29 @@ impl FrameTextures {
     pub fn new(ctx: &egui::Context, scene: &Scene, frame: usize) -> Option<FrameTextures> {
         let f = scene.frames.get(frame)?;
         let size = [f.rgb.width() as usize, f.rgb.height() as usize];
-        let rgb = ctx.load_texture(format!("rgb {frame}"), ColorImage::from_rgb(size, f.rgb.as_raw()), TextureOptions::LINEAR);
-        let depth = f.depth.as_ref().map(|d| ctx.load_texture(format!("depth {frame}"), depth_to_grey(d), TextureOptions::LINEAR));
-        // NEAREST keeps class boundaries crisp when the frame is magnified.
-        let ground_truth = f
-            .gt
+        let rgb = ctx.load_texture(
+            format!("rgb {frame}"),
+            ColorImage::from_rgb(size, f.rgb.as_raw()),
+            TextureOptions::LINEAR,
+        );
+        let depth = f
+            .depth
             .as_ref()
-            .map(|g| ctx.load_texture(format!("gt {frame}"), class_overlay(g, &scene.classes), TextureOptions::NEAREST));
-        Some(FrameTextures { frame, rgb, depth, ground_truth })
+            .map(|d| ctx.load_texture(format!("depth {frame}"), depth_to_grey(d), TextureOptions::LINEAR));
+        // NEAREST keeps class boundaries crisp when the frame is magnified.
+        let ground_truth = f.gt.as_ref().map(|g| {
+            ctx.load_texture(
+                format!("gt {frame}"),
+                class_overlay(g, &scene.classes),
+                TextureOptions::NEAREST,
+            )
+        });
+        Some(FrameTextures {
+            frame,
+            rgb,
+            depth,
+            ground_truth,
+        })
     }
 }
 
@@ -59,7 +74,13 @@ pub fn class_overlay(ids: &GrayImage, classes: &[ClassInfo]) -> ColorImage {
     let pixels = ids
         .as_raw()
         .iter()
-        .map(|&id| if id == GT_VOID { Color32::TRANSPARENT } else { class_color(classes, id as usize) })
+        .map(|&id| {
+            if id == GT_VOID {
+                Color32::TRANSPARENT
+            } else {
+                class_color(classes, id as usize)
+            }
+        })
         .collect();
     ColorImage::new([ids.width() as usize, ids.height() as usize], pixels)
 }
@@ -97,7 +118,12 @@ pub fn show_image(
     let painter = ui.painter_at(rect);
     painter.image(texture.id(), rect, uv, Color32::WHITE);
     if let Some((overlay, opacity)) = overlay {
-        painter.image(overlay.id(), rect, uv, Color32::WHITE.gamma_multiply(opacity.clamp(0.0, 1.0)));
+        painter.image(
+            overlay.id(),
+            rect,
+            uv,
+            Color32::WHITE.gamma_multiply(opacity.clamp(0.0, 1.0)),
+        );
     }
     response
 }

@@ -23,7 +23,9 @@ pub const MAX_ARCHIVE_BYTES: u64 = 1 << 30;
 /// The scene to load: `scene=<url>` from the page's fragment (`#scene=...&other=...`,
 /// URI-encoded), else [`DEFAULT_SCENE_URL`]. A relative URL is relative to the page.
 pub fn scene_url_from_page() -> String {
-    let hash = web_sys::window().and_then(|w| w.location().hash().ok()).unwrap_or_default();
+    let hash = web_sys::window()
+        .and_then(|w| w.location().hash().ok())
+        .unwrap_or_default();
     scene_url_from_fragment(&hash).unwrap_or_else(|| DEFAULT_SCENE_URL.to_string())
 }
 
@@ -31,7 +33,9 @@ fn scene_url_from_fragment(fragment: &str) -> Option<String> {
     let fragment = fragment.strip_prefix('#').unwrap_or(fragment);
     let value = fragment.split('&').find_map(|pair| pair.strip_prefix("scene="))?;
     // An undecodable value is used as written: the fetch will then report what is wrong with it.
-    let url = js_sys::decode_uri_component(value).map(String::from).unwrap_or_else(|_| value.to_string());
+    let url = js_sys::decode_uri_component(value)
+        .map(String::from)
+        .unwrap_or_else(|_| value.to_string());
     (!url.trim().is_empty()).then_some(url)
 }
 
@@ -44,7 +48,11 @@ pub enum LoadError {
     )]
     Network { url: String, detail: String },
     #[error("{url}: the server answered HTTP {status} {status_text}")]
-    Http { url: String, status: u16, status_text: String },
+    Http {
+        url: String,
+        status: u16,
+        status_text: String,
+    },
     #[error("{url}: the server sent an HTML page, not a scene archive (is the URL right?)")]
     Html { url: String },
     #[error("{url}: {bytes} bytes is more than this page can hold ({MAX_ARCHIVE_BYTES} bytes at most)")]
@@ -116,7 +124,9 @@ impl SceneLoad {
 
 async fn load(url: &str, phase: &RefCell<LoadPhase>, ctx: &egui::Context) -> Result<Box<Scene>, LoadError> {
     let bytes = download(url, phase, ctx).await?;
-    *phase.borrow_mut() = LoadPhase::Decoding { bytes: bytes.len() as u64 };
+    *phase.borrow_mut() = LoadPhase::Decoding {
+        bytes: bytes.len() as u64,
+    };
     ctx.request_repaint();
     // Let the page paint "decoding" before the thread is busy decoding.
     sleep_ms(50).await;
@@ -125,18 +135,32 @@ async fn load(url: &str, phase: &RefCell<LoadPhase>, ctx: &egui::Context) -> Res
 }
 
 async fn download(url: &str, phase: &RefCell<LoadPhase>, ctx: &egui::Context) -> Result<Vec<u8>, LoadError> {
-    let network = |e: JsValue| LoadError::Network { url: url.into(), detail: js_error_text(&e) };
+    let network = |e: JsValue| LoadError::Network {
+        url: url.into(),
+        detail: js_error_text(&e),
+    };
     let window = web_sys::window().ok_or_else(|| network(JsValue::from_str("no window")))?;
-    let response: web_sys::Response = JsFuture::from(window.fetch_with_str(url)).await.map_err(network)?.unchecked_into();
+    let response: web_sys::Response = JsFuture::from(window.fetch_with_str(url))
+        .await
+        .map_err(network)?
+        .unchecked_into();
     if !response.ok() {
-        return Err(LoadError::Http { url: url.into(), status: response.status(), status_text: response.status_text() });
+        return Err(LoadError::Http {
+            url: url.into(),
+            status: response.status(),
+            status_text: response.status_text(),
+        });
     }
     let headers = response.headers();
     let content_type = headers.get("content-type").ok().flatten().unwrap_or_default();
     if content_type.to_ascii_lowercase().starts_with("text/html") {
         return Err(LoadError::Html { url: url.into() });
     }
-    let total = headers.get("content-length").ok().flatten().and_then(|v| v.trim().parse::<u64>().ok());
+    let total = headers
+        .get("content-length")
+        .ok()
+        .flatten()
+        .and_then(|v| v.trim().parse::<u64>().ok());
     if let Some(bytes) = total.filter(|&t| t > MAX_ARCHIVE_BYTES) {
         return Err(LoadError::TooLarge { url: url.into(), bytes });
     }
@@ -152,8 +176,10 @@ async fn download(url: &str, phase: &RefCell<LoadPhase>, ctx: &egui::Context) ->
         detail: js_error_text(&e),
     };
     loop {
-        let chunk: web_sys::ReadableStreamReadResult =
-            JsFuture::from(reader.read()).await.map_err(|e| interrupted(bytes.len(), e))?.unchecked_into();
+        let chunk: web_sys::ReadableStreamReadResult = JsFuture::from(reader.read())
+            .await
+            .map_err(|e| interrupted(bytes.len(), e))?
+            .unchecked_into();
         if chunk.get_done().unwrap_or(false) {
             break;
         }
@@ -161,7 +187,10 @@ async fn download(url: &str, phase: &RefCell<LoadPhase>, ctx: &egui::Context) ->
         let received = bytes.len() as u64 + data.length() as u64;
         if received > MAX_ARCHIVE_BYTES {
             let _ = reader.cancel();
-            return Err(LoadError::TooLarge { url: url.into(), bytes: received });
+            return Err(LoadError::TooLarge {
+                url: url.into(),
+                bytes: received,
+            });
         }
         let start = bytes.len();
         bytes.resize(start + data.length() as usize, 0);

@@ -29,12 +29,23 @@ impl App {
         let gpu = match &cc.wgpu_render_state {
             Some(rs) => {
                 let info = rs.adapter.get_info();
-                format!("{} ({:?})", if info.name.is_empty() { "unnamed adapter" } else { &info.name }, info.backend)
+                format!(
+                    "{} ({:?})",
+                    if info.name.is_empty() {
+                        "unnamed adapter"
+                    } else {
+                        &info.name
+                    },
+                    info.backend
+                )
             }
             None => "none".into(),
         };
         let load = SceneLoad::start(scene_url, cc.egui_ctx.clone());
-        App { stage: Stage::Loading(load), gpu }
+        App {
+            stage: Stage::Loading(load),
+            gpu,
+        }
     }
 }
 
@@ -46,7 +57,10 @@ impl eframe::App for App {
             let url = load.url().to_string();
             self.stage = match result {
                 Ok(scene) => Stage::Viewing(Box::new(Viewer::new(scene, url))),
-                Err(e) => Stage::Failed { url, message: e.to_string() },
+                Err(e) => Stage::Failed {
+                    url,
+                    message: e.to_string(),
+                },
             };
         }
 
@@ -70,12 +84,25 @@ fn show_loading(ui: &mut egui::Ui, load: &SceneLoad) {
         LoadPhase::Connecting => ("loading", format!("Connecting to {}", load.url()), None),
         LoadPhase::Downloading { received, total } => {
             let text = match total {
-                Some(t) => format!("Downloading {}: {} of {}", load.url(), megabytes(received), megabytes(t)),
+                Some(t) => format!(
+                    "Downloading {}: {} of {}",
+                    load.url(),
+                    megabytes(received),
+                    megabytes(t)
+                ),
                 None => format!("Downloading {}: {}", load.url(), megabytes(received)),
             };
-            ("loading", text, total.filter(|&t| t > 0).map(|t| (received as f32 / t as f32).min(1.0)))
+            (
+                "loading",
+                text,
+                total.filter(|&t| t > 0).map(|t| (received as f32 / t as f32).min(1.0)),
+            )
         }
-        LoadPhase::Decoding { bytes } => ("decoding", format!("Decoding {} ({})", load.url(), megabytes(bytes)), Some(1.0)),
+        LoadPhase::Decoding { bytes } => (
+            "decoding",
+            format!("Decoding {} ({})", load.url(), megabytes(bytes)),
+            Some(1.0),
+        ),
         LoadPhase::Finished(_) | LoadPhase::Taken => ("loading", "Opening the scene".into(), Some(1.0)),
     });
     page_status::set(status);
@@ -98,7 +125,11 @@ fn show_failure(ui: &mut egui::Ui, url: &str, message: &str) {
     egui::CentralPanel::default().show(ui, |ui| {
         ui.vertical_centered(|ui| {
             ui.add_space(ui.available_height() * 0.3);
-            ui.label(RichText::new(format!("Cannot open the scene {url}")).size(18.0).strong());
+            ui.label(
+                RichText::new(format!("Cannot open the scene {url}"))
+                    .size(18.0)
+                    .strong(),
+            );
             ui.add_space(8.0);
             ui.label(RichText::new(message).color(ui.visuals().error_fg_color).monospace());
             ui.add_space(12.0);
@@ -146,7 +177,10 @@ impl Viewer {
                 ui.add_space(8.0);
                 ui.heading("View");
                 ui.checkbox(&mut self.show_depth, "depth");
-                ui.add_enabled(self.scene.has_gt(), egui::Checkbox::new(&mut self.show_ground_truth, "ground truth"));
+                ui.add_enabled(
+                    self.scene.has_gt(),
+                    egui::Checkbox::new(&mut self.show_ground_truth, "ground truth"),
+                );
                 ui.add_enabled(
                     self.scene.has_gt() && self.show_ground_truth,
                     egui::Slider::new(&mut self.overlay_opacity, 0.0..=1.0).text("opacity"),
@@ -185,7 +219,11 @@ impl Viewer {
         };
         let source = self.scene.frames[self.frame].source.as_deref().unwrap_or("");
         ui.label(format!("frame {} of {}  {source}", self.frame, self.scene.frames.len()));
-        let overlay = textures.ground_truth.as_ref().filter(|_| self.show_ground_truth).map(|t| (t, self.overlay_opacity));
+        let overlay = textures
+            .ground_truth
+            .as_ref()
+            .filter(|_| self.show_ground_truth)
+            .map(|t| (t, self.overlay_opacity));
         let depth = textures.depth.as_ref().filter(|_| self.show_depth);
         let available = ui.available_size();
         match depth {

@@ -23,14 +23,25 @@ pub struct DemoArgs {
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("size {s:?} is not WIDTHxHEIGHT, e.g. 160x120"))?;
-    let parse = |v: &str| v.trim().parse::<u32>().map_err(|_| format!("size {s:?}: {v:?} is not a whole number"));
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("size {s:?} is not WIDTHxHEIGHT, e.g. 160x120"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("size {s:?}: {v:?} is not a whole number"))
+    };
     Ok((parse(w)?, parse(h)?))
 }
 
 pub fn run(args: DemoArgs) -> CliResult {
     check_output(&args.output)?;
-    let opts = DemoOptions { seed: args.seed, width: args.size.0, height: args.size.1, frames: args.frames };
+    let opts = DemoOptions {
+        seed: args.seed,
+        width: args.size.0,
+        height: args.size.1,
+        frames: args.frames,
+    };
     let scene = demo_scene(&opts)?;
     write_archive_path(&scene, &args.output)?;
     println!("wrote the demo scene to {}", args.output.display());

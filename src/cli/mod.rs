@@ -11,7 +11,11 @@ use clap::{Parser, Subcommand};
 pub type CliResult = Result<(), Box<dyn std::error::Error>>;
 
 #[derive(Parser)]
-#[command(name = "scribblefield", version, about = "Scribbles on a few RGB-D frames, propagated to dense masks by a neural field")]
+#[command(
+    name = "scribblefield",
+    version,
+    about = "Scribbles on a few RGB-D frames, propagated to dense masks by a neural field"
+)]
 pub struct Cli {
     #[command(subcommand)]
     command: Command,

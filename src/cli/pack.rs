@@ -26,7 +26,11 @@ pub struct PackArgs {
 
 pub fn run(args: PackArgs) -> CliResult {
     check_output(&args.output)?;
-    let opts = ImportOptions { max_size: args.max_size, every: args.every, max_frames: args.max_frames };
+    let opts = ImportOptions {
+        max_size: args.max_size,
+        every: args.every,
+        max_frames: args.max_frames,
+    };
     let bar = progress::bar("loading");
     let imported = import(&args.input, &opts, &mut |done, total| {
         bar.set_length(total as u64);
@@ -37,7 +41,12 @@ pub fn run(args: PackArgs) -> CliResult {
         eprintln!("warning: {w}");
     }
     write_archive_path(&imported.scene, &args.output)?;
-    println!("packed {} ({:?} layout) into {}", args.input.display(), imported.layout, args.output.display());
+    println!(
+        "packed {} ({:?} layout) into {}",
+        args.input.display(),
+        imported.layout,
+        args.output.display()
+    );
     print!("{}", imported.scene.summary());
     Ok(())
 }

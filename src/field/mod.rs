@@ -14,3 +14,4 @@ pub mod rng;
 
 pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LossWeights};
 pub use params::{MlpLayout, ParamLayout};
+pub mod gpu;

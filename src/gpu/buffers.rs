@@ -27,8 +27,9 @@ pub const GARBAGE_WORDS: [u32; 4] = [0x7FC0_DEAD, 0x7F7F_FFFF, 0xFF80_0000, 0xDE
 
 /// Usages of every storage buffer made here: bindable, and copyable both ways so it can be
 /// filled, cleared and read back.
-pub const STORAGE_USAGE: wgpu::BufferUsages =
-    wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC).union(wgpu::BufferUsages::COPY_DST);
+pub const STORAGE_USAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
+    .union(wgpu::BufferUsages::COPY_SRC)
+    .union(wgpu::BufferUsages::COPY_DST);
 
 /// `count` 32-bit words of the garbage pattern.
 pub fn garbage_words(count: usize) -> Vec<u32> {
@@ -125,7 +126,10 @@ pub fn read_elements_async<T: Pod>(ctx: &GpuContext, buffer: &wgpu::Buffer, rang
     }
     // Copies and maps work in 4-byte units; copy the enclosing aligned range and trim afterwards.
     let aligned_start = start - start % wgpu::COPY_BUFFER_ALIGNMENT;
-    let aligned_end = end.next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT).min(buffer.size()).max(aligned_start);
+    let aligned_end = end
+        .next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT)
+        .min(buffer.size())
+        .max(aligned_start);
     let copy_size = aligned_end - aligned_start;
     if copy_size == 0 {
         return PendingRead::without_gpu_work(ctx, what, ReadStage::Empty);
@@ -136,7 +140,9 @@ pub fn read_elements_async<T: Pod>(ctx: &GpuContext, buffer: &wgpu::Buffer, rang
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+        label: Some("readback"),
+    });
     encoder.copy_buffer_to_buffer(buffer, aligned_start, &staging, 0, copy_size);
     ctx.queue.submit([encoder.finish()]);
 
@@ -150,6 +156,7 @@ pub fn read_elements_async<T: Pod>(ctx: &GpuContext, buffer: &wgpu::Buffer, rang
         }
     });
     PendingRead {
+        #[cfg(not(target_arch = "wasm32"))]
         device: ctx.device.clone(),
         what,
         stage: ReadStage::InFlight(staging),
@@ -194,6 +201,8 @@ enum ReadStage {
 /// A readback in flight. Await it, or call [`PendingRead::try_take`] now and then (the trainer's
 /// occasional loss read: it never waits).
 pub struct PendingRead<T> {
+    /// Native devices only make progress when polled; the browser drives its own.
+    #[cfg(not(target_arch = "wasm32"))]
     device: wgpu::Device,
     what: String,
     stage: ReadStage,
@@ -205,8 +214,11 @@ pub struct PendingRead<T> {
 }
 
 impl<T: Pod> PendingRead<T> {
+    // The browser needs no device handle to make progress, so `ctx` is native-only.
+    #[cfg_attr(target_arch = "wasm32", allow(unused_variables))]
     fn without_gpu_work(ctx: &GpuContext, what: String, stage: ReadStage) -> Self {
         PendingRead {
+            #[cfg(not(target_arch = "wasm32"))]
             device: ctx.device.clone(),
             what,
             stage,
@@ -228,7 +240,10 @@ impl<T: Pod> PendingRead<T> {
     }
 
     fn finish_if_ready(&mut self) -> Option<Result<Vec<T>, GpuError>> {
-        let readback_error = |reason: String| GpuError::Readback { what: self.what.clone(), reason };
+        let readback_error = |reason: String| GpuError::Readback {
+            what: self.what.clone(),
+            reason,
+        };
         let outcome = match &self.stage {
             ReadStage::Invalid(reason) => Err(readback_error(reason.clone())),
             ReadStage::Empty => Ok(Vec::new()),
@@ -270,7 +285,10 @@ impl<T: Pod> Future for PendingRead<T> {
             // inside this poll), then look again.
             if let Err(error) = self.device.poll(wgpu::PollType::wait_indefinitely()) {
                 let what = self.what.clone();
-                return Poll::Ready(Err(GpuError::Readback { what, reason: error.to_string() }));
+                return Poll::Ready(Err(GpuError::Readback {
+                    what,
+                    reason: error.to_string(),
+                }));
             }
             if let Some(done) = self.finish_if_ready() {
                 return Poll::Ready(done);

@@ -33,8 +33,13 @@ impl GpuOptions {
 
     /// Defaults, with the adapter name taken from `SCRIBBLEFIELD_ADAPTER` when set.
     pub fn from_env() -> Self {
-        let adapter_name = std::env::var(Self::ADAPTER_ENV).ok().filter(|name| !name.trim().is_empty());
-        GpuOptions { adapter_name, ..GpuOptions::default() }
+        let adapter_name = std::env::var(Self::ADAPTER_ENV)
+            .ok()
+            .filter(|name| !name.trim().is_empty());
+        GpuOptions {
+            adapter_name,
+            ..GpuOptions::default()
+        }
     }
 }
 
@@ -67,7 +72,10 @@ impl GpuContext {
         let (device, queue) = adapter
             .request_device(&descriptor)
             .await
-            .map_err(|source| GpuError::RequestDevice { adapter: describe_adapter(&adapter_info), source })?;
+            .map_err(|source| GpuError::RequestDevice {
+                adapter: describe_adapter(&adapter_info),
+                source,
+            })?;
         Ok(Self::from_device(device, queue))
     }
 
@@ -106,13 +114,19 @@ impl GpuContext {
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map(|_| ())
-            .map_err(|error| GpuError::Readback { what: "device idle wait".into(), reason: error.to_string() })
+            .map_err(|error| GpuError::Readback {
+                what: "device idle wait".into(),
+                reason: error.to_string(),
+            })
     }
 
     /// Fails with a clear message when one buffer binding of `bytes` exceeds what the device
     /// allows, so callers can split the work (tiles, chunks) before wgpu rejects a binding.
     pub fn ensure_storage_binding_fits(&self, what: &str, bytes: u64) -> Result<(), GpuError> {
-        let allowed = self.limits.max_storage_buffer_binding_size.min(self.limits.max_buffer_size);
+        let allowed = self
+            .limits
+            .max_storage_buffer_binding_size
+            .min(self.limits.max_buffer_size);
         ensure_at_most(what, "max_storage_buffer_binding_size", bytes, allowed)
     }
 
@@ -134,13 +148,37 @@ impl GpuContext {
         let defaults = wgpu::Limits::default();
         let have = &self.limits;
         let checks: [(&str, u64, u64); 7] = [
-            ("max_storage_buffer_binding_size", have.max_storage_buffer_binding_size, defaults.max_storage_buffer_binding_size),
+            (
+                "max_storage_buffer_binding_size",
+                have.max_storage_buffer_binding_size,
+                defaults.max_storage_buffer_binding_size,
+            ),
             ("max_buffer_size", have.max_buffer_size, defaults.max_buffer_size),
-            ("max_compute_workgroup_storage_size", have.max_compute_workgroup_storage_size.into(), defaults.max_compute_workgroup_storage_size.into()),
-            ("max_storage_buffers_per_shader_stage", have.max_storage_buffers_per_shader_stage.into(), defaults.max_storage_buffers_per_shader_stage.into()),
-            ("max_compute_invocations_per_workgroup", have.max_compute_invocations_per_workgroup.into(), defaults.max_compute_invocations_per_workgroup.into()),
-            ("max_compute_workgroup_size_x", have.max_compute_workgroup_size_x.into(), defaults.max_compute_workgroup_size_x.into()),
-            ("max_compute_workgroups_per_dimension", have.max_compute_workgroups_per_dimension.into(), defaults.max_compute_workgroups_per_dimension.into()),
+            (
+                "max_compute_workgroup_storage_size",
+                have.max_compute_workgroup_storage_size.into(),
+                defaults.max_compute_workgroup_storage_size.into(),
+            ),
+            (
+                "max_storage_buffers_per_shader_stage",
+                have.max_storage_buffers_per_shader_stage.into(),
+                defaults.max_storage_buffers_per_shader_stage.into(),
+            ),
+            (
+                "max_compute_invocations_per_workgroup",
+                have.max_compute_invocations_per_workgroup.into(),
+                defaults.max_compute_invocations_per_workgroup.into(),
+            ),
+            (
+                "max_compute_workgroup_size_x",
+                have.max_compute_workgroup_size_x.into(),
+                defaults.max_compute_workgroup_size_x.into(),
+            ),
+            (
+                "max_compute_workgroups_per_dimension",
+                have.max_compute_workgroups_per_dimension.into(),
+                defaults.max_compute_workgroups_per_dimension.into(),
+            ),
         ];
         checks
             .iter()
@@ -154,7 +192,12 @@ fn ensure_at_most(what: &str, limit: &'static str, needed: u64, allowed: u64) ->
     if needed <= allowed {
         Ok(())
     } else {
-        Err(GpuError::LimitExceeded { what: what.to_string(), limit, needed, allowed })
+        Err(GpuError::LimitExceeded {
+            what: what.to_string(),
+            limit,
+            needed,
+            allowed,
+        })
     }
 }
 
@@ -178,12 +221,17 @@ async fn find_adapter(options: &GpuOptions) -> Result<wgpu::Adapter, GpuError> {
     let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
     let adapters = instance.enumerate_adapters(wgpu::Backends::all()).await;
     let wanted_name = options.adapter_name.as_ref().map(|name| name.to_lowercase());
-    let found: Vec<String> = adapters.iter().map(|adapter| describe_adapter(&adapter.get_info())).collect();
+    let found: Vec<String> = adapters
+        .iter()
+        .map(|adapter| describe_adapter(&adapter.get_info()))
+        .collect();
     let best = adapters
         .into_iter()
         .filter(|adapter| {
             let info = adapter.get_info();
-            let name_ok = wanted_name.as_ref().is_none_or(|wanted| info.name.to_lowercase().contains(wanted));
+            let name_ok = wanted_name
+                .as_ref()
+                .is_none_or(|wanted| info.name.to_lowercase().contains(wanted));
             let kind_ok = !options.force_fallback_adapter || info.device_type == wgpu::DeviceType::Cpu;
             name_ok && kind_ok
         })
@@ -193,7 +241,10 @@ async fn find_adapter(options: &GpuOptions) -> Result<wgpu::Adapter, GpuError> {
         if !found.is_empty() {
             tried.push_str(&format!("; present but not matching the options: {}", found.join(", ")));
         }
-        GpuError::NoAdapter { tried, hint: NO_ADAPTER_HINT }
+        GpuError::NoAdapter {
+            tried,
+            hint: NO_ADAPTER_HINT,
+        }
     })
 }
 
@@ -230,8 +281,11 @@ async fn find_adapter(options: &GpuOptions) -> Result<wgpu::Adapter, GpuError> {
         compatible_surface: None,
         apply_limit_buckets: false,
     };
-    instance.request_adapter(&request).await.map_err(|error| GpuError::NoAdapter {
-        tried: format!("WebGPU ({error})"),
-        hint: ". This browser offers no WebGPU adapter; training needs WebGPU (recent Chrome, Edge or Firefox)",
-    })
+    instance
+        .request_adapter(&request)
+        .await
+        .map_err(|error| GpuError::NoAdapter {
+            tried: format!("WebGPU ({error})"),
+            hint: ". This browser offers no WebGPU adapter; training needs WebGPU (recent Chrome, Edge or Firefox)",
+        })
 }

@@ -15,7 +15,12 @@ pub enum GpuError {
     },
     /// A resource or kernel needs more than this device allows.
     #[error("{what} needs {needed} but this device's {limit} is {allowed}")]
-    LimitExceeded { what: String, limit: &'static str, needed: u64, allowed: u64 },
+    LimitExceeded {
+        what: String,
+        limit: &'static str,
+        needed: u64,
+        allowed: u64,
+    },
     /// wgpu rejected something we created (a shader, pipeline, bind group): a bug in our code.
     #[error("GPU validation failed for {what}: {message}")]
     Validation { what: String, message: String },
@@ -32,7 +37,10 @@ pub enum GpuError {
 
 impl GpuError {
     pub fn invalid_argument(what: impl Into<String>, problem: impl Into<String>) -> Self {
-        GpuError::InvalidArgument { what: what.into(), problem: problem.into() }
+        GpuError::InvalidArgument {
+            what: what.into(),
+            problem: problem.into(),
+        }
     }
 
     /// Turns an error caught by a wgpu error scope into ours, naming what was being created.
@@ -40,7 +48,10 @@ impl GpuError {
         let what = what.into();
         match error {
             wgpu::Error::OutOfMemory { .. } => GpuError::OutOfMemory { what },
-            other => GpuError::Validation { what, message: with_causes(&other) },
+            other => GpuError::Validation {
+                what,
+                message: with_causes(&other),
+            },
         }
     }
 }

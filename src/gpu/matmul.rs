@@ -6,8 +6,10 @@ use super::error::GpuError;
 use super::pipeline::{KernelSpec, bind_buffers, create_compute_pipeline};
 use super::shaders;
 
-/// Side of the square tiles `matmul.wgsl` stages in workgroup memory (its `TILE`).
-pub const TILE: u32 = 16;
+/// Side of the square tile of C one workgroup of `matmul.wgsl` computes (its `OUTPUT_TILE`).
+pub const OUTPUT_TILE: u32 = 64;
+/// Depth of the slices of A and B it stages in workgroup memory (its `K_SLICE`).
+const K_SLICE: u32 = 16;
 
 /// C (m x n) = A (m x k) * B (k x n), row-major.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -49,7 +51,9 @@ pub fn matmul_reference(a: &[f32], b: &[f32], dims: MatmulDims) -> Vec<f32> {
     let mut c = vec![0.0f32; m * n];
     for row in 0..m {
         for col in 0..n {
-            let sum: f64 = (0..k).map(|i| f64::from(a[row * k + i]) * f64::from(b[i * n + col])).sum();
+            let sum: f64 = (0..k)
+                .map(|i| f64::from(a[row * k + i]) * f64::from(b[i * n + col]))
+                .sum();
             c[row * n + col] = sum as f32;
         }
     }
@@ -71,7 +75,7 @@ pub struct MatmulJob {
 
 impl MatmulKernel {
     pub async fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
-        ctx.ensure_workgroup_storage_fits("matmul tiles", 2 * u64::from(TILE * TILE) * 4)?;
+        ctx.ensure_workgroup_storage_fits("matmul tiles", 2 * u64::from(OUTPUT_TILE * K_SLICE) * 4)?;
         let pipeline = create_compute_pipeline(ctx, &KernelSpec::new("matmul", shaders::MATMUL, "matmul")).await?;
         let layout = pipeline.get_bind_group_layout(0);
         Ok(MatmulKernel { pipeline, layout })
@@ -81,16 +85,23 @@ impl MatmulKernel {
     pub fn prepare(&self, ctx: &GpuContext, a: &[f32], b: &[f32], dims: MatmulDims) -> Result<MatmulJob, GpuError> {
         let (a_len, b_len, c_len) = dims.element_counts();
         if dims.m == 0 || dims.n == 0 || dims.k == 0 {
-            return Err(GpuError::invalid_argument("matmul", format!("dimensions {dims:?} must be positive")));
+            return Err(GpuError::invalid_argument(
+                "matmul",
+                format!("dimensions {dims:?} must be positive"),
+            ));
         }
         if a.len() != a_len || b.len() != b_len {
             return Err(GpuError::invalid_argument(
                 "matmul",
-                format!("{dims:?} needs A of {a_len} and B of {b_len} elements, got {} and {}", a.len(), b.len()),
+                format!(
+                    "{dims:?} needs A of {a_len} and B of {b_len} elements, got {} and {}",
+                    a.len(),
+                    b.len()
+                ),
             ));
         }
         let max_groups = ctx.limits.max_compute_workgroups_per_dimension;
-        let groups = dims.m.div_ceil(TILE).max(dims.n.div_ceil(TILE));
+        let groups = dims.m.div_ceil(OUTPUT_TILE).max(dims.n.div_ceil(OUTPUT_TILE));
         if groups > max_groups {
             return Err(GpuError::LimitExceeded {
                 what: format!("matmul {dims:?}"),
@@ -102,7 +113,16 @@ impl MatmulKernel {
         let a = storage_buffer_from(ctx, "matmul A", a)?;
         let b = storage_buffer_from(ctx, "matmul B", b)?;
         let c = storage_buffer_garbage::<f32>(ctx, "matmul C", c_len)?;
-        let uniform = uniform_buffer_from(ctx, "matmul dims", &DimsUniform { m: dims.m, n: dims.n, k: dims.k, _pad: 0 });
+        let uniform = uniform_buffer_from(
+            ctx,
+            "matmul dims",
+            &DimsUniform {
+                m: dims.m,
+                n: dims.n,
+                k: dims.k,
+                _pad: 0,
+            },
+        );
         let bind_group = bind_buffers(ctx, "matmul", &self.layout, &[&uniform, &a, &b, &c]);
         Ok(MatmulJob { dims, c, bind_group })
     }
@@ -112,17 +132,27 @@ impl MatmulKernel {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &job.bind_group, &[]);
         for _ in 0..repeats {
-            pass.dispatch_workgroups(job.dims.n.div_ceil(TILE), job.dims.m.div_ceil(TILE), 1);
+            pass.dispatch_workgroups(job.dims.n.div_ceil(OUTPUT_TILE), job.dims.m.div_ceil(OUTPUT_TILE), 1);
         }
     }
 
     /// One product, start to finish: C = A * B read back to the CPU.
-    pub async fn multiply(&self, ctx: &GpuContext, a: &[f32], b: &[f32], dims: MatmulDims) -> Result<Vec<f32>, GpuError> {
+    pub async fn multiply(
+        &self,
+        ctx: &GpuContext,
+        a: &[f32],
+        b: &[f32],
+        dims: MatmulDims,
+    ) -> Result<Vec<f32>, GpuError> {
         let job = self.prepare(ctx, a, b, dims)?;
-        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("matmul") });
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("matmul") });
         {
-            let mut pass =
-                encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("matmul"), timestamp_writes: None });
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("matmul"),
+                timestamp_writes: None,
+            });
             self.record(&mut pass, &job, 1);
         }
         ctx.queue.submit([encoder.finish()]);

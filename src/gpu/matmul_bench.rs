@@ -33,7 +33,10 @@ pub async fn matmul_gflops(ctx: &GpuContext, n: u32, iterations: u32) -> Result<
 /// warm-up product (pipeline compilation and first-touch costs stay out of the figure).
 pub async fn matmul_bench(ctx: &GpuContext, n: u32, iterations: u32) -> Result<MatmulBenchReport, GpuError> {
     if n == 0 || iterations == 0 {
-        return Err(GpuError::invalid_argument("matmul bench", format!("n = {n} and iterations = {iterations} must be positive")));
+        return Err(GpuError::invalid_argument(
+            "matmul bench",
+            format!("n = {n} and iterations = {iterations} must be positive"),
+        ));
     }
     let dims = MatmulDims::square(n);
     let kernel = MatmulKernel::new(ctx).await?;
@@ -61,16 +64,26 @@ pub async fn matmul_bench(ctx: &GpuContext, n: u32, iterations: u32) -> Result<M
         None => (wall_seconds, TimingSource::WallClock),
     };
     let gflops = dims.flops() * f64::from(iterations) / seconds / 1e9;
-    Ok(MatmulBenchReport { n, iterations, seconds, gflops, timed_by })
+    Ok(MatmulBenchReport {
+        n,
+        iterations,
+        seconds,
+        gflops,
+        timed_by,
+    })
 }
 
 fn run_products(ctx: &GpuContext, kernel: &MatmulKernel, job: &MatmulJob, repeats: u32, timer: Option<&mut PassTimer>) {
     let mut timer = timer;
-    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("matmul bench") });
+    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+        label: Some("matmul bench"),
+    });
     {
         let timestamp_writes = timer.as_mut().and_then(|timer| timer.timestamp_writes("matmul"));
-        let mut pass =
-            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("matmul bench"), timestamp_writes });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("matmul bench"),
+            timestamp_writes,
+        });
         kernel.record(&mut pass, job, repeats);
     }
     if let Some(timer) = timer {
@@ -85,7 +98,9 @@ fn pseudo_random_matrix(len: usize, seed: u64) -> Vec<f32> {
     let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
     (0..len)
         .map(|_| {
-            state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
             ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
         })
         .collect()

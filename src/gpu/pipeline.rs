@@ -21,13 +21,22 @@ pub struct KernelSpec<'a> {
 impl<'a> KernelSpec<'a> {
     /// A spec with a derived layout and no override constants.
     pub fn new(label: &'a str, source: &'a str, entry_point: &'a str) -> Self {
-        KernelSpec { label, source, entry_point, layout: None, constants: &[] }
+        KernelSpec {
+            label,
+            source,
+            entry_point,
+            layout: None,
+            constants: &[],
+        }
     }
 }
 
 /// Compiles a compute pipeline. wgpu's complaints (a shader that fails the device's own checks,
 /// a bad layout) come back as [`GpuError::Validation`] instead of a panic.
-pub async fn create_compute_pipeline(ctx: &GpuContext, spec: &KernelSpec<'_>) -> Result<wgpu::ComputePipeline, GpuError> {
+pub async fn create_compute_pipeline(
+    ctx: &GpuContext,
+    spec: &KernelSpec<'_>,
+) -> Result<wgpu::ComputePipeline, GpuError> {
     let validation = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
     let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(spec.label),
@@ -38,12 +47,18 @@ pub async fn create_compute_pipeline(ctx: &GpuContext, spec: &KernelSpec<'_>) ->
         layout: spec.layout,
         module: &module,
         entry_point: Some(spec.entry_point),
-        compilation_options: wgpu::PipelineCompilationOptions { constants: spec.constants, ..Default::default() },
+        compilation_options: wgpu::PipelineCompilationOptions {
+            constants: spec.constants,
+            ..Default::default()
+        },
         cache: None,
     });
     match validation.pop().await {
         None => Ok(pipeline),
-        Some(error) => Err(GpuError::from_scope(format!("pipeline {} ({})", spec.label, spec.entry_point), error)),
+        Some(error) => Err(GpuError::from_scope(
+            format!("pipeline {} ({})", spec.label, spec.entry_point),
+            error,
+        )),
     }
 }
 
@@ -85,9 +100,16 @@ pub fn bind_buffers(
     let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
         .iter()
         .enumerate()
-        .map(|(binding, buffer)| wgpu::BindGroupEntry { binding: binding as u32, resource: buffer.as_entire_binding() })
+        .map(|(binding, buffer)| wgpu::BindGroupEntry {
+            binding: binding as u32,
+            resource: buffer.as_entire_binding(),
+        })
         .collect();
-    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &entries,
+    })
 }
 
 /// Workgroup counts for `items` independent items in workgroups of `workgroup_size`, spread over
@@ -112,7 +134,10 @@ impl Dispatch1d {
         let workgroups = items.div_ceil(u64::from(workgroup_size));
         let max = u64::from(max_per_dimension);
         if workgroups <= max {
-            return Ok(Dispatch1d { x: workgroups as u32, y: 1 });
+            return Ok(Dispatch1d {
+                x: workgroups as u32,
+                y: 1,
+            });
         }
         let y = workgroups.div_ceil(max);
         if y > max {
@@ -125,7 +150,10 @@ impl Dispatch1d {
         }
         // Spread evenly so the overshoot is at most one row.
         let x = workgroups.div_ceil(y);
-        Ok(Dispatch1d { x: x as u32, y: y as u32 })
+        Ok(Dispatch1d {
+            x: x as u32,
+            y: y as u32,
+        })
     }
 
     /// As [`Dispatch1d::new`] with this device's per-dimension limit.
@@ -152,10 +180,14 @@ pub fn run_1d(
     bind_group: &wgpu::BindGroup,
     dispatch: Dispatch1d,
 ) -> wgpu::SubmissionIndex {
-    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+    let mut encoder = ctx
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
     {
-        let mut pass =
-            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: None });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(label),
+            timestamp_writes: None,
+        });
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, bind_group, &[]);
         dispatch.record(&mut pass);

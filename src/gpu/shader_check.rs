@@ -61,7 +61,11 @@ impl fmt::Display for ShaderProblem {
         if self.line == 0 {
             write!(f, "shaders/{}: {}", self.file, self.message)?;
         } else {
-            write!(f, "shaders/{}:{}:{}: {}", self.file, self.line, self.column, self.message)?;
+            write!(
+                f,
+                "shaders/{}:{}:{}: {}",
+                self.file, self.line, self.column, self.message
+            )?;
         }
         if self.file != self.stage {
             write!(f, " (while checking stage {})", self.stage)?;
@@ -83,8 +87,16 @@ pub fn is_snippet(file: &str) -> bool {
 /// The Rust constant name for a stage file: `matmul.wgsl` -> `MATMUL`, `ray-march.wgsl` -> `RAY_MARCH`.
 pub fn constant_name(file: &str) -> String {
     let stem = file.strip_suffix(".wgsl").unwrap_or(file);
-    let mut name: String =
-        stem.chars().map(|c| if c.is_ascii_alphanumeric() { c.to_ascii_uppercase() } else { '_' }).collect();
+    let mut name: String = stem
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() {
+                c.to_ascii_uppercase()
+            } else {
+                '_'
+            }
+        })
+        .collect();
     if name.starts_with(|c: char| c.is_ascii_digit()) {
         name.insert(0, '_');
     }
@@ -93,10 +105,21 @@ pub fn constant_name(file: &str) -> String {
 
 /// Pastes the snippets a stage includes. `files` maps file names (no directory) to their text.
 pub fn expand_includes(stage: &str, files: &BTreeMap<String, String>) -> Result<ExpandedShader, ShaderProblem> {
-    let mut expanded = ExpandedShader { file: stage.to_string(), source: String::new(), origins: Vec::new() };
+    let mut expanded = ExpandedShader {
+        file: stage.to_string(),
+        source: String::new(),
+        origins: Vec::new(),
+    };
     let mut already_included = Vec::new();
     let mut include_stack = vec![stage.to_string()];
-    paste_file(stage, stage, files, &mut expanded, &mut already_included, &mut include_stack)?;
+    paste_file(
+        stage,
+        stage,
+        files,
+        &mut expanded,
+        &mut already_included,
+        &mut include_stack,
+    )?;
     Ok(expanded)
 }
 
@@ -116,7 +139,9 @@ fn paste_file(
         message,
         report: String::new(),
     };
-    let text = files.get(file).ok_or_else(|| problem(0, format!("file {file} not found")))?;
+    let text = files
+        .get(file)
+        .ok_or_else(|| problem(0, format!("file {file} not found")))?;
     for (index, line) in text.lines().enumerate() {
         let line_number = index as u32 + 1;
         let Some(target) = line.trim().strip_prefix(INCLUDE_DIRECTIVE) else {
@@ -127,13 +152,22 @@ fn paste_file(
         };
         let target = target.trim().trim_matches('"');
         if !is_snippet(target) {
-            return Err(problem(line_number, format!("can only include snippets named _*.wgsl, not `{target}`")));
+            return Err(problem(
+                line_number,
+                format!("can only include snippets named _*.wgsl, not `{target}`"),
+            ));
         }
         if include_stack.iter().any(|open| open == target) {
-            return Err(problem(line_number, format!("include cycle: {} -> {target}", include_stack.join(" -> "))));
+            return Err(problem(
+                line_number,
+                format!("include cycle: {} -> {target}", include_stack.join(" -> ")),
+            ));
         }
         if !files.contains_key(target) {
-            return Err(problem(line_number, format!("included snippet `{target}` does not exist in shaders/")));
+            return Err(problem(
+                line_number,
+                format!("included snippet `{target}` does not exist in shaders/"),
+            ));
         }
         if already_included.iter().any(|done| done == target) {
             continue;
@@ -146,17 +180,38 @@ fn paste_file(
     Ok(())
 }
 
-/// Parses and validates an expanded stage with naga, as strictly as WebGPU: no optional
-/// capabilities, so a shader that passes here needs no native-only device feature.
+/// What naga may assume of every WebGPU device: the capabilities wgpu derives from the downlevel
+/// flags a WebGPU-compliant adapter always has (`wgpu-naga-bridge`), e.g. `unpack2x16float`
+/// needs SHADER_FLOAT16_IN_FLOAT32. Nothing that needs an optional device feature (f16, f64,
+/// 64-bit integers, float atomics, subgroups).
+pub fn webgpu_baseline_capabilities() -> naga::valid::Capabilities {
+    naga::valid::Capabilities::SHADER_FLOAT16_IN_FLOAT32
+        | naga::valid::Capabilities::MULTISAMPLED_SHADING
+        | naga::valid::Capabilities::CUBE_ARRAY_TEXTURES
+}
+
+/// Parses and validates an expanded stage with naga, as strictly as WebGPU (see
+/// [`webgpu_baseline_capabilities`]), so a shader that passes here needs no native-only feature.
 pub fn validate(shader: &ExpandedShader) -> Result<(), ShaderProblem> {
     let module = naga::front::wgsl::parse_str(&shader.source).map_err(|error| {
         let location = error.location(&shader.source);
-        locate(shader, location, error.message().to_string(), error.emit_to_string_with_path(&shader.source, &shader.file))
+        locate(
+            shader,
+            location,
+            error.message().to_string(),
+            error.emit_to_string_with_path(&shader.source, &shader.file),
+        )
     })?;
-    let mut validator = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty());
+    let mut validator =
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), webgpu_baseline_capabilities());
     validator.validate(&module).map_err(|error| {
         let location = error.location(&shader.source);
-        locate(shader, location, error_chain(error.as_inner()), error.emit_to_string_with_path(&shader.source, &shader.file))
+        locate(
+            shader,
+            location,
+            error_chain(error.as_inner()),
+            error.emit_to_string_with_path(&shader.source, &shader.file),
+        )
     })?;
     Ok(())
 }
@@ -187,7 +242,14 @@ fn locate(
         }
         None => (shader.file.clone(), 0, 0),
     };
-    ShaderProblem { file, stage: shader.file.clone(), line, column, message, report }
+    ShaderProblem {
+        file,
+        stage: shader.file.clone(),
+        line,
+        column,
+        message,
+        report,
+    }
 }
 
 /// Expands and validates every stage in `files`; returns the stages sorted by file name, or every
@@ -201,7 +263,10 @@ pub fn check_all(files: &BTreeMap<String, String>) -> Result<Vec<ExpandedShader>
             Err(problem) => problems.push(problem),
         }
     }
-    let mut names: Vec<(String, &str)> = stages.iter().map(|s| (constant_name(&s.file), s.file.as_str())).collect();
+    let mut names: Vec<(String, &str)> = stages
+        .iter()
+        .map(|s| (constant_name(&s.file), s.file.as_str()))
+        .collect();
     names.sort();
     for pair in names.windows(2) {
         if pair[0].0 == pair[1].0 {

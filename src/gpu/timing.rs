@@ -105,7 +105,11 @@ impl PassTimer {
         let names = std::mem::take(&mut self.names);
         self.untimed = 0;
         let ticks = read_elements_async::<u64>(ctx, &self.resolve_buffer, 0..names.len() as u64 * 2);
-        PassTimesRead { names, ticks, period_ns: self.period_ns }
+        PassTimesRead {
+            names,
+            ticks,
+            period_ns: self.period_ns,
+        }
     }
 }
 
@@ -126,7 +130,10 @@ impl PassTimesRead {
             .map(|(name, pair)| {
                 // Some drivers reorder the two writes slightly; a negative span is zero time.
                 let span = pair[1].saturating_sub(pair[0]);
-                PassTime { name, seconds: span as f64 * self.period_ns * 1e-9 }
+                PassTime {
+                    name,
+                    seconds: span as f64 * self.period_ns * 1e-9,
+                }
             })
             .collect())
     }
@@ -146,11 +153,15 @@ impl Stopwatch {
     pub fn start() -> Self {
         #[cfg(not(target_arch = "wasm32"))]
         {
-            Stopwatch { start: std::time::Instant::now() }
+            Stopwatch {
+                start: std::time::Instant::now(),
+            }
         }
         #[cfg(target_arch = "wasm32")]
         {
-            Stopwatch { start_ms: js_sys::Date::now() }
+            Stopwatch {
+                start_ms: js_sys::Date::now(),
+            }
         }
     }
 

@@ -43,13 +43,21 @@ pub struct LabelSet {
 
 impl Default for LabelSet {
     fn default() -> Self {
-        LabelSet { format: LABELS_FORMAT.into(), version: LABELS_VERSION, classes: vec![], frames: vec![] }
+        LabelSet {
+            format: LABELS_FORMAT.into(),
+            version: LABELS_VERSION,
+            classes: vec![],
+            frames: vec![],
+        }
     }
 }
 
 impl LabelSet {
     pub fn new(classes: Vec<ClassInfo>) -> Self {
-        LabelSet { classes, ..Default::default() }
+        LabelSet {
+            classes,
+            ..Default::default()
+        }
     }
 
     pub fn to_json(&self) -> String {
@@ -59,24 +67,35 @@ impl LabelSet {
     /// Parses and checks a labels file against a scene with `frame_count` frames; `file` names
     /// the source in errors.
     pub fn from_json(text: &[u8], file: &str, frame_count: u32) -> Result<LabelSet> {
-        let set: LabelSet =
-            serde_json::from_slice(text).map_err(|source| SceneError::Json { file: file.into(), source })?;
+        let set: LabelSet = serde_json::from_slice(text).map_err(|source| SceneError::Json {
+            file: file.into(),
+            source,
+        })?;
         set.check(file, frame_count)?;
         Ok(set)
     }
 
     pub fn check(&self, file: &str, frame_count: u32) -> Result<()> {
         if self.format != LABELS_FORMAT {
-            return Err(SceneError::invalid(file, format!("format is {:?}, expected {LABELS_FORMAT:?}", self.format)));
+            return Err(SceneError::invalid(
+                file,
+                format!("format is {:?}, expected {LABELS_FORMAT:?}", self.format),
+            ));
         }
         if self.version != LABELS_VERSION {
             return Err(SceneError::invalid(
                 file,
-                format!("unsupported labels version {} (this build reads version {LABELS_VERSION})", self.version),
+                format!(
+                    "unsupported labels version {} (this build reads version {LABELS_VERSION})",
+                    self.version
+                ),
             ));
         }
         if self.classes.len() > u16::MAX as usize {
-            return Err(SceneError::invalid(file, format!("{} classes is too many", self.classes.len())));
+            return Err(SceneError::invalid(
+                file,
+                format!("{} classes is too many", self.classes.len()),
+            ));
         }
         for fl in &self.frames {
             if fl.frame >= frame_count {
@@ -96,7 +115,10 @@ impl LabelSet {
                     }
                 }
                 if !(s.radius.is_finite() && s.radius > 0.0 && s.radius <= MAX_RADIUS) {
-                    return Err(SceneError::invalid(file, format!("{at}: brush radius {} is not in (0, {MAX_RADIUS}]", s.radius)));
+                    return Err(SceneError::invalid(
+                        file,
+                        format!("{at}: brush radius {} is not in (0, {MAX_RADIUS}]", s.radius),
+                    ));
                 }
                 if s.points.is_empty() {
                     return Err(SceneError::invalid(file, format!("{at}: has no points")));
@@ -119,7 +141,10 @@ impl LabelSet {
         match self.frames.iter_mut().find(|f| f.frame == frame) {
             Some(f) => f.strokes.push(stroke),
             None => {
-                self.frames.push(FrameLabels { frame, strokes: vec![stroke] });
+                self.frames.push(FrameLabels {
+                    frame,
+                    strokes: vec![stroke],
+                });
                 self.frames.sort_by_key(|f| f.frame);
             }
         }

@@ -2,6 +2,7 @@
 //! The same model serves the CLI, the archive's shipped labels and the app.
 mod format;
 mod raster;
+pub mod synthetic;
 
-pub use format::{ClassInfo, FrameLabels, LabelSet, Stroke, LABELS_FORMAT, LABELS_VERSION};
-pub use raster::{mask_to_strokes, rasterize_frame, UNLABELLED};
+pub use format::{ClassInfo, FrameLabels, LABELS_FORMAT, LABELS_VERSION, LabelSet, Stroke};
+pub use raster::{UNLABELLED, mask_to_strokes, rasterize_frame};

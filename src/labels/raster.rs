@@ -20,7 +20,11 @@ pub fn rasterize_frame(labels: Option<&FrameLabels>, width: u32, height: u32) ->
 fn paint_stroke(map: &mut [u16], width: u32, height: u32, s: &Stroke) {
     let value = s.class.unwrap_or(UNLABELLED);
     let r = s.radius;
-    let pts: Vec<[f32; 2]> = if s.points.len() == 1 { vec![s.points[0], s.points[0]] } else { s.points.clone() };
+    let pts: Vec<[f32; 2]> = if s.points.len() == 1 {
+        vec![s.points[0], s.points[0]]
+    } else {
+        s.points.clone()
+    };
     for seg in pts.windows(2) {
         let (a, b) = (seg[0], seg[1]);
         let x0 = (a[0].min(b[0]) - r).floor().max(0.0) as i64;
@@ -32,7 +36,11 @@ fn paint_stroke(map: &mut [u16], width: u32, height: u32, s: &Stroke) {
         for y in y0..y1 {
             for x in x0..x1 {
                 let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
-                let t = if len2 > 0.0 { (((px - a[0]) * dx + (py - a[1]) * dy) / len2).clamp(0.0, 1.0) } else { 0.0 };
+                let t = if len2 > 0.0 {
+                    (((px - a[0]) * dx + (py - a[1]) * dy) / len2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
                 let (qx, qy) = (a[0] + t * dx - px, a[1] + t * dy - py);
                 if qx * qx + qy * qy <= r * r {
                     map[y as usize * width as usize + x as usize] = value;
@@ -77,7 +85,15 @@ mod tests {
     #[test]
     fn mask_round_trips_through_strokes() {
         let (w, h) = (13u32, 7u32);
-        let mask: Vec<u16> = (0..w * h).map(|i| if (i * 7919) % 5 < 2 { UNLABELLED } else { ((i / 3) % 4) as u16 }).collect();
+        let mask: Vec<u16> = (0..w * h)
+            .map(|i| {
+                if (i * 7919) % 5 < 2 {
+                    UNLABELLED
+                } else {
+                    ((i / 3) % 4) as u16
+                }
+            })
+            .collect();
         let strokes = mask_to_strokes(&mask, w, h, |c| c != UNLABELLED);
         let fl = FrameLabels { frame: 0, strokes };
         assert_eq!(rasterize_frame(Some(&fl), w, h), mask);
@@ -85,14 +101,25 @@ mod tests {
 
     #[test]
     fn eraser_clears_and_brush_is_round() {
-        let mut fl = FrameLabels { frame: 0, strokes: vec![Stroke { class: Some(2), radius: 3.0, points: vec![[10.0, 10.0]] }] };
+        let mut fl = FrameLabels {
+            frame: 0,
+            strokes: vec![Stroke {
+                class: Some(2),
+                radius: 3.0,
+                points: vec![[10.0, 10.0]],
+            }],
+        };
         let map = rasterize_frame(Some(&fl), 20, 20);
         let covered = map.iter().filter(|&&v| v == 2).count();
         // 32 pixel centres (8 per quadrant) lie within 3 px of the corner (10, 10).
         assert_eq!(covered, 32);
         assert_eq!(map[10 * 20 + 10], 2);
         assert_eq!(map[10 * 20 + 13], UNLABELLED);
-        fl.strokes.push(Stroke { class: None, radius: 10.0, points: vec![[10.0, 10.0]] });
+        fl.strokes.push(Stroke {
+            class: None,
+            radius: 10.0,
+            points: vec![[10.0, 10.0]],
+        });
         assert!(rasterize_frame(Some(&fl), 20, 20).iter().all(|&v| v == UNLABELLED));
     }
 }

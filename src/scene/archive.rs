@@ -30,31 +30,48 @@ pub mod limits {
 
 /// Reads a scene archive held in memory; `name` is used in error messages (file name or URL).
 pub fn read_archive(bytes: &[u8], name: &str) -> Result<Scene> {
-    let mut zip = ZipArchive::new(Cursor::new(bytes)).map_err(|source| SceneError::Zip { file: name.into(), source })?;
+    let mut zip = ZipArchive::new(Cursor::new(bytes)).map_err(|source| SceneError::Zip {
+        file: name.into(),
+        source,
+    })?;
     check_entry_names(&mut zip, name)?;
     let manifest_bytes = read_entry(&mut zip, name, MANIFEST_FILE, limits::MAX_JSON_BYTES)?;
     let at = |entry: &str| format!("{name}:{entry}");
-    let manifest: Manifest = serde_json::from_slice(&manifest_bytes)
-        .map_err(|source| SceneError::Json { file: at(MANIFEST_FILE), source })?;
+    let manifest: Manifest = serde_json::from_slice(&manifest_bytes).map_err(|source| SceneError::Json {
+        file: at(MANIFEST_FILE),
+        source,
+    })?;
     check_manifest(&manifest, &at(MANIFEST_FILE))?;
 
     let (w, h) = (manifest.width, manifest.height);
     let mut frames = Vec::with_capacity(manifest.frames.len());
     for (i, fe) in manifest.frames.iter().enumerate() {
         let pose = Pose::from_row_major(&fe.pose);
-        pose.check().map_err(|p| SceneError::invalid(at(MANIFEST_FILE), format!("frame {i}: {p}")))?;
+        pose.check()
+            .map_err(|p| SceneError::invalid(at(MANIFEST_FILE), format!("frame {i}: {p}")))?;
         let image_limit = w as u64 * h as u64 * 8 + (1 << 20);
         let rgb_bytes = read_entry(&mut zip, name, &fe.rgb, image_limit)?;
         let rgb = decode_rgb(&rgb_bytes, &at(&fe.rgb), w, h)?;
         let depth = match &fe.depth {
-            Some(d) => Some(decode_depth(&read_entry(&mut zip, name, d, image_limit)?, &at(d), w, h)?),
+            Some(d) => Some(decode_depth(
+                &read_entry(&mut zip, name, d, image_limit)?,
+                &at(d),
+                w,
+                h,
+            )?),
             None => None,
         };
         let gt = match &fe.gt {
             Some(g) => Some(decode_gt(&read_entry(&mut zip, name, g, image_limit)?, &at(g), w, h)?),
             None => None,
         };
-        frames.push(Frame { pose, rgb, depth, gt, source: fe.source.clone() });
+        frames.push(Frame {
+            pose,
+            rgb,
+            depth,
+            gt,
+            source: fe.source.clone(),
+        });
     }
 
     let features = match &manifest.features {
@@ -90,11 +107,23 @@ pub fn read_archive_path(path: &Path) -> Result<Scene> {
 
 fn check_entry_names<R: Read + Seek>(zip: &mut ZipArchive<R>, name: &str) -> Result<()> {
     if zip.len() > limits::MAX_ENTRIES {
-        return Err(SceneError::invalid(name, format!("{} entries is more than any scene needs", zip.len())));
+        return Err(SceneError::invalid(
+            name,
+            format!("{} entries is more than any scene needs", zip.len()),
+        ));
     }
     for i in 0..zip.len() {
-        let entry = zip.by_index_raw(i).map_err(|source| SceneError::Zip { file: name.into(), source })?;
-        let raw = entry.name().map_err(|source| SceneError::Zip { file: name.into(), source })?.to_string();
+        let entry = zip.by_index_raw(i).map_err(|source| SceneError::Zip {
+            file: name.into(),
+            source,
+        })?;
+        let raw = entry
+            .name()
+            .map_err(|source| SceneError::Zip {
+                file: name.into(),
+                source,
+            })?
+            .to_string();
         let absolute = raw.starts_with('/') || raw.starts_with('\\') || raw.get(1..2) == Some(":");
         let climbs = raw.split(['/', '\\']).any(|part| part == "..");
         if absolute || climbs || entry.enclosed_name().is_none() {
@@ -118,14 +147,20 @@ fn read_entry<R: Read + Seek>(zip: &mut ZipArchive<R>, archive: &str, entry: &st
         Err(source) => return Err(SceneError::Zip { file: at, source }),
     };
     if file.size() > limit {
-        return Err(SceneError::invalid(at, format!("{} bytes is more than the {limit} allowed here", file.size())));
+        return Err(SceneError::invalid(
+            at,
+            format!("{} bytes is more than the {limit} allowed here", file.size()),
+        ));
     }
     let mut buf = Vec::with_capacity(file.size() as usize);
     file.take(limit + 1)
         .read_to_end(&mut buf)
         .map_err(|e| SceneError::invalid(&at, format!("cannot read entry (truncated or corrupt archive): {e}")))?;
     if buf.len() as u64 > limit {
-        return Err(SceneError::invalid(at, format!("more than the {limit} bytes allowed here")));
+        return Err(SceneError::invalid(
+            at,
+            format!("more than the {limit} bytes allowed here"),
+        ));
     }
     Ok(buf)
 }
@@ -145,17 +180,33 @@ fn check_manifest(m: &Manifest, at: &str) -> Result<()> {
         return bad("the scene has no frames".into());
     }
     if m.frame_count as usize != m.frames.len() {
-        return bad(format!("frame_count is {} but {} frames are listed", m.frame_count, m.frames.len()));
+        return bad(format!(
+            "frame_count is {} but {} frames are listed",
+            m.frame_count,
+            m.frames.len()
+        ));
     }
     if m.frame_count > limits::MAX_FRAMES {
-        return bad(format!("frame_count {} exceeds the limit of {}", m.frame_count, limits::MAX_FRAMES));
+        return bad(format!(
+            "frame_count {} exceeds the limit of {}",
+            m.frame_count,
+            limits::MAX_FRAMES
+        ));
     }
     if m.width == 0 || m.height == 0 || m.width > limits::MAX_SIDE || m.height > limits::MAX_SIDE {
-        return bad(format!("image size {} x {} is not within 1..={} per side", m.width, m.height, limits::MAX_SIDE));
+        return bad(format!(
+            "image size {} x {} is not within 1..={} per side",
+            m.width,
+            m.height,
+            limits::MAX_SIDE
+        ));
     }
     let total = m.width as u64 * m.height as u64 * m.frame_count as u64;
     if total > limits::MAX_TOTAL_PIXELS {
-        return bad(format!("{total} pixels over all frames exceeds the limit of {}", limits::MAX_TOTAL_PIXELS));
+        return bad(format!(
+            "{total} pixels over all frames exceeds the limit of {}",
+            limits::MAX_TOTAL_PIXELS
+        ));
     }
     m.intrinsics.check().or_else(|p| bad(p))?;
     m.bounds.check().or_else(|p| bad(p))?;
@@ -163,20 +214,40 @@ fn check_manifest(m: &Manifest, at: &str) -> Result<()> {
         return bad(format!("depth_scale must be a positive number, got {}", m.depth_scale));
     }
     if m.classes.len() > limits::MAX_CLASSES {
-        return bad(format!("{} classes exceeds the limit of {}", m.classes.len(), limits::MAX_CLASSES));
+        return bad(format!(
+            "{} classes exceeds the limit of {}",
+            m.classes.len(),
+            limits::MAX_CLASSES
+        ));
     }
     if let Some(f) = &m.features {
         if f.dim == 0 || f.dim > limits::MAX_FEATURE_DIM || f.width == 0 || f.height == 0 {
-            return bad(format!("features: dim {} and grid {} x {} must be positive (dim <= {})", f.dim, f.width, f.height, limits::MAX_FEATURE_DIM));
+            return bad(format!(
+                "features: dim {} and grid {} x {} must be positive (dim <= {})",
+                f.dim,
+                f.width,
+                f.height,
+                limits::MAX_FEATURE_DIM
+            ));
         }
         if f.width > m.width || f.height > m.height {
-            return bad(format!("features: grid {} x {} is larger than the images", f.width, f.height));
+            return bad(format!(
+                "features: grid {} x {} is larger than the images",
+                f.width, f.height
+            ));
         }
         let d = f.dim as usize;
         if f.pca.mean.len() != d || f.pca.components.iter().any(|c| c.len() != d) {
             return bad(format!("features: PCA mean and components must have {d} values each"));
         }
-        if f.pca.mean.iter().chain(f.pca.components.iter().flatten()).chain(&f.pca.lo).chain(&f.pca.hi).any(|v| !v.is_finite()) {
+        if f.pca
+            .mean
+            .iter()
+            .chain(f.pca.components.iter().flatten())
+            .chain(&f.pca.lo)
+            .chain(&f.pca.hi)
+            .any(|v| !v.is_finite())
+        {
             return bad("features: PCA has non-finite values".into());
         }
     }
@@ -192,11 +263,18 @@ fn decode(bytes: &[u8], at: &str, w: u32, h: u32) -> Result<DynamicImage> {
     lim.max_image_height = Some(limits::MAX_SIDE);
     lim.max_alloc = Some(w as u64 * h as u64 * 8 + (1 << 20));
     reader.limits(lim);
-    let img = reader.decode().map_err(|source| SceneError::Image { file: at.into(), source })?;
+    let img = reader.decode().map_err(|source| SceneError::Image {
+        file: at.into(),
+        source,
+    })?;
     if img.width() != w || img.height() != h {
         return Err(SceneError::invalid(
             at,
-            format!("image is {} x {}, but the scene's frames are {w} x {h}", img.width(), img.height()),
+            format!(
+                "image is {} x {}, but the scene's frames are {w} x {h}",
+                img.width(),
+                img.height()
+            ),
         ));
     }
     Ok(img)
@@ -221,16 +299,30 @@ pub(crate) fn decode_gt(bytes: &[u8], at: &str, w: u32, h: u32) -> Result<GrayIm
         DynamicImage::ImageLuma8(g) => Ok(g),
         other => Err(SceneError::invalid(
             at,
-            format!("ground truth must be an 8-bit single-channel PNG of class ids, got {:?}", other.color()),
+            format!(
+                "ground truth must be an 8-bit single-channel PNG of class ids, got {:?}",
+                other.color()
+            ),
         )),
     }
 }
 
-fn read_features<R: Read + Seek>(zip: &mut ZipArchive<R>, name: &str, fe: &FeatureEntry, frames: u32) -> Result<FeatureCodes> {
+fn read_features<R: Read + Seek>(
+    zip: &mut ZipArchive<R>,
+    name: &str,
+    fe: &FeatureEntry,
+    frames: u32,
+) -> Result<FeatureCodes> {
     let expected = frames as u64 * fe.height as u64 * fe.width as u64 * fe.dim as u64 * 2;
     let at = format!("{name}:{}", fe.file);
     if expected > limits::MAX_FEATURE_BYTES {
-        return Err(SceneError::invalid(at, format!("{expected} bytes of features exceeds the limit of {}", limits::MAX_FEATURE_BYTES)));
+        return Err(SceneError::invalid(
+            at,
+            format!(
+                "{expected} bytes of features exceeds the limit of {}",
+                limits::MAX_FEATURE_BYTES
+            ),
+        ));
     }
     let bytes = read_entry(zip, name, &fe.file, expected)?;
     if bytes.len() as u64 != expected {
@@ -245,7 +337,10 @@ fn read_features<R: Read + Seek>(zip: &mut ZipArchive<R>, name: &str, fe: &Featu
             ),
         ));
     }
-    let data: Vec<f16> = bytes.chunks_exact(2).map(|c| f16::from_le_bytes([c[0], c[1]])).collect();
+    let data: Vec<f16> = bytes
+        .chunks_exact(2)
+        .map(|c| f16::from_le_bytes([c[0], c[1]]))
+        .collect();
     if data.iter().any(|v| !v.is_finite()) {
         return Err(SceneError::invalid(at, "contains non-finite values"));
     }
@@ -304,7 +399,8 @@ pub fn manifest_of(scene: &Scene) -> Manifest {
 
 fn encode_png(img: &DynamicImage) -> Vec<u8> {
     let mut out = Cursor::new(Vec::new());
-    img.write_to(&mut out, ImageFormat::Png).expect("PNG encoding into memory cannot fail");
+    img.write_to(&mut out, ImageFormat::Png)
+        .expect("PNG encoding into memory cannot fail");
     out.into_inner()
 }
 
@@ -314,27 +410,44 @@ pub fn write_archive<W: Write + Seek>(scene: &Scene, out: W) -> Result<W> {
     let manifest = manifest_of(scene);
     check_manifest(&manifest, "scene to write")?;
     for (i, f) in scene.frames.iter().enumerate() {
-        f.pose.check().map_err(|p| SceneError::invalid("scene to write", format!("frame {i}: {p}")))?;
+        f.pose
+            .check()
+            .map_err(|p| SceneError::invalid("scene to write", format!("frame {i}: {p}")))?;
         let dims_ok = f.rgb.dimensions() == (scene.width, scene.height)
-            && f.depth.as_ref().is_none_or(|d| d.dimensions() == (scene.width, scene.height))
-            && f.gt.as_ref().is_none_or(|g| g.dimensions() == (scene.width, scene.height));
+            && f.depth
+                .as_ref()
+                .is_none_or(|d| d.dimensions() == (scene.width, scene.height))
+            && f.gt
+                .as_ref()
+                .is_none_or(|g| g.dimensions() == (scene.width, scene.height));
         if !dims_ok {
-            return Err(SceneError::invalid("scene to write", format!("frame {i}: image sizes differ from the scene's")));
+            return Err(SceneError::invalid(
+                "scene to write",
+                format!("frame {i}: image sizes differ from the scene's"),
+            ));
         }
     }
     if let Some(f) = &scene.features {
         if f.data.len() != f.values_per_frame() * scene.frames.len() {
-            return Err(SceneError::invalid("scene to write", "feature codes do not match frames x grid x dim"));
+            return Err(SceneError::invalid(
+                "scene to write",
+                "feature codes do not match frames x grid x dim",
+            ));
         }
     }
     if let Some(l) = &scene.labels {
         l.check("scene to write: labels", scene.frames.len() as u32)?;
     }
 
-    let zip_err = |source| SceneError::Zip { file: "scene to write".into(), source };
+    let zip_err = |source| SceneError::Zip {
+        file: "scene to write".into(),
+        source,
+    };
     let io_err = |e| SceneError::io("scene to write", e);
     let mut zip = ZipWriter::new(out);
-    let stored = SimpleFileOptions::default().compression_method(CompressionMethod::Stored).large_file(false);
+    let stored = SimpleFileOptions::default()
+        .compression_method(CompressionMethod::Stored)
+        .large_file(false);
     let deflated = SimpleFileOptions::default().compression_method(CompressionMethod::Deflated);
 
     let json = serde_json::to_vec_pretty(&manifest).expect("manifest always serializes");
@@ -343,18 +456,25 @@ pub fn write_archive<W: Write + Seek>(scene: &Scene, out: W) -> Result<W> {
     for (i, (f, fe)) in scene.frames.iter().zip(&manifest.frames).enumerate() {
         let _ = i;
         zip.start_file(fe.rgb.as_str(), stored).map_err(zip_err)?;
-        zip.write_all(&encode_png(&DynamicImage::ImageRgb8(f.rgb.clone()))).map_err(io_err)?;
+        zip.write_all(&encode_png(&DynamicImage::ImageRgb8(f.rgb.clone())))
+            .map_err(io_err)?;
         if let (Some(d), Some(name)) = (&f.depth, &fe.depth) {
             zip.start_file(name.as_str(), stored).map_err(zip_err)?;
-            zip.write_all(&encode_png(&DynamicImage::ImageLuma16(d.clone()))).map_err(io_err)?;
+            zip.write_all(&encode_png(&DynamicImage::ImageLuma16(d.clone())))
+                .map_err(io_err)?;
         }
         if let (Some(g), Some(name)) = (&f.gt, &fe.gt) {
             zip.start_file(name.as_str(), stored).map_err(zip_err)?;
-            zip.write_all(&encode_png(&DynamicImage::ImageLuma8(g.clone()))).map_err(io_err)?;
+            zip.write_all(&encode_png(&DynamicImage::ImageLuma8(g.clone())))
+                .map_err(io_err)?;
         }
     }
     if let (Some(f), Some(fe)) = (&scene.features, &manifest.features) {
-        zip.start_file(fe.file.as_str(), deflated.large_file(f.data.len() * 2 >= u32::MAX as usize)).map_err(zip_err)?;
+        zip.start_file(
+            fe.file.as_str(),
+            deflated.large_file(f.data.len() * 2 >= u32::MAX as usize),
+        )
+        .map_err(zip_err)?;
         let bytes: Vec<u8> = f.data.iter().flat_map(|v| v.to_le_bytes()).collect();
         zip.write_all(&bytes).map_err(io_err)?;
     }
@@ -370,8 +490,11 @@ pub fn write_archive<W: Write + Seek>(scene: &Scene, out: W) -> Result<W> {
 pub fn write_archive_path(scene: &Scene, path: &Path) -> Result<()> {
     let tmp = path.with_extension("zip.partial");
     let file = std::fs::File::create(&tmp).map_err(|e| SceneError::io(&tmp, e))?;
-    let result = write_archive(scene, std::io::BufWriter::new(file))
-        .and_then(|w| w.into_inner().map_err(|e| SceneError::io(&tmp, e.into_error())).map(drop));
+    let result = write_archive(scene, std::io::BufWriter::new(file)).and_then(|w| {
+        w.into_inner()
+            .map_err(|e| SceneError::io(&tmp, e.into_error()))
+            .map(drop)
+    });
     if let Err(e) = result {
         let _ = std::fs::remove_file(&tmp);
         return Err(e);

@@ -38,7 +38,10 @@ impl Intrinsics {
             return Err(format!("intrinsics must be finite, got {self:?}"));
         }
         if self.fx <= 0.0 || self.fy <= 0.0 {
-            return Err(format!("focal lengths must be positive, got fx={} fy={}", self.fx, self.fy));
+            return Err(format!(
+                "focal lengths must be positive, got fx={} fy={}",
+                self.fx, self.fy
+            ));
         }
         Ok(())
     }
@@ -125,9 +128,14 @@ impl Pose {
         }
         let r = self.rotation();
         let rtr = r.transpose() * r;
-        let err = (rtr - DMat3::IDENTITY).to_cols_array().iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let err = (rtr - DMat3::IDENTITY)
+            .to_cols_array()
+            .iter()
+            .fold(0.0f64, |m, v| m.max(v.abs()));
         if err > RIGID_TOLERANCE {
-            return Err(format!("pose is not rigid: rotation part is not orthonormal (error {err:.2e})"));
+            return Err(format!(
+                "pose is not rigid: rotation part is not orthonormal (error {err:.2e})"
+            ));
         }
         if r.determinant() < 0.0 {
             return Err("pose is not rigid: rotation part is a reflection (determinant < 0)".into());
@@ -178,7 +186,10 @@ impl Bounds {
             return None;
         }
         let pad = (hi - lo).max(DVec3::splat(1e-3)) * margin;
-        Some(Bounds { min: (lo - pad).to_array(), max: (hi + pad).to_array() })
+        Some(Bounds {
+            min: (lo - pad).to_array(),
+            max: (hi + pad).to_array(),
+        })
     }
 }
 
@@ -219,7 +230,12 @@ mod tests {
 
     #[test]
     fn scaling_intrinsics_keeps_pixel_centres() {
-        let k = Intrinsics { fx: 500.0, fy: 500.0, cx: 319.5, cy: 239.5 };
+        let k = Intrinsics {
+            fx: 500.0,
+            fy: 500.0,
+            cx: 319.5,
+            cy: 239.5,
+        };
         let half = k.scaled((640, 480), (320, 240));
         assert!((half.cx - 159.5).abs() < 1e-12 && (half.fx - 250.0).abs() < 1e-12);
     }

@@ -38,13 +38,22 @@ pub enum SceneError {
 
 impl SceneError {
     pub fn invalid(file: impl Into<String>, problem: impl Into<String>) -> Self {
-        SceneError::Invalid { file: file.into(), problem: problem.into() }
+        SceneError::Invalid {
+            file: file.into(),
+            problem: problem.into(),
+        }
     }
     pub fn missing(file: impl Into<String>, what: impl Into<String>) -> Self {
-        SceneError::Missing { file: file.into(), what: what.into() }
+        SceneError::Missing {
+            file: file.into(),
+            what: what.into(),
+        }
     }
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        SceneError::Io { path: path.into(), source }
+        SceneError::Io {
+            path: path.into(),
+            source,
+        }
     }
 }
 

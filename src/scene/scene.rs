@@ -85,17 +85,31 @@ impl Scene {
         let yes = |v: bool| if v { "yes" } else { "no" };
         let _ = writeln!(s, "frames:      {}", self.frames.len());
         let _ = writeln!(s, "image size:  {} x {}", self.width, self.height);
-        let _ = writeln!(s, "intrinsics:  fx {:.3} fy {:.3} cx {:.3} cy {:.3}", k.fx, k.fy, k.cx, k.cy);
+        let _ = writeln!(
+            s,
+            "intrinsics:  fx {:.3} fy {:.3} cx {:.3} cy {:.3}",
+            k.fx, k.fy, k.cx, k.cy
+        );
         let _ = writeln!(
             s,
             "bounds (m):  [{:.3}, {:.3}, {:.3}] .. [{:.3}, {:.3}, {:.3}]",
             b.min[0], b.min[1], b.min[2], b.max[0], b.max[1], b.max[2]
         );
         let depth_frames = self.frames.iter().filter(|f| f.depth.is_some()).count();
-        let _ = writeln!(s, "depth:       {} ({} of {} frames)", yes(depth_frames > 0), depth_frames, self.frames.len());
+        let _ = writeln!(
+            s,
+            "depth:       {} ({} of {} frames)",
+            yes(depth_frames > 0),
+            depth_frames,
+            self.frames.len()
+        );
         match &self.features {
             Some(f) => {
-                let _ = writeln!(s, "features:    yes ({} x {} x {}, {})", f.width, f.height, f.dim, f.extractor);
+                let _ = writeln!(
+                    s,
+                    "features:    yes ({} x {} x {}, {})",
+                    f.width, f.height, f.dim, f.extractor
+                );
             }
             None => {
                 let _ = writeln!(s, "features:    no");
@@ -115,11 +129,20 @@ impl Scene {
         if self.classes.is_empty() {
             let _ = writeln!(s, "classes:     unknown");
         } else {
-            let names: Vec<String> = self.classes.iter().enumerate().map(|(i, c)| format!("{i}:{}", c.name)).collect();
+            let names: Vec<String> = self
+                .classes
+                .iter()
+                .enumerate()
+                .map(|(i, c)| format!("{i}:{}", c.name))
+                .collect();
             let _ = writeln!(s, "classes:     {}", names.join(", "));
         }
         if !self.provenance.source.is_empty() || !self.provenance.importer.is_empty() {
-            let _ = writeln!(s, "provenance:  {} ({})", self.provenance.source, self.provenance.importer);
+            let _ = writeln!(
+                s,
+                "provenance:  {} ({})",
+                self.provenance.source, self.provenance.importer
+            );
         }
         for n in &self.provenance.notes {
             let _ = writeln!(s, "note:        {n}");

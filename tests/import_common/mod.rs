@@ -11,7 +11,10 @@ pub fn real_data(name: &str) -> Option<PathBuf> {
     if dir.is_dir() {
         Some(dir)
     } else {
-        eprintln!("\n!!! SKIPPING: real data {} is absent; this test checks nothing here !!!\n", dir.display());
+        eprintln!(
+            "\n!!! SKIPPING: real data {} is absent; this test checks nothing here !!!\n",
+            dir.display()
+        );
         None
     }
 }
@@ -38,7 +41,9 @@ pub fn truncate_half(path: &Path) {
 
 /// A colourful test pattern that differs per `seed`.
 pub fn pattern_rgb(w: u32, h: u32, seed: u32) -> RgbImage {
-    RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 7 + seed) as u8, (y * 11 + seed * 3) as u8, ((x ^ y) * 5) as u8]))
+    RgbImage::from_fn(w, h, |x, y| {
+        image::Rgb([(x * 7 + seed) as u8, (y * 11 + seed * 3) as u8, ((x ^ y) * 5) as u8])
+    })
 }
 
 pub fn save_rgb(path: &Path, img: &RgbImage) {
@@ -63,7 +68,10 @@ pub fn save_gray16(path: &Path, img: &ImageBuffer<Luma<u16>, Vec<u16>>) {
 
 /// Writes a 4x4 row-major matrix as a pose text file.
 pub fn write_matrix(path: &Path, m: &[f64; 16]) {
-    let text: String = m.chunks(4).map(|r| format!("{} {} {} {}\n", r[0], r[1], r[2], r[3])).collect();
+    let text: String = m
+        .chunks(4)
+        .map(|r| format!("{} {} {} {}\n", r[0], r[1], r[2], r[3]))
+        .collect();
     write(path, text);
 }
 
@@ -74,8 +82,18 @@ pub fn expect_err<T>(result: Result<T, scribblefield::scene::SceneError>, needle
         Ok(_) => panic!("expected an error mentioning {needles:?}, but the import succeeded"),
         Err(e) => e.to_string(),
     };
+    eprintln!("error as the user sees it: {msg}");
     for n in needles {
         assert!(msg.contains(n), "error {msg:?} does not mention {n:?}");
     }
     msg
+}
+
+/// Asserts a depth reading in metres, to within float rounding of millimetres times 0.001.
+#[track_caller]
+pub fn assert_metres(got: Option<f64>, expected: f64) {
+    match got {
+        Some(m) => assert!((m - expected).abs() < 1e-9, "depth {m} m, expected {expected} m"),
+        None => panic!("no depth reading, expected {expected} m"),
+    }
 }

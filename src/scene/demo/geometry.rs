@@ -31,26 +31,55 @@ pub struct SurfaceHit {
 #[derive(Clone, Copy, Debug)]
 pub enum Shape {
     /// The inside of an axis-aligned box: walls, floor and ceiling of the room.
-    RoomInterior { min: DVec3, max: DVec3 },
+    RoomInterior {
+        min: DVec3,
+        max: DVec3,
+    },
     /// A box turned by a yaw about the vertical axis through its centre.
-    Cuboid { centre: DVec3, half: DVec3, cos_yaw: f64, sin_yaw: f64 },
-    Sphere { centre: DVec3, radius: f64 },
+    Cuboid {
+        centre: DVec3,
+        half: DVec3,
+        cos_yaw: f64,
+        sin_yaw: f64,
+    },
+    Sphere {
+        centre: DVec3,
+        radius: f64,
+    },
     /// A closed vertical cylinder.
-    Cylinder { base: DVec3, radius: f64, height: f64 },
+    Cylinder {
+        base: DVec3,
+        radius: f64,
+        height: f64,
+    },
     /// A vertical cone with its apex up, closed by its base disc.
-    Cone { base: DVec3, radius: f64, height: f64 },
+    Cone {
+        base: DVec3,
+        radius: f64,
+        height: f64,
+    },
 }
 
 impl Shape {
     pub fn cuboid(centre: DVec3, size: DVec3, yaw: f64) -> Shape {
-        Shape::Cuboid { centre, half: size * 0.5, cos_yaw: yaw.cos(), sin_yaw: yaw.sin() }
+        Shape::Cuboid {
+            centre,
+            half: size * 0.5,
+            cos_yaw: yaw.cos(),
+            sin_yaw: yaw.sin(),
+        }
     }
 
     /// The nearest intersection with `t` in (t_min, t_max).
     pub fn intersect(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<SurfaceHit> {
         match *self {
             Shape::RoomInterior { min, max } => room_exit(ray, min, max, t_min, t_max),
-            Shape::Cuboid { centre, half, cos_yaw, sin_yaw } => {
+            Shape::Cuboid {
+                centre,
+                half,
+                cos_yaw,
+                sin_yaw,
+            } => {
                 let local_ray = Ray {
                     origin: rotate_z(ray.origin - centre, cos_yaw, -sin_yaw),
                     dir: rotate_z(ray.dir, cos_yaw, -sin_yaw),
@@ -61,11 +90,18 @@ impl Shape {
             }
             Shape::Sphere { centre, radius } => {
                 let o = ray.origin - centre;
-                let t = nearest_root(ray.dir.length_squared(), 2.0 * o.dot(ray.dir), o.length_squared() - radius * radius, |t| {
-                    t > t_min && t < t_max
-                })?;
+                let t = nearest_root(
+                    ray.dir.length_squared(),
+                    2.0 * o.dot(ray.dir),
+                    o.length_squared() - radius * radius,
+                    |t| t > t_min && t < t_max,
+                )?;
                 let local = o + ray.dir * t;
-                Some(SurfaceHit { t, normal: local / radius, local })
+                Some(SurfaceHit {
+                    t,
+                    normal: local / radius,
+                    local,
+                })
             }
             Shape::Cylinder { base, radius, height } => cylinder_hit(ray, base, radius, height, t_min, t_max),
             Shape::Cone { base, radius, height } => cone_hit(ray, base, radius, height, t_min, t_max),
@@ -77,7 +113,12 @@ impl Shape {
     pub fn signed_distance(&self, p: DVec3) -> f64 {
         match *self {
             Shape::RoomInterior { min, max } => (p - min).min(max - p).min_element(),
-            Shape::Cuboid { centre, half, cos_yaw, sin_yaw } => {
+            Shape::Cuboid {
+                centre,
+                half,
+                cos_yaw,
+                sin_yaw,
+            } => {
                 let q = rotate_z(p - centre, cos_yaw, -sin_yaw).abs() - half;
                 q.max(DVec3::ZERO).length() + q.max_element().min(0.0)
             }
@@ -91,7 +132,11 @@ impl Shape {
                 let (rho, z) = profile_coords(p - base);
                 // The profile touches the axis, so mirroring it across rho = 0 gives a triangle
                 // whose 2D distance is the solid's 3D distance.
-                let profile = [DVec2::new(-radius, 0.0), DVec2::new(radius, 0.0), DVec2::new(0.0, height)];
+                let profile = [
+                    DVec2::new(-radius, 0.0),
+                    DVec2::new(radius, 0.0),
+                    DVec2::new(0.0, height),
+                ];
                 convex_polygon_distance(&profile, DVec2::new(rho, z))
             }
         }
@@ -164,7 +209,11 @@ fn room_exit(ray: &Ray, min: DVec3, max: DVec3, t_min: f64, t_max: f64) -> Optio
     let (t, axis) = best?;
     let mut normal = DVec3::ZERO;
     normal[axis] = -ray.dir[axis].signum();
-    Some(SurfaceHit { t, normal, local: ray.at(t) })
+    Some(SurfaceHit {
+        t,
+        normal,
+        local: ray.at(t),
+    })
 }
 
 /// Where a ray enters an origin-centred box of half extents `half` (slab method).
@@ -195,7 +244,11 @@ fn slab_entry(ray: &Ray, half: DVec3, t_min: f64, t_max: f64) -> Option<SurfaceH
     }
     let mut normal = DVec3::ZERO;
     normal[near_axis] = -ray.dir[near_axis].signum();
-    Some(SurfaceHit { t: t_near, normal, local: ray.at(t_near) })
+    Some(SurfaceHit {
+        t: t_near,
+        normal,
+        local: ray.at(t_near),
+    })
 }
 
 /// Nearest of the candidate hits (side surface and flat caps) of a vertical solid.
@@ -219,19 +272,31 @@ fn disc_hit(ray: &Ray, z: f64, radius: f64, up: bool, t_min: f64, t_max: f64) ->
 }
 
 fn cylinder_hit(ray: &Ray, base: DVec3, radius: f64, height: f64, t_min: f64, t_max: f64) -> Option<SurfaceHit> {
-    let r = Ray { origin: ray.origin - base, dir: ray.dir };
+    let r = Ray {
+        origin: ray.origin - base,
+        dir: ray.dir,
+    };
     let (o, d) = (r.origin, r.dir);
     let a = d.x * d.x + d.y * d.y;
     let side = if a == 0.0 {
         None
     } else {
-        nearest_root(a, 2.0 * (o.x * d.x + o.y * d.y), o.x * o.x + o.y * o.y - radius * radius, |t| {
-            let z = o.z + d.z * t;
-            t > t_min && t < t_max && (0.0..=height).contains(&z)
-        })
+        nearest_root(
+            a,
+            2.0 * (o.x * d.x + o.y * d.y),
+            o.x * o.x + o.y * o.y - radius * radius,
+            |t| {
+                let z = o.z + d.z * t;
+                t > t_min && t < t_max && (0.0..=height).contains(&z)
+            },
+        )
         .map(|t| {
             let local = r.at(t);
-            SurfaceHit { t, normal: DVec3::new(local.x, local.y, 0.0) / radius, local }
+            SurfaceHit {
+                t,
+                normal: DVec3::new(local.x, local.y, 0.0) / radius,
+                local,
+            }
         })
     };
     nearest([
@@ -242,7 +307,10 @@ fn cylinder_hit(ray: &Ray, base: DVec3, radius: f64, height: f64, t_min: f64, t_
 }
 
 fn cone_hit(ray: &Ray, base: DVec3, radius: f64, height: f64, t_min: f64, t_max: f64) -> Option<SurfaceHit> {
-    let r = Ray { origin: ray.origin - base, dir: ray.dir };
+    let r = Ray {
+        origin: ray.origin - base,
+        dir: ray.dir,
+    };
     let (o, d) = (r.origin, r.dir);
     // x^2 + y^2 = k^2 (height - z)^2 with 0 <= z <= height; the z range drops the upper nappe.
     let k2 = (radius / height).powi(2);
@@ -286,10 +354,33 @@ mod tests {
     /// Test shapes with a point inside each.
     fn shapes_and_inner_points() -> Vec<(Shape, DVec3)> {
         vec![
-            (Shape::cuboid(DVec3::new(0.1, -0.2, 0.3), DVec3::new(0.3, 0.2, 0.1), 0.7), DVec3::new(0.1, -0.2, 0.3)),
-            (Shape::Sphere { centre: DVec3::new(-0.1, 0.2, 0.1), radius: 0.25 }, DVec3::new(-0.1, 0.2, 0.1)),
-            (Shape::Cylinder { base: DVec3::new(0.2, 0.1, -0.1), radius: 0.15, height: 0.4 }, DVec3::new(0.2, 0.1, 0.1)),
-            (Shape::Cone { base: DVec3::new(-0.2, -0.1, -0.2), radius: 0.2, height: 0.5 }, DVec3::new(-0.2, -0.1, -0.1)),
+            (
+                Shape::cuboid(DVec3::new(0.1, -0.2, 0.3), DVec3::new(0.3, 0.2, 0.1), 0.7),
+                DVec3::new(0.1, -0.2, 0.3),
+            ),
+            (
+                Shape::Sphere {
+                    centre: DVec3::new(-0.1, 0.2, 0.1),
+                    radius: 0.25,
+                },
+                DVec3::new(-0.1, 0.2, 0.1),
+            ),
+            (
+                Shape::Cylinder {
+                    base: DVec3::new(0.2, 0.1, -0.1),
+                    radius: 0.15,
+                    height: 0.4,
+                },
+                DVec3::new(0.2, 0.1, 0.1),
+            ),
+            (
+                Shape::Cone {
+                    base: DVec3::new(-0.2, -0.1, -0.2),
+                    radius: 0.2,
+                    height: 0.5,
+                },
+                DVec3::new(-0.2, -0.1, -0.1),
+            ),
         ]
     }
 
@@ -308,50 +399,95 @@ mod tests {
 
     #[test]
     fn known_hits_have_the_expected_distance_and_normal() {
-        let ray = Ray { origin: DVec3::new(0.0, 0.0, 5.0), dir: DVec3::new(0.0, 0.0, -2.0) };
-        let sphere = Shape::Sphere { centre: DVec3::ZERO, radius: 1.0 };
+        let ray = Ray {
+            origin: DVec3::new(0.0, 0.0, 5.0),
+            dir: DVec3::new(0.0, 0.0, -2.0),
+        };
+        let sphere = Shape::Sphere {
+            centre: DVec3::ZERO,
+            radius: 1.0,
+        };
         let hit = sphere.intersect(&ray, 0.0, f64::INFINITY).unwrap();
         assert!((hit.t - 2.0).abs() < 1e-12 && (hit.normal - DVec3::Z).length() < 1e-12);
 
-        let cyl = Shape::Cylinder { base: DVec3::ZERO, radius: 1.0, height: 1.0 };
+        let cyl = Shape::Cylinder {
+            base: DVec3::ZERO,
+            radius: 1.0,
+            height: 1.0,
+        };
         let hit = cyl.intersect(&ray, 0.0, f64::INFINITY).unwrap();
         assert!((hit.t - 2.0).abs() < 1e-12 && hit.normal == DVec3::Z);
-        let side = Ray { origin: DVec3::new(3.0, 0.0, 0.5), dir: DVec3::NEG_X };
+        let side = Ray {
+            origin: DVec3::new(3.0, 0.0, 0.5),
+            dir: DVec3::NEG_X,
+        };
         let hit = cyl.intersect(&side, 0.0, f64::INFINITY).unwrap();
         assert!((hit.t - 2.0).abs() < 1e-12 && (hit.normal - DVec3::X).length() < 1e-12);
 
-        let cone = Shape::Cone { base: DVec3::ZERO, radius: 1.0, height: 1.0 };
+        let cone = Shape::Cone {
+            base: DVec3::ZERO,
+            radius: 1.0,
+            height: 1.0,
+        };
         let hit = cone.intersect(&ray, 0.0, f64::INFINITY).unwrap();
         assert!((hit.t - 2.0).abs() < 1e-9, "apex at z = 1, t {}", hit.t);
         let hit = cone.intersect(&side, 0.0, f64::INFINITY).unwrap();
-        assert!((hit.t - 2.5).abs() < 1e-12, "at half height the cone's radius is 0.5, t {}", hit.t);
+        assert!(
+            (hit.t - 2.5).abs() < 1e-12,
+            "at half height the cone's radius is 0.5, t {}",
+            hit.t
+        );
         assert!((hit.normal - DVec3::new(1.0, 0.0, 1.0).normalize()).length() < 1e-12);
 
         let turned = Shape::cuboid(DVec3::ZERO, DVec3::new(2.0, 1.0, 1.0), std::f64::consts::FRAC_PI_2);
         let hit = turned.intersect(&side, 0.0, f64::INFINITY).unwrap();
-        assert!((hit.t - 2.5).abs() < 1e-12, "turned 90 degrees the box is 1 m wide along x, t {}", hit.t);
+        assert!(
+            (hit.t - 2.5).abs() < 1e-12,
+            "turned 90 degrees the box is 1 m wide along x, t {}",
+            hit.t
+        );
         assert!((hit.normal - DVec3::X).length() < 1e-12);
     }
 
     #[test]
     fn misses_and_the_range_limits_are_respected() {
-        let ray = Ray { origin: DVec3::new(0.0, 0.0, 5.0), dir: DVec3::Z };
+        let ray = Ray {
+            origin: DVec3::new(0.0, 0.0, 5.0),
+            dir: DVec3::Z,
+        };
         for s in shapes() {
-            assert!(s.intersect(&ray, 0.0, f64::INFINITY).is_none(), "{s:?} is behind the ray");
+            assert!(
+                s.intersect(&ray, 0.0, f64::INFINITY).is_none(),
+                "{s:?} is behind the ray"
+            );
         }
-        let down = Ray { origin: DVec3::new(0.0, 0.0, 5.0), dir: DVec3::NEG_Z };
-        let sphere = Shape::Sphere { centre: DVec3::ZERO, radius: 1.0 };
+        let down = Ray {
+            origin: DVec3::new(0.0, 0.0, 5.0),
+            dir: DVec3::NEG_Z,
+        };
+        let sphere = Shape::Sphere {
+            centre: DVec3::ZERO,
+            radius: 1.0,
+        };
         assert!(sphere.intersect(&down, 0.0, 3.9).is_none());
         assert!(sphere.intersect(&down, 0.0, 4.1).is_some());
     }
 
     #[test]
     fn room_is_hit_from_inside_with_inward_normals() {
-        let room = Shape::RoomInterior { min: DVec3::new(-1.0, -2.0, 0.0), max: DVec3::new(1.0, 2.0, 3.0) };
+        let room = Shape::RoomInterior {
+            min: DVec3::new(-1.0, -2.0, 0.0),
+            max: DVec3::new(1.0, 2.0, 3.0),
+        };
         let mut rng = SplitMix64::new(5);
         for _ in 0..1000 {
-            let ray = Ray { origin: DVec3::new(0.1, 0.2, 1.0), dir: random_unit(&mut rng) * 1.7 };
-            let hit = room.intersect(&ray, 0.0, f64::INFINITY).expect("a ray inside the room always hits it");
+            let ray = Ray {
+                origin: DVec3::new(0.1, 0.2, 1.0),
+                dir: random_unit(&mut rng) * 1.7,
+            };
+            let hit = room
+                .intersect(&ray, 0.0, f64::INFINITY)
+                .expect("a ray inside the room always hits it");
             assert!(room.signed_distance(hit.local).abs() < 1e-12);
             assert!(hit.normal.dot(ray.dir) < 0.0, "the normal faces the camera inside");
         }
@@ -367,7 +503,10 @@ mod tests {
             for _ in 0..4000 {
                 let origin = random_unit(&mut rng) * 2.0;
                 let target = inner + DVec3::new(rng.range(-0.2, 0.2), rng.range(-0.2, 0.2), rng.range(-0.2, 0.2));
-                let ray = Ray { origin, dir: (target - origin) * rng.range(0.5, 2.0) };
+                let ray = Ray {
+                    origin,
+                    dir: (target - origin) * rng.range(0.5, 2.0),
+                };
                 let Some(hit) = shape.intersect(&ray, 0.0, f64::INFINITY) else {
                     // A miss: points along the ray stay outside.
                     for i in 0..=50 {
@@ -378,27 +517,50 @@ mod tests {
                 };
                 hits += 1;
                 let p = ray.at(hit.t);
-                assert!(shape.signed_distance(p).abs() < 1e-9, "{shape:?}: hit point off the surface");
+                assert!(
+                    shape.signed_distance(p).abs() < 1e-9,
+                    "{shape:?}: hit point off the surface"
+                );
                 assert!((hit.normal.length() - 1.0).abs() < 1e-9);
-                assert!(hit.normal.dot(ray.dir) <= 1e-12, "{shape:?}: normal faces away from the ray");
+                assert!(
+                    hit.normal.dot(ray.dir) <= 1e-12,
+                    "{shape:?}: normal faces away from the ray"
+                );
                 let eps = 1e-6 * ray.dir.length();
-                assert!(shape.signed_distance(p + hit.normal * eps) > 0.0, "{shape:?}: normal points inward");
+                assert!(
+                    shape.signed_distance(p + hit.normal * eps) > 0.0,
+                    "{shape:?}: normal points inward"
+                );
                 for i in 0..50 {
                     let before = ray.at(hit.t * i as f64 / 50.0);
-                    assert!(shape.signed_distance(before) > -1e-9, "{shape:?}: a nearer hit was skipped");
+                    assert!(
+                        shape.signed_distance(before) > -1e-9,
+                        "{shape:?}: a nearer hit was skipped"
+                    );
                 }
             }
-            assert!(hits > 800 && hits < 3900, "{shape:?}: only {hits} hits, the test rays are badly aimed");
+            assert!(
+                hits > 800 && hits < 3900,
+                "{shape:?}: only {hits} hits, the test rays are badly aimed"
+            );
         }
     }
 
     #[test]
     fn signed_distances_are_exact_at_known_points() {
-        let cone = Shape::Cone { base: DVec3::ZERO, radius: 1.0, height: 1.0 };
+        let cone = Shape::Cone {
+            base: DVec3::ZERO,
+            radius: 1.0,
+            height: 1.0,
+        };
         assert!((cone.signed_distance(DVec3::new(0.0, 0.0, 2.0)) - 1.0).abs() < 1e-12);
         assert!((cone.signed_distance(DVec3::new(0.0, 0.0, -0.5)) - 0.5).abs() < 1e-12);
         assert!((cone.signed_distance(DVec3::new(0.0, 0.0, 0.1)) + 0.1).abs() < 1e-12);
-        let cyl = Shape::Cylinder { base: DVec3::ZERO, radius: 1.0, height: 2.0 };
+        let cyl = Shape::Cylinder {
+            base: DVec3::ZERO,
+            radius: 1.0,
+            height: 2.0,
+        };
         assert!((cyl.signed_distance(DVec3::new(0.0, 3.0, 1.0)) - 2.0).abs() < 1e-12);
         assert!((cyl.signed_distance(DVec3::new(2.0, 0.0, 3.0)) - 2f64.sqrt()).abs() < 1e-12);
         let cube = Shape::cuboid(DVec3::ZERO, DVec3::splat(2.0), 0.3);

@@ -11,8 +11,14 @@ use crate::scene::camera::Bounds;
 pub const DEMO_CLASSES: &[&str] = &["background", "table", "box", "mug", "ball", "cone"];
 
 /// Display colours of `DEMO_CLASSES`, chosen to be told apart at a glance.
-pub const DEMO_CLASS_COLOURS: [[u8; 3]; 6] =
-    [[90, 90, 100], [170, 110, 50], [230, 50, 60], [50, 110, 240], [250, 210, 40], [40, 200, 110]];
+pub const DEMO_CLASS_COLOURS: [[u8; 3]; 6] = [
+    [90, 90, 100],
+    [170, 110, 50],
+    [230, 50, 60],
+    [50, 110, 240],
+    [250, 210, 40],
+    [40, 200, 110],
+];
 
 pub const BACKGROUND: u8 = 0;
 pub const TABLE: u8 = 1;
@@ -124,32 +130,64 @@ impl DemoWorld {
         let box_yaw = rng.range(0.0, std::f64::consts::PI);
         parts.push(Part {
             shape: Shape::cuboid(spots[0].extend(top + box_size.z * 0.5), box_size, box_yaw),
-            texture: Texture::Checker { a: palette.red, b: palette.cream, cell: box_size.z / 3.0 },
+            texture: Texture::Checker {
+                a: palette.red,
+                b: palette.cream,
+                cell: box_size.z / 3.0,
+            },
             class: BOX,
         });
 
         let mug_base = spots[1].extend(top);
         parts.push(Part {
-            shape: Shape::Cylinder { base: mug_base, radius: mug_radius, height: mug_height },
-            texture: Texture::Stripes { a: palette.blue, b: palette.cream, period: mug_height / 7.0, top: palette.coffee },
+            shape: Shape::Cylinder {
+                base: mug_base,
+                radius: mug_radius,
+                height: mug_height,
+            },
+            texture: Texture::Stripes {
+                a: palette.blue,
+                b: palette.cream,
+                period: mug_height / 7.0,
+                top: palette.coffee,
+            },
             class: MUG,
         });
         let handle_yaw = rng.range(0.0, std::f64::consts::TAU);
-        parts.extend(mug_handle(mug_base, mug_radius, mug_height, handle_yaw, handle_reach).map(|shape| Part {
-            shape,
-            texture: Texture::Plain(palette.blue),
-            class: MUG,
-        }));
+        parts.extend(
+            mug_handle(mug_base, mug_radius, mug_height, handle_yaw, handle_reach).map(|shape| Part {
+                shape,
+                texture: Texture::Plain(palette.blue),
+                class: MUG,
+            }),
+        );
 
         parts.push(Part {
-            shape: Shape::Sphere { centre: spots[2].extend(top + ball_radius), radius: ball_radius },
-            texture: Texture::Dots { base: palette.red, dot: palette.white, spacing: 0.045, radius: 0.013 },
+            shape: Shape::Sphere {
+                centre: spots[2].extend(top + ball_radius),
+                radius: ball_radius,
+            },
+            texture: Texture::Dots {
+                base: palette.red,
+                dot: palette.white,
+                spacing: 0.045,
+                radius: 0.013,
+            },
             class: BALL,
         });
 
         parts.push(Part {
-            shape: Shape::Cone { base: spots[3].extend(top), radius: cone_radius, height: cone_height },
-            texture: Texture::Spiral { a: palette.orange, b: palette.teal, turns: 2.0, pitch: cone_height / 2.5 },
+            shape: Shape::Cone {
+                base: spots[3].extend(top),
+                radius: cone_radius,
+                height: cone_height,
+            },
+            texture: Texture::Spiral {
+                a: palette.orange,
+                b: palette.teal,
+                turns: 2.0,
+                pitch: cone_height / 2.5,
+            },
             class: CONE,
         });
 
@@ -198,16 +236,24 @@ impl DemoWorld {
 
     /// Whether something other than the room lies between `from` and `from + to_light`.
     fn blocks_light(&self, from: DVec3, to_light: DVec3) -> bool {
-        let ray = Ray { origin: from, dir: to_light };
+        let ray = Ray {
+            origin: from,
+            dir: to_light,
+        };
         self.cluster.intersect(&ray, f64::NEG_INFINITY, f64::INFINITY).is_some()
-            && self.parts[1..].iter().any(|p| p.shape.intersect(&ray, 0.0, 1.0).is_some())
+            && self.parts[1..]
+                .iter()
+                .any(|p| p.shape.intersect(&ray, 0.0, 1.0).is_some())
     }
 
     /// Exact signed distance to the scene's surfaces (positive in the free space of the room).
     /// It is computed without the ray code, so it can check renders.
     pub fn distance(&self, p: DVec3) -> f64 {
         let room = self.parts[0].shape.signed_distance(p);
-        self.parts[1..].iter().map(|part| part.shape.signed_distance(p)).fold(room, f64::min)
+        self.parts[1..]
+            .iter()
+            .map(|part| part.shape.signed_distance(p))
+            .fold(room, f64::min)
     }
 
     /// Distance from `p` to the nearest surface of a part of `class` (infinite for no part).
@@ -221,7 +267,10 @@ impl DemoWorld {
 
     /// The room: everything a camera inside it can see.
     pub fn bounds(&self) -> Bounds {
-        Bounds { min: ROOM_MIN.to_array(), max: ROOM_MAX.to_array() }
+        Bounds {
+            min: ROOM_MIN.to_array(),
+            max: ROOM_MAX.to_array(),
+        }
     }
 
     /// Where the cameras look: a little above the middle of the table top.
@@ -242,7 +291,10 @@ impl DemoWorld {
 fn room(rng: &mut SplitMix64) -> Part {
     let mut c = |r: f64, g: f64, b: f64| DVec3::new(r, g, b) + DVec3::splat(rng.range(-0.04, 0.04));
     Part {
-        shape: Shape::RoomInterior { min: ROOM_MIN, max: ROOM_MAX },
+        shape: Shape::RoomInterior {
+            min: ROOM_MIN,
+            max: ROOM_MAX,
+        },
         texture: Texture::Room {
             tile_a: c(0.56, 0.56, 0.58),
             tile_b: c(0.42, 0.43, 0.46),
@@ -258,15 +310,27 @@ fn room(rng: &mut SplitMix64) -> Part {
 
 /// The top and four legs, all of wood.
 fn table(palette: &Palette, rng: &mut SplitMix64) -> Vec<Part> {
-    let wood = Texture::Wood { light: palette.wood_light, dark: palette.wood_dark, salt: rng.next_u64() };
+    let wood = Texture::Wood {
+        light: palette.wood_light,
+        dark: palette.wood_dark,
+        salt: rng.next_u64(),
+    };
     let top_centre = DVec3::new(0.0, 0.0, TABLE_HEIGHT - TABLE_SIZE.z * 0.5);
-    let mut parts = vec![Part { shape: Shape::cuboid(top_centre, TABLE_SIZE, 0.0), texture: wood, class: TABLE }];
+    let mut parts = vec![Part {
+        shape: Shape::cuboid(top_centre, TABLE_SIZE, 0.0),
+        texture: wood,
+        class: TABLE,
+    }];
     let leg_height = TABLE_HEIGHT - TABLE_SIZE.z;
     let (lx, ly) = (TABLE_SIZE.x * 0.5 - LEG_INSET, TABLE_SIZE.y * 0.5 - LEG_INSET);
     for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
         let centre = DVec3::new(sx * lx, sy * ly, leg_height * 0.5);
         let size = DVec3::new(LEG_SIDE, LEG_SIDE, leg_height);
-        parts.push(Part { shape: Shape::cuboid(centre, size, 0.0), texture: wood, class: TABLE });
+        parts.push(Part {
+            shape: Shape::cuboid(centre, size, 0.0),
+            texture: wood,
+            class: TABLE,
+        });
     }
     parts
 }
@@ -325,9 +389,8 @@ fn layout_fits(spots: &[glam::DVec2; 4], footprints: &[f64; 4], table_half: glam
         .iter()
         .zip(footprints)
         .all(|(s, r)| s.x.abs() + r + CLEARANCE <= table_half.x && s.y.abs() + r + CLEARANCE <= table_half.y);
-    let apart = (0..4).all(|i| {
-        (i + 1..4).all(|j| spots[i].distance(spots[j]) >= footprints[i] + footprints[j] + CLEARANCE)
-    });
+    let apart =
+        (0..4).all(|i| (i + 1..4).all(|j| spots[i].distance(spots[j]) >= footprints[i] + footprints[j] + CLEARANCE));
     on_table && apart
 }
 
@@ -378,15 +441,32 @@ mod tests {
             let objects = standing_objects(&world);
             let classes: Vec<u8> = objects.iter().map(|o| o.0).collect();
             assert_eq!(classes, [BOX, MUG, BALL, CONE]);
-            let mug = world.parts().iter().find(|p| p.class == MUG).unwrap().shape.footprint_radius();
-            let footprints: Vec<f64> =
-                objects.iter().map(|(c, _, s)| if *c == MUG { mug + 0.045 } else { s.footprint_radius() }).collect();
+            let mug = world
+                .parts()
+                .iter()
+                .find(|p| p.class == MUG)
+                .unwrap()
+                .shape
+                .footprint_radius();
+            let footprints: Vec<f64> = objects
+                .iter()
+                .map(|(c, _, s)| if *c == MUG { mug + 0.045 } else { s.footprint_radius() })
+                .collect();
             for (i, (_, axis, shape)) in objects.iter().enumerate() {
-                assert!((shape.bottom() - TABLE_HEIGHT).abs() < 1e-12, "seed {seed}: {shape:?} does not stand on the table");
+                assert!(
+                    (shape.bottom() - TABLE_HEIGHT).abs() < 1e-12,
+                    "seed {seed}: {shape:?} does not stand on the table"
+                );
                 let half = world.table_half_size();
-                assert!(axis.x.abs() + footprints[i] < half.x && axis.y.abs() + footprints[i] < half.y, "seed {seed}");
+                assert!(
+                    axis.x.abs() + footprints[i] < half.x && axis.y.abs() + footprints[i] < half.y,
+                    "seed {seed}"
+                );
                 for (j, (_, other, _)) in objects.iter().enumerate().skip(i + 1) {
-                    assert!(axis.distance(*other) > footprints[i] + footprints[j], "seed {seed}: objects {i} and {j} touch");
+                    assert!(
+                        axis.distance(*other) > footprints[i] + footprints[j],
+                        "seed {seed}: objects {i} and {j} touch"
+                    );
                 }
             }
         }
@@ -396,10 +476,15 @@ mod tests {
     fn mug_handle_touches_the_mug() {
         let world = DemoWorld::generate(3);
         let mug = world.parts().iter().find(|p| p.class == MUG).unwrap();
-        let bars: Vec<&Part> =
-            world.parts().iter().filter(|p| p.class == MUG && matches!(p.shape, Shape::Cuboid { .. })).collect();
+        let bars: Vec<&Part> = world
+            .parts()
+            .iter()
+            .filter(|p| p.class == MUG && matches!(p.shape, Shape::Cuboid { .. }))
+            .collect();
         assert_eq!(bars.len(), 3);
-        let Shape::Cylinder { base, radius, height } = mug.shape else { panic!("the mug is a cylinder") };
+        let Shape::Cylinder { base, radius, height } = mug.shape else {
+            panic!("the mug is a cylinder")
+        };
         // The arms reach into the wall; the upright stands clear of it.
         let touching = bars
             .iter()
@@ -431,7 +516,9 @@ mod tests {
         let mut rng = SplitMix64::new(9);
         for _ in 0..2000 {
             let dir = DVec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
-            let hit = world.cast(DVec3::new(1.0, -0.5, 1.3), dir).expect("the room closes every ray");
+            let hit = world
+                .cast(DVec3::new(1.0, -0.5, 1.3), dir)
+                .expect("the room closes every ray");
             assert!(world.distance(hit.point).abs() < 1e-9);
         }
     }
@@ -443,7 +530,10 @@ mod tests {
         for _ in 0..5000 {
             let origin = DVec3::new(rng.range(-1.5, 1.5), rng.range(-1.4, 1.4), rng.range(1.0, 2.0));
             let target = DVec3::new(rng.range(-0.7, 0.7), rng.range(-0.5, 0.5), rng.range(0.0, 1.2));
-            let ray = Ray { origin, dir: target - origin };
+            let ray = Ray {
+                origin,
+                dir: target - origin,
+            };
             let brute = world
                 .parts()
                 .iter()
@@ -460,7 +550,9 @@ mod tests {
     fn shadows_fall_behind_objects_from_the_light() {
         let world = DemoWorld::generate(0);
         let ball = world.parts().iter().find(|p| p.class == BALL).unwrap();
-        let Shape::Sphere { centre, .. } = ball.shape else { panic!("the ball is a sphere") };
+        let Shape::Sphere { centre, .. } = ball.shape else {
+            panic!("the ball is a sphere")
+        };
         // Where the line from the light through the ball's centre meets the table top.
         let away_from_light = (centre - LIGHT).normalize();
         let shadowed = centre + away_from_light * ((TABLE_HEIGHT - centre.z) / away_from_light.z);

@@ -39,7 +39,12 @@ pub struct DemoOptions {
 
 impl Default for DemoOptions {
     fn default() -> Self {
-        DemoOptions { seed: 0, width: 160, height: 120, frames: 36 }
+        DemoOptions {
+            seed: 0,
+            width: 160,
+            height: 120,
+            frames: 36,
+        }
     }
 }
 
@@ -84,7 +89,10 @@ pub fn demo_classes() -> Vec<ClassInfo> {
     DEMO_CLASSES
         .iter()
         .zip(DEMO_CLASS_COLOURS)
-        .map(|(name, color)| ClassInfo { name: (*name).into(), color })
+        .map(|(name, color)| ClassInfo {
+            name: (*name).into(),
+            color,
+        })
         .collect()
 }
 
@@ -93,13 +101,22 @@ pub fn demo_scene(opts: &DemoOptions) -> Result<Scene> {
     opts.check()?;
     let world = DemoWorld::generate(opts.seed);
     // The orbit draws from its own stream, so layout changes never move the cameras.
-    let orbit = Orbit::new(world.look_target(), &mut SplitMix64::new(opts.seed ^ 0x0c0f_fee0_0b17_ca11));
+    let orbit = Orbit::new(
+        world.look_target(),
+        &mut SplitMix64::new(opts.seed ^ 0x0c0f_fee0_0b17_ca11),
+    );
     let intrinsics = demo_intrinsics(opts.width, opts.height);
     let frames = (0..opts.frames)
         .map(|i| {
             let pose = orbit.pose(i, opts.frames);
             let r = render_frame(&world, &intrinsics, &pose, opts.width, opts.height);
-            Frame { pose, rgb: r.rgb, depth: Some(r.depth), gt: Some(r.gt), source: Some(format!("demo-{i:03}")) }
+            Frame {
+                pose,
+                rgb: r.rgb,
+                depth: Some(r.depth),
+                gt: Some(r.gt),
+                source: Some(format!("demo-{i:03}")),
+            }
         })
         .collect();
     Ok(Scene {

@@ -16,7 +16,12 @@ pub const DEPTH_SCALE: f64 = 0.001;
 /// (integer pixel coordinates are pixel centres, as `Intrinsics::ray_dir` expects).
 pub fn demo_intrinsics(width: u32, height: u32) -> Intrinsics {
     let f = width as f64 * 0.5 / (HORIZONTAL_FOV_DEGREES.to_radians() * 0.5).tan();
-    Intrinsics { fx: f, fy: f, cx: (width as f64 - 1.0) * 0.5, cy: (height as f64 - 1.0) * 0.5 }
+    Intrinsics {
+        fx: f,
+        fy: f,
+        cx: (width as f64 - 1.0) * 0.5,
+        cy: (height as f64 - 1.0) * 0.5,
+    }
 }
 
 /// A camera at `eye` looking at `target` with no roll (world z up), in OpenCV axes.
@@ -24,7 +29,12 @@ pub fn look_at(eye: DVec3, target: DVec3) -> Pose {
     let forward = (target - eye).normalize();
     let right = forward.cross(DVec3::Z).normalize();
     let down = forward.cross(right);
-    Pose(DMat4::from_cols(right.extend(0.0), down.extend(0.0), forward.extend(0.0), eye.extend(1.0)))
+    Pose(DMat4::from_cols(
+        right.extend(0.0),
+        down.extend(0.0),
+        forward.extend(0.0),
+        eye.extend(1.0),
+    ))
 }
 
 /// One loop around the target; elevation and distance swing gently so views differ in more
@@ -55,9 +65,14 @@ impl Orbit {
     pub fn pose(&self, i: u32, n: u32) -> Pose {
         let turn = i as f64 / n.max(1) as f64 * std::f64::consts::TAU;
         let azimuth = self.start_azimuth + turn;
-        let elevation = (self.elevation_degrees + self.swing_degrees * (2.0 * turn + self.swing_phase).sin()).to_radians();
+        let elevation =
+            (self.elevation_degrees + self.swing_degrees * (2.0 * turn + self.swing_phase).sin()).to_radians();
         let distance = self.distance * (1.0 + 0.06 * (3.0 * turn).cos());
-        let offset = DVec3::new(azimuth.cos() * elevation.cos(), azimuth.sin() * elevation.cos(), elevation.sin());
+        let offset = DVec3::new(
+            azimuth.cos() * elevation.cos(),
+            azimuth.sin() * elevation.cos(),
+            elevation.sin(),
+        );
         look_at(self.target + offset * distance, self.target)
     }
 }
@@ -79,14 +94,18 @@ pub fn render_frame(world: &DemoWorld, k: &Intrinsics, pose: &Pose, width: u32, 
     let rotation = pose.rotation();
     let eye = pose.position();
     let cast = |u: f64, v: f64| world.cast(eye, rotation * k.ray_dir(u, v));
-    let hits: Vec<Option<WorldHit>> =
-        (0..height).flat_map(|y| (0..width).map(move |x| (x, y))).map(|(x, y)| cast(x as f64, y as f64)).collect();
+    let hits: Vec<Option<WorldHit>> = (0..height)
+        .flat_map(|y| (0..width).map(move |x| (x, y)))
+        .map(|(x, y)| cast(x as f64, y as f64))
+        .collect();
 
     let part_at = |x: u32, y: u32| hits[(y * width + x) as usize].map(|h| h.part);
     let on_edge = |x: u32, y: u32| {
         let here = part_at(x, y);
         let neighbours = [(x.wrapping_sub(1), y), (x + 1, y), (x, y.wrapping_sub(1)), (x, y + 1)];
-        neighbours.iter().any(|&(nx, ny)| nx < width && ny < height && part_at(nx, ny) != here)
+        neighbours
+            .iter()
+            .any(|&(nx, ny)| nx < width && ny < height && part_at(nx, ny) != here)
     };
     let colour_of = |hit: Option<WorldHit>| hit.map_or(DVec3::ZERO, |h| world.shade(&h));
 
@@ -97,8 +116,10 @@ pub fn render_frame(world: &DemoWorld, k: &Intrinsics, pose: &Pose, width: u32, 
         for x in 0..width {
             let hit = hits[(y * width + x) as usize];
             let colour = if on_edge(x, y) {
-                let sum: DVec3 =
-                    EDGE_SAMPLES.iter().map(|&(dx, dy)| colour_of(cast(x as f64 + dx, y as f64 + dy))).sum();
+                let sum: DVec3 = EDGE_SAMPLES
+                    .iter()
+                    .map(|&(dx, dy)| colour_of(cast(x as f64 + dx, y as f64 + dy)))
+                    .sum();
                 sum / EDGE_SAMPLES.len() as f64
             } else {
                 colour_of(hit)
@@ -132,9 +153,15 @@ mod tests {
         pose.check().unwrap();
         let forward = pose.transform_vector(DVec3::Z);
         assert!((forward - (target - eye).normalize()).length() < 1e-12);
-        assert!(pose.transform_vector(DVec3::Y).z < 0.0, "camera y (image down) points down in the world");
+        assert!(
+            pose.transform_vector(DVec3::Y).z < 0.0,
+            "camera y (image down) points down in the world"
+        );
         assert!(pose.transform_vector(DVec3::X).z.abs() < 1e-12, "no roll");
-        assert!(pose.inverse().transform_point(target).truncate().length() < 1e-12, "target on the axis");
+        assert!(
+            pose.inverse().transform_point(target).truncate().length() < 1e-12,
+            "target on the axis"
+        );
     }
 
     #[test]
@@ -156,14 +183,22 @@ mod tests {
         let n = 36;
         let poses: Vec<Pose> = (0..n).map(|i| orbit.pose(i, n)).collect();
         let heights: Vec<f64> = poses.iter().map(|p| p.position().z).collect();
-        let spread = heights.iter().cloned().fold(f64::MIN, f64::max) - heights.iter().cloned().fold(f64::MAX, f64::min);
+        let spread =
+            heights.iter().cloned().fold(f64::MIN, f64::max) - heights.iter().cloned().fold(f64::MAX, f64::min);
         assert!(spread > 0.2, "camera heights vary by only {spread} m");
         let mut swept = 0.0;
         for w in poses.windows(2) {
-            let (a, b) = ((w[0].position() - target).truncate(), (w[1].position() - target).truncate());
+            let (a, b) = (
+                (w[0].position() - target).truncate(),
+                (w[1].position() - target).truncate(),
+            );
             swept += a.angle_to(b);
         }
-        assert!((swept.to_degrees() - 350.0).abs() < 1e-6, "35 steps of 10 degrees, got {}", swept.to_degrees());
+        assert!(
+            (swept.to_degrees() - 350.0).abs() < 1e-6,
+            "35 steps of 10 degrees, got {}",
+            swept.to_degrees()
+        );
         for p in &poses {
             p.check().unwrap();
             assert!(p.inverse().transform_point(target).truncate().length() < 1e-9);
@@ -179,7 +214,9 @@ mod tests {
         let frame = render_frame(&world, &k, &pose, w, h);
         let to_camera = pose.inverse();
         for (x, y) in [(0, 0), (63, 0), (0, 47), (63, 47), (31, 24), (10, 40)] {
-            let hit = world.cast(pose.position(), pose.rotation() * k.ray_dir(x as f64, y as f64)).unwrap();
+            let hit = world
+                .cast(pose.position(), pose.rotation() * k.ray_dir(x as f64, y as f64))
+                .unwrap();
             let z = to_camera.transform_point(hit.point).z;
             let stored = frame.depth.get_pixel(x, y).0[0];
             assert_eq!(stored, (z * 1000.0).round() as u16, "pixel ({x}, {y})");

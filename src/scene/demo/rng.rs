@@ -96,8 +96,12 @@ mod tests {
     fn lattice_hash_depends_on_every_coordinate_and_the_salt() {
         let base = lattice_hash(1, 2, 3, 0);
         assert_eq!(base, lattice_hash(1, 2, 3, 0));
-        for other in [lattice_hash(0, 2, 3, 0), lattice_hash(1, 0, 3, 0), lattice_hash(1, 2, 0, 0), lattice_hash(1, 2, 3, 1)]
-        {
+        for other in [
+            lattice_hash(0, 2, 3, 0),
+            lattice_hash(1, 0, 3, 0),
+            lattice_hash(1, 2, 0, 0),
+            lattice_hash(1, 2, 3, 1),
+        ] {
             assert_ne!(base, other);
         }
         assert!((0.0..1.0).contains(&lattice_hash(-5, i64::MAX, i64::MIN, u64::MAX)));

@@ -10,17 +10,48 @@ pub type Colour = DVec3;
 #[derive(Clone, Copy, Debug)]
 pub enum Texture {
     /// Wood grain running along local x.
-    Wood { light: Colour, dark: Colour, salt: u64 },
+    Wood {
+        light: Colour,
+        dark: Colour,
+        salt: u64,
+    },
     /// Tiled floor, plastered walls with a skirting board, plain ceiling; chosen by the normal.
-    Room { tile_a: Colour, tile_b: Colour, grout: Colour, wall: Colour, skirting: Colour, ceiling: Colour, salt: u64 },
+    Room {
+        tile_a: Colour,
+        tile_b: Colour,
+        grout: Colour,
+        wall: Colour,
+        skirting: Colour,
+        ceiling: Colour,
+        salt: u64,
+    },
     /// 3D checkerboard of cubes of side `cell`.
-    Checker { a: Colour, b: Colour, cell: f64 },
+    Checker {
+        a: Colour,
+        b: Colour,
+        cell: f64,
+    },
     /// Horizontal bands of height `period`; upward faces get `top` (the drink in a mug).
-    Stripes { a: Colour, b: Colour, period: f64, top: Colour },
+    Stripes {
+        a: Colour,
+        b: Colour,
+        period: f64,
+        top: Colour,
+    },
     /// Round spots where the surface passes near points of a cubic lattice of `spacing`.
-    Dots { base: Colour, dot: Colour, spacing: f64, radius: f64 },
+    Dots {
+        base: Colour,
+        dot: Colour,
+        spacing: f64,
+        radius: f64,
+    },
     /// Bands winding up around the vertical axis.
-    Spiral { a: Colour, b: Colour, turns: f64, pitch: f64 },
+    Spiral {
+        a: Colour,
+        b: Colour,
+        turns: f64,
+        pitch: f64,
+    },
     Plain(Colour),
 }
 
@@ -34,7 +65,15 @@ impl Texture {
                 let fibre = 0.92 + 0.08 * value_noise(local * DVec3::new(3.0, 120.0, 120.0), salt ^ 1);
                 dark.lerp(light, grain) * fibre
             }
-            Texture::Room { tile_a, tile_b, grout, wall, skirting, ceiling, salt } => {
+            Texture::Room {
+                tile_a,
+                tile_b,
+                grout,
+                wall,
+                skirting,
+                ceiling,
+                salt,
+            } => {
                 if normal.z > 0.5 {
                     let tile = 0.5;
                     let (u, v) = (local.x / tile, local.y / tile);
@@ -58,7 +97,11 @@ impl Texture {
             Texture::Checker { a, b, cell } => {
                 // Half a cell of offset keeps the box faces (at +-half size) off cell borders.
                 let c = (local / cell + 0.5).floor();
-                if (c.x as i64 + c.y as i64 + c.z as i64).rem_euclid(2) == 0 { a } else { b }
+                if (c.x as i64 + c.y as i64 + c.z as i64).rem_euclid(2) == 0 {
+                    a
+                } else {
+                    b
+                }
             }
             Texture::Stripes { a, b, period, top } => {
                 if normal.z > 0.5 {
@@ -69,13 +112,26 @@ impl Texture {
                     b
                 }
             }
-            Texture::Dots { base, dot, spacing, radius } => {
+            Texture::Dots {
+                base,
+                dot,
+                spacing,
+                radius,
+            } => {
                 let q = local / spacing;
-                if (q - q.round()).length() < radius / spacing { dot } else { base }
+                if (q - q.round()).length() < radius / spacing {
+                    dot
+                } else {
+                    base
+                }
             }
             Texture::Spiral { a, b, turns, pitch } => {
                 let around = local.y.atan2(local.x) / std::f64::consts::TAU;
-                if (around * turns + local.z / pitch).rem_euclid(1.0) < 0.5 { a } else { b }
+                if (around * turns + local.z / pitch).rem_euclid(1.0) < 0.5 {
+                    a
+                } else {
+                    b
+                }
             }
             Texture::Plain(c) => c,
         }
@@ -110,7 +166,11 @@ pub fn value_noise(p: DVec3, salt: u64) -> f64 {
 /// Three octaves of value noise, in [0, 1).
 pub fn fbm(p: DVec3, salt: u64) -> f64 {
     let octaves = [(1.0, 0.5714), (2.0, 0.2857), (4.0, 0.1429)];
-    octaves.iter().enumerate().map(|(i, &(freq, weight))| weight * value_noise(p * freq, salt.wrapping_add(i as u64))).sum()
+    octaves
+        .iter()
+        .enumerate()
+        .map(|(i, &(freq, weight))| weight * value_noise(p * freq, salt.wrapping_add(i as u64)))
+        .sum()
 }
 
 #[cfg(test)]
@@ -138,7 +198,11 @@ mod tests {
 
     #[test]
     fn checker_alternates_between_neighbouring_cells() {
-        let t = Texture::Checker { a: RED, b: WHITE, cell: 0.1 };
+        let t = Texture::Checker {
+            a: RED,
+            b: WHITE,
+            cell: 0.1,
+        };
         let at = |x: f64| t.colour(DVec3::new(x, 0.0, 0.0), DVec3::X);
         assert_eq!(at(0.0), RED);
         assert_eq!(at(0.1), WHITE);
@@ -149,7 +213,12 @@ mod tests {
     #[test]
     fn stripes_band_by_height_and_tops_differ() {
         let coffee = DVec3::new(0.2, 0.1, 0.05);
-        let t = Texture::Stripes { a: RED, b: WHITE, period: 0.02, top: coffee };
+        let t = Texture::Stripes {
+            a: RED,
+            b: WHITE,
+            period: 0.02,
+            top: coffee,
+        };
         assert_eq!(t.colour(DVec3::new(0.05, 0.0, 0.01), DVec3::X), RED);
         assert_eq!(t.colour(DVec3::new(0.05, 0.0, 0.03), DVec3::X), WHITE);
         assert_eq!(t.colour(DVec3::new(0.0, 0.0, 0.03), DVec3::Z), coffee);
@@ -157,7 +226,12 @@ mod tests {
 
     #[test]
     fn dots_cover_part_of_a_sphere() {
-        let t = Texture::Dots { base: RED, dot: WHITE, spacing: 0.03, radius: 0.009 };
+        let t = Texture::Dots {
+            base: RED,
+            dot: WHITE,
+            spacing: 0.03,
+            radius: 0.009,
+        };
         let mut dots = 0;
         let n = 2000;
         for i in 0..n {
@@ -175,20 +249,34 @@ mod tests {
 
     #[test]
     fn spiral_and_wood_show_both_colours() {
-        let spiral = Texture::Spiral { a: RED, b: WHITE, turns: 3.0, pitch: 0.05 };
-        let wood = Texture::Wood { light: WHITE, dark: RED, salt: 4 };
+        let spiral = Texture::Spiral {
+            a: RED,
+            b: WHITE,
+            turns: 3.0,
+            pitch: 0.05,
+        };
+        let wood = Texture::Wood {
+            light: WHITE,
+            dark: RED,
+            salt: 4,
+        };
         let mut spiral_colours = std::collections::HashSet::new();
         let (mut wood_lo, mut wood_hi) = (f64::INFINITY, 0.0f64);
         for i in 0..400 {
             let a = i as f64 * 0.1;
             let p = DVec3::new(0.05 * a.cos(), 0.05 * a.sin(), i as f64 * 0.001);
             spiral_colours.insert(format!("{:?}", spiral.colour(p, DVec3::X)));
-            let w = wood.colour(DVec3::new(i as f64 * 0.003, i as f64 * 0.002, 0.02), DVec3::Z).x;
+            let w = wood
+                .colour(DVec3::new(i as f64 * 0.003, i as f64 * 0.002, 0.02), DVec3::Z)
+                .x;
             wood_lo = wood_lo.min(w);
             wood_hi = wood_hi.max(w);
         }
         assert_eq!(spiral_colours.len(), 2);
-        assert!(wood_hi - wood_lo > 0.05, "wood grain has no contrast: {wood_lo}..{wood_hi}");
+        assert!(
+            wood_hi - wood_lo > 0.05,
+            "wood grain has no contrast: {wood_lo}..{wood_hi}"
+        );
     }
 
     #[test]

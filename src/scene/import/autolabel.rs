@@ -30,11 +30,24 @@ const IMAGE_EXTS: &[&str] = &["png", "jpg", "jpeg"];
 /// autolabel stores depth in millimetres.
 const DEPTH_SCALE: f64 = 0.001;
 
+/// Whether `dir` has autolabel's camera files (poses or intrinsics) beside its rgb/ folder.
+pub(super) fn has_camera_files(dir: &Path) -> bool {
+    dir.join(POSE_DIR).is_dir() || dir.join(INTRINSICS_FILE).is_file()
+}
+
 pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Built> {
     let mut warnings = Vec::new();
     let rgb = files_by_stem(&dir.join(RGB_DIR), IMAGE_EXTS, "")?;
-    let depth = files_by_stem(&required_dir(dir, DEPTH_DIR, "depth images (uint16 millimetres)")?, &["png"], "")?;
-    let pose = files_by_stem(&required_dir(dir, POSE_DIR, "4x4 world-to-camera pose files")?, &["txt"], "")?;
+    let depth = files_by_stem(
+        &required_dir(dir, DEPTH_DIR, "depth images (uint16 millimetres)")?,
+        &["png"],
+        "",
+    )?;
+    let pose = files_by_stem(
+        &required_dir(dir, POSE_DIR, "4x4 world-to-camera pose files")?,
+        &["txt"],
+        "",
+    )?;
     let gt = optional_files(dir, GT_DIR)?;
     let semantic = optional_files(dir, SEMANTIC_DIR)?;
     let intrinsics_path = dir.join(INTRINSICS_FILE);
@@ -74,14 +87,17 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
     for &i in &keep {
         let name = &names[i];
         let file = |map: &BTreeMap<String, PathBuf>, sub: &str| {
-            map.get(name).cloned().ok_or_else(|| SceneError::missing(shown(&dir.join(sub).join(name)), "file of this frame"))
+            map.get(name)
+                .cloned()
+                .ok_or_else(|| SceneError::missing(shown(&dir.join(sub).join(name)), "file of this frame"))
         };
         // autolabel stores world-to-camera; the scene stores camera-to-world. The full inverse
         // (not the rigid shortcut) so that the two multiply to the identity even though text
         // files hold rotations orthonormal only to their printed digits.
         let pose_file = file(&pose, POSE_DIR)?;
         let pose = Pose(read_pose(&pose_file)?.0.inverse());
-        pose.check().map_err(|p| SceneError::invalid(shown(&pose_file), format!("inverted: {p}")))?;
+        pose.check()
+            .map_err(|p| SceneError::invalid(shown(&pose_file), format!("inverted: {p}")))?;
         files.push(FrameFiles {
             name: name.clone(),
             rgb: file(&rgb, RGB_DIR)?,
@@ -107,9 +123,15 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
     let bounds = if bbox_path.is_file() {
         read_bbox(&bbox_path)?
     } else {
-        warnings.push(format!("{}: missing; bounds estimated from the depth", shown(&bbox_path)));
+        warnings.push(format!(
+            "{}: missing; bounds estimated from the depth",
+            shown(&bbox_path)
+        ));
         from_depth(&loaded.frames, &intrinsics, DEPTH_SCALE).ok_or_else(|| {
-            SceneError::invalid(shown(&dir.join(DEPTH_DIR)), "no valid depth in any frame, and no bbox.txt for bounds")
+            SceneError::invalid(
+                shown(&dir.join(DEPTH_DIR)),
+                "no valid depth in any frame, and no bbox.txt for bounds",
+            )
         })?
     };
 
@@ -126,17 +148,30 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
         labels,
         provenance: Default::default(),
     };
-    Ok(Built { scene, layout: Layout::Autolabel, warnings, notes })
+    Ok(Built {
+        scene,
+        layout: Layout::Autolabel,
+        warnings,
+        notes,
+    })
 }
 
 fn required_dir(dir: &Path, name: &str, what: &str) -> Result<PathBuf> {
     let path = dir.join(name);
-    if path.is_dir() { Ok(path) } else { Err(SceneError::missing(format!("{}/", shown(&path)), what)) }
+    if path.is_dir() {
+        Ok(path)
+    } else {
+        Err(SceneError::missing(format!("{}/", shown(&path)), what))
+    }
 }
 
 fn optional_files(dir: &Path, name: &str) -> Result<BTreeMap<String, PathBuf>> {
     let path = dir.join(name);
-    if path.is_dir() { files_by_stem(&path, &["png"], "") } else { Ok(BTreeMap::new()) }
+    if path.is_dir() {
+        files_by_stem(&path, &["png"], "")
+    } else {
+        Ok(BTreeMap::new())
+    }
 }
 
 /// Every colour image needs its depth and pose, and every depth and pose its colour image:
@@ -151,7 +186,10 @@ fn check_matched(
     let counts = format!("{RGB_DIR}/ has {} images, {sub}/ has {} files", rgb.len(), other.len());
     if let Some(name) = frame_order(rgb.keys()).into_iter().find(|n| !other.contains_key(n)) {
         let expected = dir.join(sub).join(format!("{name}.{ext}"));
-        return Err(SceneError::missing(shown(&expected), format!("{sub} of frame {name} ({counts})")));
+        return Err(SceneError::missing(
+            shown(&expected),
+            format!("{sub} of frame {name} ({counts})"),
+        ));
     }
     if let Some((name, path)) = other.iter().find(|(n, _)| !rgb.contains_key(*n)) {
         return Err(SceneError::invalid(
@@ -189,7 +227,10 @@ fn load_scribbles(
             ));
         }
         // autolabel writes class c as c + 1 so that 0 can mean "not labelled".
-        let ids = resize_nearest(&mask, size).into_raw().into_iter().map(|v| if v == 0 { UNLABELLED } else { v - 1 });
+        let ids = resize_nearest(&mask, size)
+            .into_raw()
+            .into_iter()
+            .map(|v| if v == 0 { UNLABELLED } else { v - 1 });
         masks.insert(frame, ids.collect());
     }
     Ok(masks)
@@ -198,12 +239,20 @@ fn load_scribbles(
 /// Class names from classes.txt, or numbered placeholders covering every id seen.
 fn class_names(dir: &Path, frames: &[Frame], masks: &Masks, warnings: &mut Vec<String>) -> Result<Vec<String>> {
     let path = dir.join(CLASSES_FILE);
-    let gt_max = frames.iter().filter_map(|f| f.gt.as_ref()).flat_map(|g| g.iter()).filter(|&&v| v != GT_VOID).max();
+    let gt_max = frames
+        .iter()
+        .filter_map(|f| f.gt.as_ref())
+        .flat_map(|g| g.iter())
+        .filter(|&&v| v != GT_VOID)
+        .max();
     let scribble_max = masks.values().flatten().filter(|&&v| v != UNLABELLED).max();
     let names = if path.is_file() {
         read_class_names(&path)?
     } else {
-        let count = gt_max.map(|&v| v as usize + 1).max(scribble_max.map(|&v| v as usize + 1)).unwrap_or(0);
+        let count = gt_max
+            .map(|&v| v as usize + 1)
+            .max(scribble_max.map(|&v| v as usize + 1))
+            .unwrap_or(0);
         if count > 0 {
             warnings.push(format!("{}: missing; classes are named by number", shown(&path)));
         }
@@ -215,13 +264,17 @@ fn class_names(dir: &Path, frames: &[Frame], masks: &Masks, warnings: &mut Vec<S
             format!("{} classes exceed the limit of {}", names.len(), limits::MAX_CLASSES),
         ));
     }
-    if let Some(&c) = scribble_max {
-        if c as usize >= names.len() {
-            return Err(SceneError::invalid(
-                shown(&dir.join(SEMANTIC_DIR)),
-                format!("scribbles use class {c} (value {}) but {} names only {} classes", c + 1, CLASSES_FILE, names.len()),
-            ));
-        }
+    if let Some(&c) = scribble_max
+        && c as usize >= names.len()
+    {
+        return Err(SceneError::invalid(
+            shown(&dir.join(SEMANTIC_DIR)),
+            format!(
+                "scribbles use class {c} (value {}) but {CLASSES_FILE} names only {} classes",
+                c + 1,
+                names.len()
+            ),
+        ));
     }
     Ok(names)
 }
@@ -245,7 +298,13 @@ fn check_gt_ids(
     Ok(())
 }
 
-fn scribble_labels(masks: &Masks, size: (u32, u32), classes: &[ClassInfo], frames: usize, dir: &Path) -> Result<Option<LabelSet>> {
+fn scribble_labels(
+    masks: &Masks,
+    size: (u32, u32),
+    classes: &[ClassInfo],
+    frames: usize,
+    dir: &Path,
+) -> Result<Option<LabelSet>> {
     if masks.is_empty() {
         return Ok(None);
     }
@@ -253,7 +312,10 @@ fn scribble_labels(masks: &Masks, size: (u32, u32), classes: &[ClassInfo], frame
     for (&frame, mask) in masks {
         let strokes = mask_to_strokes(mask, size.0, size.1, |c| c != UNLABELLED);
         if !strokes.is_empty() {
-            set.frames.push(FrameLabels { frame: frame as u32, strokes });
+            set.frames.push(FrameLabels {
+                frame: frame as u32,
+                strokes,
+            });
         }
     }
     set.check(&shown(&dir.join(SEMANTIC_DIR)), frames as u32)?;

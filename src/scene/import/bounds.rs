@@ -34,7 +34,9 @@ pub(super) fn from_depth(frames: &[Frame], k: &Intrinsics, depth_scale: f64) -> 
                 if d == 0 {
                     continue;
                 }
-                let p = f.pose.transform_point(k.ray_dir(x as f64, y as f64) * (d as f64 * depth_scale));
+                let p = f
+                    .pose
+                    .transform_point(k.ray_dir(x as f64, y as f64) * (d as f64 * depth_scale));
                 for (axis, v) in axes.iter_mut().zip(p.to_array()) {
                     axis.push(v);
                 }
@@ -126,7 +128,12 @@ mod tests {
         let z = (target - eye).normalize();
         let x = z.cross(DVec3::NEG_Y).normalize();
         let y = z.cross(x);
-        Pose(DMat4::from_cols(x.extend(0.0), y.extend(0.0), z.extend(0.0), eye.extend(1.0)))
+        Pose(DMat4::from_cols(
+            x.extend(0.0),
+            y.extend(0.0),
+            z.extend(0.0),
+            eye.extend(1.0),
+        ))
     }
 
     #[test]
@@ -143,7 +150,12 @@ mod tests {
         }
         let f = look_at_point(&poses).unwrap();
         assert!((f - target).length() < 1e-6, "{f}");
-        let k = Intrinsics { fx: 100.0, fy: 100.0, cx: 49.5, cy: 49.5 };
+        let k = Intrinsics {
+            fx: 100.0,
+            fy: 100.0,
+            cx: 49.5,
+            cy: 49.5,
+        };
         let b = from_cameras(&poses, &k, (100, 100)).unwrap();
         for p in poses.iter().map(Pose::position).chain([target]) {
             assert!((0..3).all(|i| b.min[i] < p[i] && p[i] < b.max[i]));
@@ -154,9 +166,16 @@ mod tests {
 
     #[test]
     fn parallel_cameras_fall_back_to_spread() {
-        let poses: Vec<Pose> = (0..3).map(|i| Pose(DMat4::from_translation(DVec3::new(i as f64, 0.0, 0.0)))).collect();
+        let poses: Vec<Pose> = (0..3)
+            .map(|i| Pose(DMat4::from_translation(DVec3::new(i as f64, 0.0, 0.0))))
+            .collect();
         assert!(look_at_point(&poses).is_none());
-        let k = Intrinsics { fx: 100.0, fy: 100.0, cx: 49.5, cy: 49.5 };
+        let k = Intrinsics {
+            fx: 100.0,
+            fy: 100.0,
+            cx: 49.5,
+            cy: 49.5,
+        };
         let b = from_cameras(&poses, &k, (100, 100)).unwrap();
         // Look distance = the cameras' box diagonal (2), so the box reaches z = 2 in front.
         assert!(b.max[2] > 2.0 && b.max[2] < 2.5 && b.min[2] < 0.0);

@@ -34,11 +34,22 @@ pub(super) fn class_color(i: usize) -> [u8; 3] {
         4 => (t, p, v),
         _ => (v, p, q),
     };
-    [(r * 255.0).round() as u8, (g * 255.0).round() as u8, (b * 255.0).round() as u8]
+    [
+        (r * 255.0).round() as u8,
+        (g * 255.0).round() as u8,
+        (b * 255.0).round() as u8,
+    ]
 }
 
 pub(super) fn class_infos(names: impl IntoIterator<Item = String>) -> Vec<ClassInfo> {
-    names.into_iter().enumerate().map(|(i, name)| ClassInfo { name, color: class_color(i) }).collect()
+    names
+        .into_iter()
+        .enumerate()
+        .map(|(i, name)| ClassInfo {
+            name,
+            color: class_color(i),
+        })
+        .collect()
 }
 
 /// Placeholder names for `count` classes known only by id.

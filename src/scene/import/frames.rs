@@ -29,9 +29,15 @@ pub(super) fn files_by_stem(dir: &Path, exts: &[&str], suffix: &str) -> Result<B
     let mut out = BTreeMap::new();
     for entry in entries {
         let path = entry.map_err(|e| SceneError::io(dir, e))?.path();
-        let Some(file_name) = path.file_name().and_then(|n| n.to_str()) else { continue };
-        let Some((stem, ext)) = file_name.rsplit_once('.') else { continue };
-        let Some(stem) = stem.strip_suffix(suffix) else { continue };
+        let Some(file_name) = path.file_name().and_then(|n| n.to_str()) else {
+            continue;
+        };
+        let Some((stem, ext)) = file_name.rsplit_once('.') else {
+            continue;
+        };
+        let Some(stem) = stem.strip_suffix(suffix) else {
+            continue;
+        };
         if stem.is_empty() || !exts.contains(&ext.to_ascii_lowercase().as_str()) || !path.is_file() {
             continue;
         }
@@ -90,13 +96,21 @@ pub(super) fn select(count: usize, opts: &ImportOptions) -> Result<(Vec<usize>, 
     let mut keep: Vec<usize> = (0..count).step_by(opts.every as usize).collect();
     let mut notes = Vec::new();
     if opts.every > 1 {
-        notes.push(format!("kept one frame in {} ({} of {}, --every)", opts.every, keep.len(), count));
+        notes.push(format!(
+            "kept one frame in {} ({} of {}, --every)",
+            opts.every,
+            keep.len(),
+            count
+        ));
     }
-    if let Some(m) = opts.max_frames {
-        if keep.len() > m as usize {
-            notes.push(format!("kept the first {m} of {} selected frames (--max-frames)", keep.len()));
-            keep.truncate(m as usize);
-        }
+    if let Some(m) = opts.max_frames
+        && keep.len() > m as usize
+    {
+        notes.push(format!(
+            "kept the first {m} of {} selected frames (--max-frames)",
+            keep.len()
+        ));
+        keep.truncate(m as usize);
     }
     if keep.len() > limits::MAX_FRAMES as usize {
         return Err(SceneError::invalid(
@@ -138,7 +152,11 @@ pub(super) fn load_frames(
                 if size != native {
                     notes.push(format!(
                         "resized from {}x{} to {}x{} (longest side {}); intrinsics scaled to match",
-                        native.0, native.1, size.0, size.1, size.0.max(size.1)
+                        native.0,
+                        native.1,
+                        size.0,
+                        size.1,
+                        size.0.max(size.1)
                     ));
                 }
                 sizes = Some((native, size));
@@ -182,14 +200,25 @@ pub(super) fn load_frames(
             }
             None => None,
         };
-        frames.push(Frame { pose: f.pose, rgb, depth, gt, source: Some(f.name) });
+        frames.push(Frame {
+            pose: f.pose,
+            rgb,
+            depth,
+            gt,
+            source: Some(f.name),
+        });
         progress(i + 1, total);
     }
     let (native, size) = sizes.ok_or_else(|| SceneError::invalid("capture", "no frames to import"))?;
     if resampled_depth {
         notes.push("depth recorded at a different resolution was resampled (nearest) onto the colour images".into());
     }
-    Ok(Loaded { frames, native, size, notes })
+    Ok(Loaded {
+        frames,
+        native,
+        size,
+        notes,
+    })
 }
 
 fn check_resamplable(got: (u32, u32), native: (u32, u32), file: &str, what: &str) -> Result<()> {
@@ -236,12 +265,19 @@ mod tests {
 
     #[test]
     fn selection_applies_every_then_max() {
-        let opts = ImportOptions { every: 3, max_frames: Some(2), ..Default::default() };
+        let opts = ImportOptions {
+            every: 3,
+            max_frames: Some(2),
+            ..Default::default()
+        };
         let (keep, notes) = select(10, &opts).unwrap();
         assert_eq!(keep, vec![0, 3]);
         assert_eq!(notes.len(), 2);
         assert_eq!(select(5, &ImportOptions::default()).unwrap().0, vec![0, 1, 2, 3, 4]);
-        let zero = ImportOptions { every: 0, ..Default::default() };
+        let zero = ImportOptions {
+            every: 0,
+            ..Default::default()
+        };
         assert!(select(5, &zero).unwrap_err().to_string().contains("--every"));
     }
 }

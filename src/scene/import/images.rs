@@ -33,7 +33,10 @@ pub(super) fn decode(path: &Path) -> Result<DynamicImage> {
     lim.max_image_height = Some(limits::MAX_SIDE);
     lim.max_alloc = Some(limits::MAX_SIDE as u64 * limits::MAX_SIDE as u64 * 8);
     reader.limits(lim);
-    reader.decode().map_err(|source| SceneError::Image { file: name(path), source })
+    reader.decode().map_err(|source| SceneError::Image {
+        file: name(path),
+        source,
+    })
 }
 
 /// The JPEG decoder fills a cut-off file with grey instead of failing, so a truncated JPEG
@@ -43,7 +46,10 @@ fn check_jpeg_complete(bytes: &[u8], path: &Path) -> Result<()> {
     if tail.windows(2).any(|w| w == [0xFF, 0xD9]) {
         Ok(())
     } else {
-        Err(SceneError::invalid(name(path), "JPEG is truncated (no end-of-image marker)"))
+        Err(SceneError::invalid(
+            name(path),
+            "JPEG is truncated (no end-of-image marker)",
+        ))
     }
 }
 
@@ -51,7 +57,10 @@ fn check_jpeg_complete(bytes: &[u8], path: &Path) -> Result<()> {
 pub(super) fn dimensions(path: &Path) -> Result<(u32, u32)> {
     let reader = ImageReader::open(path).map_err(|e| SceneError::io(path, e))?;
     let reader = reader.with_guessed_format().map_err(|e| SceneError::io(path, e))?;
-    reader.into_dimensions().map_err(|source| SceneError::Image { file: name(path), source })
+    reader.into_dimensions().map_err(|source| SceneError::Image {
+        file: name(path),
+        source,
+    })
 }
 
 /// Colour image as 8-bit RGB; transparent pixels are composited over white (the convention of
@@ -76,7 +85,10 @@ pub(super) fn load_depth(path: &Path) -> Result<DepthImage> {
         DynamicImage::ImageLuma16(d) => Ok(d),
         other => Err(SceneError::invalid(
             name(path),
-            format!("depth must be a 16-bit single-channel PNG (millimetres), got {:?}", other.color()),
+            format!(
+                "depth must be a 16-bit single-channel PNG (millimetres), got {:?}",
+                other.color()
+            ),
         )),
     }
 }
@@ -87,7 +99,10 @@ pub(super) fn load_gt(path: &Path) -> Result<GrayImage> {
         DynamicImage::ImageLuma8(g) => Ok(g),
         other => Err(SceneError::invalid(
             name(path),
-            format!("ground truth must be an 8-bit single-channel PNG of class ids, got {:?}", other.color()),
+            format!(
+                "ground truth must be an 8-bit single-channel PNG of class ids, got {:?}",
+                other.color()
+            ),
         )),
     }
 }
@@ -95,13 +110,16 @@ pub(super) fn load_gt(path: &Path) -> Result<GrayImage> {
 /// A label mask of 8- or 16-bit single-channel values, widened to u16.
 pub(super) fn load_mask(path: &Path) -> Result<Mask16> {
     match decode(path)? {
-        DynamicImage::ImageLuma8(g) => {
-            Ok(image::ImageBuffer::from_fn(g.width(), g.height(), |x, y| image::Luma([g.get_pixel(x, y).0[0] as u16])))
-        }
+        DynamicImage::ImageLuma8(g) => Ok(image::ImageBuffer::from_fn(g.width(), g.height(), |x, y| {
+            image::Luma([g.get_pixel(x, y).0[0] as u16])
+        })),
         DynamicImage::ImageLuma16(g) => Ok(g),
         other => Err(SceneError::invalid(
             name(path),
-            format!("label mask must be an 8- or 16-bit single-channel PNG, got {:?}", other.color()),
+            format!(
+                "label mask must be an 8- or 16-bit single-channel PNG, got {:?}",
+                other.color()
+            ),
         )),
     }
 }

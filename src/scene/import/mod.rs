@@ -31,7 +31,11 @@ pub struct ImportOptions {
 
 impl Default for ImportOptions {
     fn default() -> Self {
-        ImportOptions { max_size: None, every: 1, max_frames: None }
+        ImportOptions {
+            max_size: None,
+            every: 1,
+            max_frames: None,
+        }
     }
 }
 
@@ -79,10 +83,16 @@ pub fn detect_layout(input: &Path) -> Result<Layout> {
             "is a file; expected a capture folder or a transforms.json",
         ));
     }
+    let has_rgb_dir = input.join(autolabel::RGB_DIR).is_dir();
+    // A full autolabel scene wins over a transforms.json exported next to it, since only the
+    // autolabel files carry depth; a bare rgb/ folder next to a transforms.json is just images.
+    if has_rgb_dir && autolabel::has_camera_files(input) {
+        return Ok(Layout::Autolabel);
+    }
     if input.join(transforms::FILE).is_file() {
         return Ok(Layout::Transforms);
     }
-    if input.join(autolabel::RGB_DIR).is_dir() {
+    if has_rgb_dir {
         return Ok(Layout::Autolabel);
     }
     if seven_scenes::looks_like(input)? {
@@ -127,7 +137,11 @@ impl Built {
             tool: format!("scribblefield {}", env!("CARGO_PKG_VERSION")),
             notes,
         };
-        Imported { scene: self.scene, layout: self.layout, warnings: self.warnings }
+        Imported {
+            scene: self.scene,
+            layout: self.layout,
+            warnings: self.warnings,
+        }
     }
 }
 
@@ -137,8 +151,14 @@ fn check_scene(scene: &Scene, input: &Path) -> Result<()> {
     if scene.frames.is_empty() {
         return Err(SceneError::invalid(at, "the capture has no frames"));
     }
-    scene.intrinsics.check().map_err(|p| SceneError::invalid(&at, format!("intrinsics: {p}")))?;
-    scene.bounds.check().map_err(|p| SceneError::invalid(&at, format!("bounds: {p}")))?;
+    scene
+        .intrinsics
+        .check()
+        .map_err(|p| SceneError::invalid(&at, format!("intrinsics: {p}")))?;
+    scene
+        .bounds
+        .check()
+        .map_err(|p| SceneError::invalid(&at, format!("bounds: {p}")))?;
     if let Some(labels) = &scene.labels {
         labels.check(&format!("{at}: imported labels"), scene.frames.len() as u32)?;
     }

@@ -29,7 +29,10 @@ pub fn resize_rgb(img: &RgbImage, to: (u32, u32)) -> RgbImage {
 
 /// Nearest-pixel-centre resampling: output pixel centre (x + 0.5) maps to source coordinate
 /// (x + 0.5) * from / to, the same mapping `Intrinsics::scaled` assumes.
-pub fn resize_nearest<P: Pixel>(img: &ImageBuffer<P, Vec<P::Subpixel>>, to: (u32, u32)) -> ImageBuffer<P, Vec<P::Subpixel>> {
+pub fn resize_nearest<P: Pixel>(
+    img: &ImageBuffer<P, Vec<P::Subpixel>>,
+    to: (u32, u32),
+) -> ImageBuffer<P, Vec<P::Subpixel>> {
     let (w, h) = img.dimensions();
     if (w, h) == to {
         return img.clone();

@@ -19,7 +19,12 @@ const POSE: &str = ".pose";
 const DEPTH_SCALE: f64 = 0.001;
 /// The Kinect calibration 7-Scenes documents, for its 640x480 images; the dataset ships no
 /// intrinsics file, so a missing one means these.
-const DEFAULT_INTRINSICS: Intrinsics = Intrinsics { fx: 585.0, fy: 585.0, cx: 320.0, cy: 240.0 };
+const DEFAULT_INTRINSICS: Intrinsics = Intrinsics {
+    fx: 585.0,
+    fy: 585.0,
+    cx: 320.0,
+    cy: 240.0,
+};
 const DEFAULT_SIZE: (u32, u32) = (640, 480);
 
 /// Whether `dir` holds 7-Scenes colour frames.
@@ -34,7 +39,10 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
     let pose = files_by_stem(dir, &["txt"], POSE)?;
     let names = frame_order(color.keys());
     if names.is_empty() {
-        return Err(SceneError::invalid(shown(dir), "no colour frames (frame-000000.color.jpg, ...): no frames"));
+        return Err(SceneError::invalid(
+            shown(dir),
+            "no colour frames (frame-000000.color.jpg, ...): no frames",
+        ));
     }
     check_matched(dir, &color, &depth, DEPTH, "png")?;
     check_matched(dir, &color, &pose, POSE, "txt")?;
@@ -44,7 +52,9 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
     for &i in &keep {
         let name = &names[i];
         let file = |map: &BTreeMap<String, PathBuf>, suffix: &str| {
-            map.get(name).cloned().ok_or_else(|| SceneError::missing(shown(&dir.join(name)), format!("{suffix} file")))
+            map.get(name)
+                .cloned()
+                .ok_or_else(|| SceneError::missing(shown(&dir.join(name)), format!("{suffix} file")))
         };
         files.push(FrameFiles {
             name: name.clone(),
@@ -87,7 +97,10 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
     };
     let intrinsics = k.scaled(loaded.native, loaded.size);
     let bounds = from_depth(&loaded.frames, &intrinsics, DEPTH_SCALE).ok_or_else(|| {
-        SceneError::invalid(shown(dir), "no valid depth in any imported frame, so the scene's bounds cannot be found")
+        SceneError::invalid(
+            shown(dir),
+            "no valid depth in any imported frame, so the scene's bounds cannot be found",
+        )
     })?;
     notes.push("bounds: central 98 % of back-projected depth and all camera centres, padded by 5 %".into());
 
@@ -104,7 +117,12 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
         labels: None,
         provenance: Default::default(),
     };
-    Ok(Built { scene, layout: Layout::SevenScenes, warnings, notes })
+    Ok(Built {
+        scene,
+        layout: Layout::SevenScenes,
+        warnings,
+        notes,
+    })
 }
 
 /// Every colour frame needs its depth and pose and vice versa, or frames would go missing.
@@ -118,10 +136,16 @@ fn check_matched(
     let counts = format!("{} colour frames, {} {suffix}.{ext} files", color.len(), other.len());
     if let Some(name) = frame_order(color.keys()).into_iter().find(|n| !other.contains_key(n)) {
         let expected = dir.join(format!("{name}{suffix}.{ext}"));
-        return Err(SceneError::missing(shown(&expected), format!("the {} of {name} ({counts})", &suffix[1..])));
+        return Err(SceneError::missing(
+            shown(&expected),
+            format!("the {} of {name} ({counts})", &suffix[1..]),
+        ));
     }
     if let Some((name, path)) = other.iter().find(|(n, _)| !color.contains_key(*n)) {
-        return Err(SceneError::invalid(shown(path), format!("no colour image {name}{COLOR}.jpg for this frame ({counts})")));
+        return Err(SceneError::invalid(
+            shown(path),
+            format!("no colour image {name}{COLOR}.jpg for this frame ({counts})"),
+        ));
     }
     Ok(())
 }

@@ -28,10 +28,13 @@ pub(super) fn parse_numbers(text: &str, file: &str) -> Result<Vec<f64>> {
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate() {
         let line = line.split('#').next().unwrap_or("");
-        for word in line.split(|c: char| c.is_whitespace() || c == ',').filter(|w| !w.is_empty()) {
-            let v: f64 = word.parse().map_err(|_| {
-                SceneError::invalid(file, format!("line {}: cannot read {word:?} as a number", i + 1))
-            })?;
+        for word in line
+            .split(|c: char| c.is_whitespace() || c == ',')
+            .filter(|w| !w.is_empty())
+        {
+            let v: f64 = word
+                .parse()
+                .map_err(|_| SceneError::invalid(file, format!("line {}: cannot read {word:?} as a number", i + 1)))?;
             out.push(v);
         }
     }
@@ -64,7 +67,10 @@ pub(super) fn read_intrinsics(path: &Path) -> Result<(Intrinsics, Option<String>
 /// Checks a row-major 3x3 K and turns it into intrinsics.
 pub(super) fn parse_k(k: &[f64; 9], file: &str) -> Result<(Intrinsics, Option<String>)> {
     if k.iter().any(|x| !x.is_finite()) {
-        return Err(SceneError::invalid(file, format!("camera matrix has non-finite values: {k:?}")));
+        return Err(SceneError::invalid(
+            file,
+            format!("camera matrix has non-finite values: {k:?}"),
+        ));
     }
     let lower = [k[3], k[6], k[7]];
     if lower.iter().any(|x| x.abs() > K_TOLERANCE) || (k[8] - 1.0).abs() > K_TOLERANCE {
@@ -76,7 +82,12 @@ pub(super) fn parse_k(k: &[f64; 9], file: &str) -> Result<(Intrinsics, Option<St
             ),
         ));
     }
-    let intrinsics = Intrinsics { fx: k[0], fy: k[4], cx: k[2], cy: k[5] };
+    let intrinsics = Intrinsics {
+        fx: k[0],
+        fy: k[4],
+        cx: k[2],
+        cy: k[5],
+    };
     intrinsics.check().map_err(|p| SceneError::invalid(file, p))?;
     let warning = (k[1].abs() > K_TOLERANCE).then(|| format!("{file}: skew {} ignored (pinhole model)", k[1]));
     Ok((intrinsics, warning))
@@ -114,10 +125,16 @@ pub(super) fn read_bbox(path: &Path) -> Result<Bounds> {
     if v.len() != 6 && v.len() != 7 {
         return Err(SceneError::invalid(
             file,
-            format!("expected `minx miny minz maxx maxy maxz [voxel]` (6 or 7 numbers), found {} numbers", v.len()),
+            format!(
+                "expected `minx miny minz maxx maxy maxz [voxel]` (6 or 7 numbers), found {} numbers",
+                v.len()
+            ),
         ));
     }
-    let bounds = Bounds { min: [v[0], v[1], v[2]], max: [v[3], v[4], v[5]] };
+    let bounds = Bounds {
+        min: [v[0], v[1], v[2]],
+        max: [v[3], v[4], v[5]],
+    };
     bounds.check().map_err(|p| SceneError::invalid(file, p))?;
     Ok(bounds)
 }
@@ -125,7 +142,12 @@ pub(super) fn read_bbox(path: &Path) -> Result<Bounds> {
 /// One class name per non-empty line.
 pub(super) fn read_class_names(path: &Path) -> Result<Vec<String>> {
     let text = read_text(path)?;
-    let names: Vec<String> = text.lines().map(str::trim).filter(|l| !l.is_empty()).map(String::from).collect();
+    let names: Vec<String> = text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .map(String::from)
+        .collect();
     if names.is_empty() {
         return Err(SceneError::invalid(path.display().to_string(), "lists no class names"));
     }
@@ -139,7 +161,10 @@ mod tests {
     #[test]
     fn numbers_error_names_line_and_word() {
         let err = parse_numbers("1 2 3\n4 five 6\n", "k.txt").unwrap_err().to_string();
-        assert!(err.contains("k.txt") && err.contains("line 2") && err.contains("\"five\""), "{err}");
+        assert!(
+            err.contains("k.txt") && err.contains("line 2") && err.contains("\"five\""),
+            "{err}"
+        );
         assert_eq!(parse_numbers("# c\n1,2\n\n 3e-1 ", "x").unwrap(), vec![1.0, 2.0, 0.3]);
     }
 
@@ -151,7 +176,12 @@ mod tests {
         assert!(err.to_string().contains("not a camera matrix"));
         let err = parse_k(&[-5.0, 0.0, 320.0, 0.0, 510.0, 240.0, 0.0, 0.0, 1.0], "k").unwrap_err();
         assert!(err.to_string().contains("positive"));
-        assert!(parse_k(&[500.0, 2.0, 320.0, 0.0, 510.0, 240.0, 0.0, 0.0, 1.0], "k").unwrap().1.is_some());
+        assert!(
+            parse_k(&[500.0, 2.0, 320.0, 0.0, 510.0, 240.0, 0.0, 0.0, 1.0], "k")
+                .unwrap()
+                .1
+                .is_some()
+        );
     }
 
     #[test]

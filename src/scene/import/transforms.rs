@@ -68,18 +68,30 @@ struct FrameEntry {
 }
 
 pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Built> {
-    let json_path = if input.is_dir() { input.join(FILE) } else { input.to_path_buf() };
+    let json_path = if input.is_dir() {
+        input.join(FILE)
+    } else {
+        input.to_path_buf()
+    };
     let file = shown(&json_path);
     let base = json_path.parent().unwrap_or(Path::new("."));
     let meta = std::fs::metadata(&json_path).map_err(|e| SceneError::io(&json_path, e))?;
     if meta.len() > limits::MAX_JSON_BYTES {
-        return Err(SceneError::invalid(&file, format!("{} bytes is too large for a transforms file", meta.len())));
+        return Err(SceneError::invalid(
+            &file,
+            format!("{} bytes is too large for a transforms file", meta.len()),
+        ));
     }
     let bytes = std::fs::read(&json_path).map_err(|e| SceneError::io(&json_path, e))?;
-    let parsed: TransformsFile =
-        serde_json::from_slice(&bytes).map_err(|source| SceneError::Json { file: file.clone(), source })?;
+    let parsed: TransformsFile = serde_json::from_slice(&bytes).map_err(|source| SceneError::Json {
+        file: file.clone(),
+        source,
+    })?;
     if parsed.frames.is_empty() {
-        return Err(SceneError::invalid(&file, "\"frames\" is empty: the scene has no frames"));
+        return Err(SceneError::invalid(
+            &file,
+            "\"frames\" is empty: the scene has no frames",
+        ));
     }
     let mut warnings = Vec::new();
     warnings.extend(distortion_warning(&parsed.distortion, &file)?);
@@ -95,16 +107,28 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
         }
     }
     if !missing.is_empty() {
-        let mut listed = missing.iter().take(LISTED_MISSING).cloned().collect::<Vec<_>>().join(", ");
+        let mut listed = missing
+            .iter()
+            .take(LISTED_MISSING)
+            .cloned()
+            .collect::<Vec<_>>()
+            .join(", ");
         if missing.len() > LISTED_MISSING {
             listed.push_str(&format!(" and {} more", missing.len() - LISTED_MISSING));
         }
-        warnings.push(format!("{file}: skipped {} frames whose image is missing: {listed}", missing.len()));
+        warnings.push(format!(
+            "{file}: skipped {} frames whose image is missing: {listed}",
+            missing.len()
+        ));
     }
     if present.is_empty() {
         return Err(SceneError::invalid(
             &file,
-            format!("none of the {} frames' images exist (file_path is relative to {})", missing.len(), shown(base)),
+            format!(
+                "none of the {} frames' images exist (file_path is relative to {})",
+                missing.len(),
+                shown(base)
+            ),
         ));
     }
 
@@ -187,7 +211,12 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
         labels: None,
         provenance: Default::default(),
     };
-    Ok(Built { scene, layout: Layout::Transforms, warnings, notes })
+    Ok(Built {
+        scene,
+        layout: Layout::Transforms,
+        warnings,
+        notes,
+    })
 }
 
 /// The image a `file_path` names: as given, or with an image extension appended.
@@ -196,7 +225,10 @@ fn resolve_image(base: &Path, file_path: &str) -> Option<PathBuf> {
     if direct.is_file() {
         return Some(direct);
     }
-    IMAGE_EXTS.iter().map(|ext| base.join(format!("{file_path}.{ext}"))).find(|p| p.is_file())
+    IMAGE_EXTS
+        .iter()
+        .map(|ext| base.join(format!("{file_path}.{ext}")))
+        .find(|p| p.is_file())
 }
 
 /// The one camera all frames share: top-level values, filled in from the first frame that has
@@ -241,7 +273,10 @@ fn pixels(v: f64, name: &str, file: &str) -> Result<u32> {
     if v.is_finite() && v >= 1.0 && v.fract() == 0.0 && v <= limits::MAX_SIDE as f64 {
         Ok(v as u32)
     } else {
-        Err(SceneError::invalid(file, format!("{name} = {v} is not an image size in pixels (1..={})", limits::MAX_SIDE)))
+        Err(SceneError::invalid(
+            file,
+            format!("{name} = {v} is not an image size in pixels (1..={})", limits::MAX_SIDE),
+        ))
     }
 }
 
@@ -253,14 +288,20 @@ fn intrinsics(c: &Camera, (w, h): (u32, u32), file: &str) -> Result<Intrinsics> 
         if angle.is_finite() && angle > 0.0 && angle < std::f64::consts::PI {
             Ok(0.5 * side as f64 / (0.5 * angle).tan())
         } else {
-            Err(SceneError::invalid(file, format!("{name} = {angle} is not a field of view in radians (0..pi)")))
+            Err(SceneError::invalid(
+                file,
+                format!("{name} = {angle} is not a field of view in radians (0..pi)"),
+            ))
         }
     };
     let fx = match (c.fl_x, c.camera_angle_x) {
         (Some(f), _) => f,
         (None, Some(a)) => from_angle(a, w, "camera_angle_x")?,
         (None, None) => {
-            return Err(SceneError::invalid(file, "no focal length: expected fl_x (pixels) or camera_angle_x (radians)"));
+            return Err(SceneError::invalid(
+                file,
+                "no focal length: expected fl_x (pixels) or camera_angle_x (radians)",
+            ));
         }
     };
     let fy = match (c.fl_y, c.camera_angle_y, c.fl_x) {
@@ -283,7 +324,10 @@ fn intrinsics(c: &Camera, (w, h): (u32, u32), file: &str) -> Result<Intrinsics> 
 fn distortion_warning(d: &Distortion, file: &str) -> Result<Option<String>> {
     let model = d.camera_model.as_deref().unwrap_or("PINHOLE");
     if model.eq_ignore_ascii_case("EQUIRECTANGULAR") {
-        return Err(SceneError::invalid(file, "camera_model EQUIRECTANGULAR is not a pinhole camera; not supported"));
+        return Err(SceneError::invalid(
+            file,
+            "camera_model EQUIRECTANGULAR is not a pinhole camera; not supported",
+        ));
     }
     let coefficients = [d.k1, d.k2, d.k3, d.k4, d.p1, d.p2];
     let distorted = coefficients.iter().flatten().any(|v| *v != 0.0);

@@ -1,0 +1,240 @@
+// Volume rendering, the four losses and their backward, one invocation per ray looping over its
+// S samples (src/field/gpu/composite.rs `CompositePass`). The spec is reference::activations,
+// reference::render (composite, composite_backward) and reference::loss::ray_loss, with the
+// same operation order where it matters: transmittance from the summed optical depth, the
+// backward suffix sum accumulated back to front.
+//
+// Per ray it writes a row of `ray_outputs` (stride 4 + 2k, k = 4 + C + D channels in
+// reference::render::Channels order [rgb, depth, logits, feature]):
+//   [loss rgb, loss depth, loss semantic, loss feature, rendered (k), dL/drendered (k)]
+// and per sample n = ray * S + s a row of `grad_heads` (stride k):
+//   [dL/dh0, dL/d(colour pre-sigmoid) (3), dL/dlogits (C), dL/dfeature (D)].
+// Losses are weighted and divided by the whole batch B. Rays that miss the scene box render
+// nothing and contribute no loss and no gradient (the reference never builds them).
+//!include _dispatch.wgsl
+//!include _step.wgsl
+//!include _ray_layout.wgsl
+
+// Mirrors `field::gpu::composite::CompositeUniforms` (64 bytes). Head outputs are read at
+// row * stride + offset from buffers other passes own.
+struct CompositeUniforms {
+    classes: u32,
+    feature_dim: u32,
+    // The config's feature_supervision (rays still need RAY_HAS_CODE).
+    supervise_features: u32,
+    target_stride: u32,
+    h0_stride: u32,
+    h0_offset: u32,
+    color_stride: u32,
+    color_offset: u32,
+    logits_stride: u32,
+    logits_offset: u32,
+    feature_stride: u32,
+    feature_offset: u32,
+    weight_rgb: f32,
+    weight_depth: f32,
+    weight_semantic: f32,
+    weight_feature: f32,
+}
+
+const WORKGROUP_SIZE: u32 = 64u;
+// reference::activations::DENSITY_LOG_CLAMP
+const DENSITY_LOG_CLAMP: f32 = 15.0;
+const LOSS_WORDS: u32 = 4u;
+
+@group(0) @binding(0) var<uniform> step_info: StepUniforms;
+@group(0) @binding(1) var<uniform> params: CompositeUniforms;
+@group(0) @binding(2) var<storage, read> h0_source: array<f32>;
+@group(0) @binding(3) var<storage, read> color_source: array<f32>;
+@group(0) @binding(4) var<storage, read> logits_source: array<f32>;
+@group(0) @binding(5) var<storage, read> feature_source: array<f32>;
+@group(0) @binding(6) var<storage, read> intervals: array<vec2<f32>>;
+@group(0) @binding(7) var<storage, read> targets: array<u32>;
+@group(0) @binding(8) var<storage, read_write> grad_heads: array<f32>;
+@group(0) @binding(9) var<storage, read_write> ray_outputs: array<f32>;
+
+fn density(h0: f32) -> f32 {
+    return exp(clamp(h0, -DENSITY_LOG_CLAMP, DENSITY_LOG_CLAMP));
+}
+
+fn sigmoid(h: f32) -> f32 {
+    return 1.0 / (1.0 + exp(-h));
+}
+
+fn sign_or_zero(x: f32) -> f32 {
+    return select(select(0.0, -1.0, x < 0.0), 1.0, x > 0.0);
+}
+
+fn colour_of(n: u32, c: u32) -> f32 {
+    return sigmoid(color_source[n * params.color_stride + params.color_offset + c]);
+}
+
+fn logit_of(n: u32, c: u32) -> f32 {
+    return logits_source[n * params.logits_stride + params.logits_offset + c];
+}
+
+fn feature_of(n: u32, d: u32) -> f32 {
+    return feature_source[n * params.feature_stride + params.feature_offset + d];
+}
+
+fn target_f32(row: u32, word: u32) -> f32 {
+    return bitcast<f32>(targets[row + word]);
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn composite(
+    @builtin(workgroup_id) workgroup_id: vec3<u32>,
+    @builtin(num_workgroups) num_workgroups: vec3<u32>,
+    @builtin(local_invocation_index) local_index: u32,
+) {
+    let ray = linear_item_index(workgroup_id, num_workgroups, local_index, WORKGROUP_SIZE);
+    let batch = step_info.batch_rays;
+    if ray >= batch {
+        return;
+    }
+    let samples = step_info.samples_per_ray;
+    let classes = params.classes;
+    let feature_dim = params.feature_dim;
+    let semantic_at = 4u;
+    let feature_at = 4u + classes;
+    let k = 4u + classes + feature_dim;
+    let out_row = ray * (LOSS_WORDS + 2u * k);
+    let rendered_at = out_row + LOSS_WORDS;
+    let grad_at = rendered_at + k;
+    let first = ray * samples;
+    let target_row = ray * params.target_stride;
+    let flags = targets[target_row + TARGET_FLAGS];
+
+    for (var c = 0u; c < LOSS_WORDS + 2u * k; c++) {
+        ray_outputs[out_row + c] = 0.0;
+    }
+    if (flags & RAY_HITS_BOX) == 0u {
+        for (var e = 0u; e < samples * k; e++) {
+            grad_heads[first * k + e] = 0.0;
+        }
+        return;
+    }
+
+    // Forward (reference::render::composite). Logits and features accumulate in this ray's own
+    // output row, so C and D need no fixed-size local array. The weights and transmittances are
+    // parked in the first two words of each sample's gradient row for the backward walk.
+    var rgb = vec3<f32>(0.0);
+    var depth = 0.0;
+    var optical_depth = 0.0;
+    for (var s = 0u; s < samples; s++) {
+        let n = first + s;
+        let interval = intervals[n];
+        let sigma = density(h0_source[n * params.h0_stride + params.h0_offset]);
+        let t_before = exp(-optical_depth);
+        optical_depth += sigma * interval.x;
+        let t_after = exp(-optical_depth);
+        let w = t_before - t_after;
+        rgb += w * vec3<f32>(colour_of(n, 0u), colour_of(n, 1u), colour_of(n, 2u));
+        depth += w * interval.y;
+        for (var c = 0u; c < classes; c++) {
+            ray_outputs[rendered_at + semantic_at + c] += w * logit_of(n, c);
+        }
+        for (var d = 0u; d < feature_dim; d++) {
+            ray_outputs[rendered_at + feature_at + d] += w * feature_of(n, d);
+        }
+        grad_heads[n * k] = w;
+        grad_heads[n * k + 1u] = t_after;
+    }
+    ray_outputs[rendered_at] = rgb.x;
+    ray_outputs[rendered_at + 1u] = rgb.y;
+    ray_outputs[rendered_at + 2u] = rgb.z;
+    ray_outputs[rendered_at + 3u] = depth;
+
+    // Losses and dL/drendered (reference::loss::ray_loss), scaled by 1/B.
+    let inv_batch = 1.0 / f32(batch);
+    let target_rgb = vec3<f32>(
+        target_f32(target_row, TARGET_RGB),
+        target_f32(target_row, TARGET_RGB + 1u),
+        target_f32(target_row, TARGET_RGB + 2u),
+    );
+    let rgb_weight = params.weight_rgb * inv_batch;
+    let rgb_diff = rgb - target_rgb;
+    ray_outputs[out_row] = dot(rgb_diff, rgb_diff) * rgb_weight;
+    let grad_rgb = (rgb_diff + rgb_diff) * rgb_weight;
+    ray_outputs[grad_at] = grad_rgb.x;
+    ray_outputs[grad_at + 1u] = grad_rgb.y;
+    ray_outputs[grad_at + 2u] = grad_rgb.z;
+
+    var grad_depth = 0.0;
+    let target_depth = target_f32(target_row, TARGET_DEPTH);
+    if target_depth > 0.0 {
+        let depth_weight = params.weight_depth * inv_batch;
+        let diff = depth - target_depth;
+        ray_outputs[out_row + 1u] = abs(diff) * depth_weight;
+        grad_depth = sign_or_zero(diff) * depth_weight;
+    }
+    ray_outputs[grad_at + 3u] = grad_depth;
+
+    let label = targets[target_row + TARGET_LABEL];
+    if label < classes {
+        let semantic_weight = params.weight_semantic * inv_batch;
+        var max_logit = ray_outputs[rendered_at + semantic_at];
+        for (var c = 1u; c < classes; c++) {
+            max_logit = max(max_logit, ray_outputs[rendered_at + semantic_at + c]);
+        }
+        var sum = 0.0;
+        for (var c = 0u; c < classes; c++) {
+            sum += exp(ray_outputs[rendered_at + semantic_at + c] - max_logit);
+        }
+        let loss = log(sum) - (ray_outputs[rendered_at + semantic_at + label] - max_logit);
+        ray_outputs[out_row + 2u] = loss * semantic_weight;
+        for (var c = 0u; c < classes; c++) {
+            var g = exp(ray_outputs[rendered_at + semantic_at + c] - max_logit) / sum;
+            if c == label {
+                g -= 1.0;
+            }
+            ray_outputs[grad_at + semantic_at + c] = g * semantic_weight;
+        }
+    }
+
+    if params.supervise_features != 0u && (flags & RAY_HAS_CODE) != 0u {
+        let inv_dim = 1.0 / f32(feature_dim);
+        let feature_weight = params.weight_feature * inv_batch;
+        var loss = 0.0;
+        for (var d = 0u; d < feature_dim; d++) {
+            let diff = ray_outputs[rendered_at + feature_at + d] - target_f32(target_row, TARGET_HEADER_WORDS + d);
+            loss += abs(diff);
+            ray_outputs[grad_at + feature_at + d] = sign_or_zero(diff) * inv_dim * feature_weight;
+        }
+        ray_outputs[out_row + 3u] = loss * inv_dim * feature_weight;
+    }
+
+    // Backward, back to front (reference::render::composite_backward, then the activations'
+    // backward): u_i = g . h_i, dsigma_i = delta_i (T_{i+1} u_i - sum_{j>i} w_j u_j).
+    var suffix = 0.0;
+    for (var back = 0u; back < samples; back++) {
+        let s = samples - 1u - back;
+        let n = first + s;
+        let interval = intervals[n];
+        let w = grad_heads[n * k];
+        let t_after = grad_heads[n * k + 1u];
+        let colour = vec3<f32>(colour_of(n, 0u), colour_of(n, 1u), colour_of(n, 2u));
+        var u = grad_rgb.x * colour.x + grad_rgb.y * colour.y + grad_rgb.z * colour.z + grad_depth * interval.y;
+        for (var c = 0u; c < classes; c++) {
+            u += ray_outputs[grad_at + semantic_at + c] * logit_of(n, c);
+        }
+        for (var d = 0u; d < feature_dim; d++) {
+            u += ray_outputs[grad_at + feature_at + d] * feature_of(n, d);
+        }
+        let grad_sigma = interval.x * (t_after * u - suffix);
+        suffix += w * u;
+
+        let row = n * k;
+        grad_heads[row] = grad_sigma * density(h0_source[n * params.h0_stride + params.h0_offset]);
+        let grad_colour = w * grad_rgb;
+        grad_heads[row + 1u] = grad_colour.x * colour.x * (1.0 - colour.x);
+        grad_heads[row + 2u] = grad_colour.y * colour.y * (1.0 - colour.y);
+        grad_heads[row + 3u] = grad_colour.z * colour.z * (1.0 - colour.z);
+        for (var c = 0u; c < classes; c++) {
+            grad_heads[row + semantic_at + c] = w * ray_outputs[grad_at + semantic_at + c];
+        }
+        for (var d = 0u; d < feature_dim; d++) {
+            grad_heads[row + feature_at + d] = w * ray_outputs[grad_at + feature_at + d];
+        }
+    }
+}

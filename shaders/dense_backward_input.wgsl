@@ -1,0 +1,70 @@
+// Input gradient of one dense layer (src/field/gpu/dense.rs):
+// dX[n][i] = Σ_o dZ[n][o] · W[o][i] with dZ = dY ⊙ act'(Y) formed while staging (ReLU: Y > 0).
+// dX is overwritten (not accumulated). Workgroups: x, y spread the row tiles, z the input-column
+// tiles.
+//!include _dense_tile.wgsl
+//!include _dispatch.wgsl
+
+@group(0) @binding(0) var<uniform> dims: DenseDims;
+@group(0) @binding(1) var<storage, read> dy: array<f32>;
+@group(0) @binding(2) var<storage, read> y: array<f32>;
+@group(0) @binding(3) var<storage, read> weights: array<f32>;
+@group(0) @binding(4) var<storage, read_write> dx: array<f32>;
+
+@compute @workgroup_size(TX, TY)
+fn backward_input(
+    @builtin(workgroup_id) workgroup_id: vec3<u32>,
+    @builtin(num_workgroups) num_workgroups: vec3<u32>,
+    @builtin(local_invocation_id) local_id: vec3<u32>,
+    @builtin(local_invocation_index) local_index: u32,
+) {
+    let tm = tile_m();
+    let tn = tile_n();
+    let row_tile = linear_item_index(workgroup_id, num_workgroups, 0u, 1u);
+    let row0 = row_tile * tm;
+    if row0 >= dims.rows {
+        return;
+    }
+    let col0 = workgroup_id.z * tn;
+    let threads = TX * TY;
+    var acc: array<array<f32, RN>, RM>;
+    for (var k0 = 0u; k0 < dims.out_dim; k0 += KC) {
+        // A = dZ rows (k = output unit), read along a row.
+        for (var e = local_index; e < tm * KC; e += threads) {
+            let k = e % KC;
+            let m = e / KC;
+            let row = row0 + m;
+            let o = k0 + k;
+            var value = 0.0;
+            if row < dims.rows && o < dims.out_dim {
+                let g = dy[row * dims.dy_stride + dims.dy_offset + o];
+                value = output_gradient(g, y[row * dims.y_stride + dims.y_offset + o]);
+            }
+            a_tile[k * tm + m] = value;
+        }
+        // B[k][i] = W[k0 + k][i]: read along a weight row.
+        for (var e = local_index; e < tn * KC; e += threads) {
+            let n = e % tn;
+            let k = e / tn;
+            let o = k0 + k;
+            let i = col0 + n;
+            var value = 0.0;
+            if o < dims.out_dim && i < dims.in_dim {
+                value = weights[dims.weight_offset + o * dims.in_dim + i];
+            }
+            b_tile[k * tn + n] = value;
+        }
+        workgroupBarrier();
+        multiply_staged(&acc, local_id.x, local_id.y);
+        workgroupBarrier();
+    }
+    for (var r = 0u; r < RM; r++) {
+        let row = row0 + local_id.y + r * TY;
+        for (var c = 0u; c < RN; c++) {
+            let i = col0 + local_id.x + c * TX;
+            if row < dims.rows && i < dims.in_dim {
+                dx[row * dims.dx_stride + dims.dx_offset + i] = acc[r][c];
+            }
+        }
+    }
+}

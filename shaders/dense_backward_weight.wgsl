@@ -1,0 +1,93 @@
+// Weight gradient of one dense layer (src/field/gpu/dense.rs): dW[o][i] = Σ_n dZ[n][o] · X[n][i],
+// dZ = dY ⊙ act'(Y). A reduction over all N rows done deterministically in two steps:
+// `partial_sums` gives every chunk of dims.chunk_rows rows its own [out][in] partial matrix
+// (workgroups: x the input-column tiles, y the output-row tiles, z the chunk), then
+// `reduce_chunks` sums the chunks in order per weight and ADDS the total to the gradient buffer
+// (the trainer zeroes it before a step), touching only the layer's [out][in] range.
+//!include _dense_tile.wgsl
+//!include _dispatch.wgsl
+
+@group(0) @binding(0) var<uniform> dims: DenseDims;
+@group(0) @binding(1) var<storage, read> dy: array<f32>;
+@group(0) @binding(2) var<storage, read> y: array<f32>;
+@group(0) @binding(3) var<storage, read> x: array<f32>;
+// [chunk][out][in]
+@group(0) @binding(4) var<storage, read_write> partials: array<f32>;
+@group(0) @binding(5) var<storage, read_write> grads: array<f32>;
+
+@compute @workgroup_size(TX, TY)
+fn partial_sums(
+    @builtin(workgroup_id) workgroup_id: vec3<u32>,
+    @builtin(local_invocation_id) local_id: vec3<u32>,
+    @builtin(local_invocation_index) local_index: u32,
+) {
+    let tm = tile_m();
+    let tn = tile_n();
+    let o0 = workgroup_id.y * tm;
+    let i0 = workgroup_id.x * tn;
+    let chunk = workgroup_id.z;
+    let first_row = chunk * dims.chunk_rows;
+    let end_row = min(first_row + dims.chunk_rows, dims.rows);
+    let threads = TX * TY;
+    var acc: array<array<f32, RN>, RM>;
+    for (var k0 = 0u; k0 < dims.chunk_rows; k0 += KC) {
+        // A[m][k] = dZ[row k][output m]: consecutive invocations read along a row of dY.
+        for (var e = local_index; e < tm * KC; e += threads) {
+            let m = e % tm;
+            let k = e / tm;
+            let row = first_row + k0 + k;
+            let o = o0 + m;
+            var value = 0.0;
+            if row < end_row && o < dims.out_dim {
+                let g = dy[row * dims.dy_stride + dims.dy_offset + o];
+                value = output_gradient(g, y[row * dims.y_stride + dims.y_offset + o]);
+            }
+            a_tile[k * tm + m] = value;
+        }
+        // B[k][n] = X[row k][input n]: read along a row of X.
+        for (var e = local_index; e < tn * KC; e += threads) {
+            let n = e % tn;
+            let k = e / tn;
+            let row = first_row + k0 + k;
+            let i = i0 + n;
+            var value = 0.0;
+            if row < end_row && i < dims.in_dim {
+                value = x[row * dims.x_stride + dims.x_offset + i];
+            }
+            b_tile[k * tn + n] = value;
+        }
+        workgroupBarrier();
+        multiply_staged(&acc, local_id.x, local_id.y);
+        workgroupBarrier();
+    }
+    let matrix = dims.out_dim * dims.in_dim;
+    for (var r = 0u; r < RM; r++) {
+        let o = o0 + local_id.y + r * TY;
+        for (var c = 0u; c < RN; c++) {
+            let i = i0 + local_id.x + c * TX;
+            if o < dims.out_dim && i < dims.in_dim {
+                partials[chunk * matrix + o * dims.in_dim + i] = acc[r][c];
+            }
+        }
+    }
+}
+
+const REDUCE_WORKGROUP: u32 = 256u;
+
+@compute @workgroup_size(REDUCE_WORKGROUP)
+fn reduce_chunks(
+    @builtin(workgroup_id) workgroup_id: vec3<u32>,
+    @builtin(num_workgroups) num_workgroups: vec3<u32>,
+    @builtin(local_invocation_index) local_index: u32,
+) {
+    let matrix = dims.out_dim * dims.in_dim;
+    let e = linear_item_index(workgroup_id, num_workgroups, local_index, REDUCE_WORKGROUP);
+    if e >= matrix {
+        return;
+    }
+    var sum = 0.0;
+    for (var chunk = 0u; chunk < dims.chunks; chunk++) {
+        sum += partials[chunk * matrix + e];
+    }
+    grads[dims.weight_offset + e] += sum;
+}

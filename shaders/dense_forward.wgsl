@@ -1,0 +1,73 @@
+// Forward of one bias-free dense layer over N rows (src/field/gpu/dense.rs):
+// Y[n][o] = act(Σ_i X[n][i] · W[o][i]), act ReLU or none, X and Y row views (stride, offset),
+// W the layer's row-major [out][in] matrix at dims.weight_offset of the bound params.
+// Workgroups: x, y spread the row tiles (Dispatch1d), z the output-column tiles.
+//!include _dense_tile.wgsl
+//!include _dispatch.wgsl
+
+@group(0) @binding(0) var<uniform> dims: DenseDims;
+@group(0) @binding(1) var<storage, read> x: array<f32>;
+@group(0) @binding(2) var<storage, read> weights: array<f32>;
+@group(0) @binding(3) var<storage, read_write> y: array<f32>;
+
+@compute @workgroup_size(TX, TY)
+fn forward(
+    @builtin(workgroup_id) workgroup_id: vec3<u32>,
+    @builtin(num_workgroups) num_workgroups: vec3<u32>,
+    @builtin(local_invocation_id) local_id: vec3<u32>,
+    @builtin(local_invocation_index) local_index: u32,
+) {
+    let tm = tile_m();
+    let tn = tile_n();
+    let row_tile = linear_item_index(workgroup_id, num_workgroups, 0u, 1u);
+    let row0 = row_tile * tm;
+    // Uniform per workgroup, so returning before the barriers is allowed.
+    if row0 >= dims.rows {
+        return;
+    }
+    let col0 = workgroup_id.z * tn;
+    let threads = TX * TY;
+    var acc: array<array<f32, RN>, RM>;
+    for (var k0 = 0u; k0 < dims.in_dim; k0 += KC) {
+        // A = X rows: consecutive invocations read consecutive inputs of a row.
+        for (var e = local_index; e < tm * KC; e += threads) {
+            let k = e % KC;
+            let m = e / KC;
+            let row = row0 + m;
+            let i = k0 + k;
+            var value = 0.0;
+            if row < dims.rows && i < dims.in_dim {
+                value = x[row * dims.x_stride + dims.x_offset + i];
+            }
+            a_tile[k * tm + m] = value;
+        }
+        // B[k][o] = W[o][k]: consecutive invocations read along a weight row.
+        for (var e = local_index; e < tn * KC; e += threads) {
+            let k = e % KC;
+            let n = e / KC;
+            let o = col0 + n;
+            let i = k0 + k;
+            var value = 0.0;
+            if o < dims.out_dim && i < dims.in_dim {
+                value = weights[dims.weight_offset + o * dims.in_dim + i];
+            }
+            b_tile[k * tn + n] = value;
+        }
+        workgroupBarrier();
+        multiply_staged(&acc, local_id.x, local_id.y);
+        workgroupBarrier();
+    }
+    for (var r = 0u; r < RM; r++) {
+        let row = row0 + local_id.y + r * TY;
+        for (var c = 0u; c < RN; c++) {
+            let o = col0 + local_id.x + c * TX;
+            if row < dims.rows && o < dims.out_dim {
+                var value = acc[r][c];
+                if dims.relu != 0u {
+                    value = max(value, 0.0);
+                }
+                y[row * dims.y_stride + dims.y_offset + o] = value;
+            }
+        }
+    }
+}

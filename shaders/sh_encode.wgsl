@@ -1,0 +1,61 @@
+// Degree-4 real spherical harmonics of each ray's view direction, written for every SAMPLE of
+// the ray into columns [column_offset, column_offset + 16) of a strided per-sample buffer (the
+// colour MLP's input row is [SH 16 | geometry]). Exactly reference::sh::encode: same constants
+// (tiny-cuda-nn's), same products. Other columns of the rows are left untouched.
+// Rust side: field::gpu::encoding::DirectionShPass.
+
+//!include _dispatch.wgsl
+
+const WORKGROUP_SIZE: u32 = 64u;
+
+// Mirrors `field::gpu::encoding::ShUniforms`.
+struct ShUniforms {
+    sample_count: u32,
+    samples_per_ray: u32,
+    row_stride: u32,
+    column_offset: u32,
+}
+
+@group(0) @binding(0) var<uniform> sh_layout: ShUniforms;
+// One unit direction per ray (xyz; w unused).
+@group(0) @binding(1) var<storage, read> directions: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> sh_out: array<f32>;
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn sh_encode(
+    @builtin(workgroup_id) workgroup_id: vec3<u32>,
+    @builtin(num_workgroups) num_workgroups: vec3<u32>,
+    @builtin(local_invocation_index) local_index: u32,
+) {
+    let sample = linear_item_index(workgroup_id, num_workgroups, local_index, WORKGROUP_SIZE);
+    if sample >= sh_layout.sample_count {
+        return;
+    }
+    let d = directions[sample / sh_layout.samples_per_ray].xyz;
+    let x = d.x;
+    let y = d.y;
+    let z = d.z;
+    let xy = x * y;
+    let xz = x * z;
+    let yz = y * z;
+    let x2 = x * x;
+    let y2 = y * y;
+    let z2 = z * z;
+    let o = sample * sh_layout.row_stride + sh_layout.column_offset;
+    sh_out[o] = 0.28209479177387814;
+    sh_out[o + 1u] = -0.48860251190291987 * y;
+    sh_out[o + 2u] = 0.48860251190291987 * z;
+    sh_out[o + 3u] = -0.48860251190291987 * x;
+    sh_out[o + 4u] = 1.0925484305920792 * xy;
+    sh_out[o + 5u] = -1.0925484305920792 * yz;
+    sh_out[o + 6u] = 0.94617469575755997 * z2 - 0.31539156525251999;
+    sh_out[o + 7u] = -1.0925484305920792 * xz;
+    sh_out[o + 8u] = 0.54627421529603959 * x2 - 0.54627421529603959 * y2;
+    sh_out[o + 9u] = 0.59004358992664352 * y * (-3.0 * x2 + y2);
+    sh_out[o + 10u] = 2.8906114426405538 * xy * z;
+    sh_out[o + 11u] = 0.45704579946446572 * y * (1.0 - 5.0 * z2);
+    sh_out[o + 12u] = 0.3731763325901154 * z * (5.0 * z2 - 3.0);
+    sh_out[o + 13u] = 0.45704579946446572 * x * (1.0 - 5.0 * z2);
+    sh_out[o + 14u] = 1.4453057213202769 * z * (x2 - y2);
+    sh_out[o + 15u] = 0.59004358992664352 * x * (-x2 + 3.0 * y2);
+}

@@ -1,0 +1,4 @@
+//! Measuring masks against ground truth.
+pub mod metrics;
+
+pub use metrics::{Confusion, EvalReport};

@@ -1,0 +1,196 @@
+//! Adam over the whole flat parameter buffer on the GPU (`shaders/adam.wgsl`), the twin of
+//! `reference::adam`: one element-wise kernel over params, gradient and the two moments.
+//!
+//! β₁, β₂ and ε are fixed when the pass is built; the learning rate and the bias corrections
+//! c₁, c₂ change every step and are read from the trainer's shared `StepUniforms` buffer
+//! (`shaders/_step.wgsl`: fields `lr`, `adam_c1`, `adam_c2`, with c₁, c₂ from
+//! `reference::adam::Adam::bias_corrections`), so a step records no CPU work.
+//!
+//! Buffers longer than one storage binding are updated in segments, each bound at an aligned
+//! offset; the kernel itself only ever sees one segment.
+use crate::field::config::AdamConfig;
+use crate::gpu::buffers::uniform_buffer_from;
+use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
+use crate::gpu::{GpuContext, GpuError, shaders};
+
+/// Workgroup size of `adam.wgsl`.
+const WORKGROUP: u32 = 256;
+
+/// The fixed hyper-parameters and segment length; mirrors `AdamConstants` in `shaders/adam.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct AdamConstants {
+    pub beta1: f32,
+    pub beta2: f32,
+    pub epsilon: f32,
+    pub count: u32,
+}
+
+/// The four flat buffers Adam walks (all of `count` f32, ParamLayout order).
+#[derive(Debug, Clone, Copy)]
+pub struct AdamBuffers<'a> {
+    pub params: &'a wgpu::Buffer,
+    pub grads: &'a wgpu::Buffer,
+    pub first_moment: &'a wgpu::Buffer,
+    pub second_moment: &'a wgpu::Buffer,
+}
+
+struct Segment {
+    bind_group: wgpu::BindGroup,
+    dispatch: Dispatch1d,
+}
+
+/// One Adam step over `count` parameters.
+pub struct AdamPass {
+    pipeline: wgpu::ComputePipeline,
+    segments: Vec<Segment>,
+}
+
+impl AdamPass {
+    /// `step` is the trainer's `StepUniforms` uniform buffer (`shaders/_step.wgsl`), rewritten
+    /// before every submit.
+    pub async fn new(
+        ctx: &GpuContext,
+        config: &AdamConfig,
+        count: usize,
+        buffers: AdamBuffers<'_>,
+        step: &wgpu::Buffer,
+    ) -> Result<AdamPass, GpuError> {
+        Self::with_segment_length(ctx, config, count, buffers, step, segment_length(ctx)).await
+    }
+
+    /// As [`AdamPass::new`], splitting the buffers into segments of at most `segment_len`
+    /// elements (a multiple of the device's storage offset alignment, in f32, and at most one
+    /// binding); `new` uses the largest allowed. Exposed so the splitting can be tested.
+    pub async fn with_segment_length(
+        ctx: &GpuContext,
+        config: &AdamConfig,
+        count: usize,
+        buffers: AdamBuffers<'_>,
+        step: &wgpu::Buffer,
+        segment_len: u64,
+    ) -> Result<AdamPass, GpuError> {
+        let align = u64::from(ctx.limits.min_storage_buffer_offset_alignment.max(4)) / 4;
+        if segment_len == 0 || segment_len % align != 0 || segment_len > segment_length(ctx) {
+            return Err(GpuError::invalid_argument(
+                "adam",
+                format!(
+                    "segment length {segment_len} must be a positive multiple of {align} and at most {}",
+                    segment_length(ctx)
+                ),
+            ));
+        }
+        let bytes = count as u64 * 4;
+        if count == 0 {
+            return Err(GpuError::invalid_argument("adam", "no parameters to update"));
+        }
+        let named = [
+            ("params", buffers.params),
+            ("gradient", buffers.grads),
+            ("first moment", buffers.first_moment),
+            ("second moment", buffers.second_moment),
+        ];
+        for (name, buffer) in named {
+            if buffer.size() < bytes {
+                return Err(GpuError::invalid_argument(
+                    format!("adam {name}"),
+                    format!("buffer of {} bytes is shorter than {count} f32", buffer.size()),
+                ));
+            }
+        }
+        let spec = KernelSpec::new("adam", shaders::ADAM, "adam");
+        let pipeline = create_compute_pipeline(ctx, &spec).await?;
+        let layout = pipeline.get_bind_group_layout(0);
+
+        let mut segments = Vec::new();
+        let mut start = 0u64;
+        while start < count as u64 {
+            let len = (count as u64 - start).min(segment_len);
+            let constants = AdamConstants {
+                beta1: config.beta1,
+                beta2: config.beta2,
+                epsilon: config.epsilon,
+                count: len as u32,
+            };
+            let uniform = uniform_buffer_from(ctx, "adam constants", &constants);
+            let size = std::num::NonZeroU64::new(len * 4)
+                .ok_or_else(|| GpuError::invalid_argument("adam", "empty segment"))?;
+            let slice = |buffer| {
+                wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer,
+                    offset: start * 4,
+                    size: Some(size),
+                })
+            };
+            let entries = [
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: uniform.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: step.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: slice(buffers.params),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: slice(buffers.grads),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: slice(buffers.first_moment),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: slice(buffers.second_moment),
+                },
+            ];
+            let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("adam"),
+                layout: &layout,
+                entries: &entries,
+            });
+            let dispatch = Dispatch1d::for_device(ctx, len, WORKGROUP)?;
+            segments.push(Segment { bind_group, dispatch });
+            start += len;
+        }
+        Ok(AdamPass { pipeline, segments })
+    }
+
+    /// Segments the buffers were split into (1 unless they exceed one storage binding).
+    pub fn segment_count(&self) -> usize {
+        self.segments.len()
+    }
+
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        pass.set_pipeline(&self.pipeline);
+        for segment in &self.segments {
+            pass.set_bind_group(0, &segment.bind_group, &[]);
+            segment.dispatch.record(pass);
+        }
+    }
+}
+
+/// Elements per segment: the largest binding the device allows, in whole alignment units so
+/// every segment starts at an offset the device accepts.
+fn segment_length(ctx: &GpuContext) -> u64 {
+    let align = u64::from(ctx.limits.min_storage_buffer_offset_alignment.max(4));
+    let max_binding = ctx
+        .limits
+        .max_storage_buffer_binding_size
+        .min(ctx.limits.max_buffer_size);
+    (max_binding / align * align / 4).max(align / 4)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn uniforms_match_the_wgsl_layout() {
+        assert_eq!(size_of::<AdamConstants>(), 16);
+    }
+}

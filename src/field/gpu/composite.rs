@@ -1,0 +1,217 @@
+//! Volume rendering, the four losses and the backward of both on the GPU
+//! (`shaders/composite.wgsl`): one invocation per ray, looping over its S samples.
+//!
+//! Reads per sample the raw head outputs (density pre-activation h₀, colour pre-sigmoid (3),
+//! semantic logits (C), feature (D)) from buffers other passes own, each at
+//! `row · stride + offset`, plus the sample's (δ, z-depth) and the ray's targets from
+//! [`super::rays`]. Writes:
+//! - `grad_heads`, per sample `n = ray·S + s` a row of [`CompositeLayout::grad_stride`] values
+//!   `[∂L/∂h₀, ∂L/∂colour pre-sigmoid (3), ∂L/∂logits (C), ∂L/∂feature (D)]`: what the MLP
+//!   backward passes start from (σ = exp(clamp(h₀)) and the sigmoid are undone here, as
+//!   `reference::activations`);
+//! - `ray_outputs`, per ray a row of [`CompositeLayout::ray_output_stride`] values
+//!   `[loss rgb, depth, semantic, feature, rendered (k), ∂L/∂rendered (k)]` in
+//!   `reference::render::Channels` order (k = 4 + C + D). The loss terms are weighted and divided
+//!   by the batch size B, so their sum over rays is the batch loss; the trainer reduces or reads
+//!   them now and then.
+//!
+//! A ray that misses the scene box contributes nothing (zero loss and gradients).
+use crate::field::config::FieldConfig;
+use crate::field::reference::Channels;
+use crate::gpu::buffers::{storage_buffer_zeroed, uniform_buffer_from};
+use crate::gpu::pipeline::{Dispatch1d, KernelSpec, bind_buffers, create_compute_pipeline};
+use crate::gpu::{GpuContext, GpuError, shaders};
+
+use super::rays::{RAY_WORKGROUP_SIZE, TARGET_HEADER_WORDS};
+
+/// Loss words at the start of a ray's output row: rgb, depth, semantic, feature.
+pub const LOSS_WORDS: usize = 4;
+
+/// Uniform block mirrored by `CompositeUniforms` in `shaders/composite.wgsl` (64 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct CompositeUniforms {
+    pub classes: u32,
+    pub feature_dim: u32,
+    pub supervise_features: u32,
+    pub target_stride: u32,
+    pub h0_stride: u32,
+    pub h0_offset: u32,
+    pub color_stride: u32,
+    pub color_offset: u32,
+    pub logits_stride: u32,
+    pub logits_offset: u32,
+    pub feature_stride: u32,
+    pub feature_offset: u32,
+    pub weight_rgb: f32,
+    pub weight_depth: f32,
+    pub weight_semantic: f32,
+    pub weight_feature: f32,
+}
+
+/// Where one head's per-sample outputs live: sample n's values start at `n · stride + offset`.
+#[derive(Clone, Copy, Debug)]
+pub struct HeadSource<'a> {
+    pub buffer: &'a wgpu::Buffer,
+    pub stride: u32,
+    pub offset: u32,
+}
+
+/// Everything the pass reads.
+#[derive(Clone, Copy, Debug)]
+pub struct CompositeInputs<'a> {
+    pub step_uniforms: &'a wgpu::Buffer,
+    /// h₀: 1 value per sample (column 0 of the density MLP's output rows).
+    pub h0: HeadSource<'a>,
+    /// Colour before the sigmoid: 3 values.
+    pub color: HeadSource<'a>,
+    /// Semantic logits: C values.
+    pub logits: HeadSource<'a>,
+    /// Feature f: D values.
+    pub feature: HeadSource<'a>,
+    /// `SamplePointsPass::intervals`.
+    pub intervals: &'a wgpu::Buffer,
+    /// `RayBatchPass::targets`.
+    pub targets: &'a wgpu::Buffer,
+}
+
+/// Shapes of the pass's outputs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CompositeLayout {
+    pub channels: Channels,
+}
+
+impl CompositeLayout {
+    pub fn new(cfg: &FieldConfig) -> Self {
+        CompositeLayout {
+            channels: Channels {
+                classes: cfg.num_classes as usize,
+                feature_dim: cfg.feature_dim as usize,
+            },
+        }
+    }
+
+    /// Values per sample in `grad_heads` (equal to the channel count k: h₀ takes depth's place).
+    pub fn grad_stride(&self) -> usize {
+        self.channels.count()
+    }
+
+    /// Values per ray in `ray_outputs`.
+    pub fn ray_output_stride(&self) -> usize {
+        LOSS_WORDS + 2 * self.channels.count()
+    }
+
+    /// Offset of the rendered channels in a ray's output row.
+    pub fn rendered_offset(&self) -> usize {
+        LOSS_WORDS
+    }
+
+    /// Offset of ∂L/∂rendered in a ray's output row.
+    pub fn grad_rendered_offset(&self) -> usize {
+        LOSS_WORDS + self.channels.count()
+    }
+
+    /// Offsets in a `grad_heads` row.
+    pub const GRAD_H0: usize = 0;
+    pub const GRAD_COLOR: usize = 1;
+    pub fn grad_logits_offset(&self) -> usize {
+        4
+    }
+    pub fn grad_feature_offset(&self) -> usize {
+        4 + self.channels.classes
+    }
+}
+
+/// Compositing, losses and their backward for a batch of `cfg.batch_rays` rays.
+pub struct CompositePass {
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    dispatch: Dispatch1d,
+    pub layout: CompositeLayout,
+    /// B·S rows of [`CompositeLayout::grad_stride`] f32.
+    pub grad_heads: wgpu::Buffer,
+    /// B rows of [`CompositeLayout::ray_output_stride`] f32.
+    pub ray_outputs: wgpu::Buffer,
+}
+
+impl CompositePass {
+    pub async fn new(ctx: &GpuContext, cfg: &FieldConfig, inputs: &CompositeInputs<'_>) -> Result<Self, GpuError> {
+        cfg.validate()
+            .map_err(|error| GpuError::invalid_argument("composite pass", error.to_string()))?;
+        let layout = CompositeLayout::new(cfg);
+        let batch = cfg.batch_rays as usize;
+        let samples = batch * cfg.samples_per_ray();
+        let heads = [("h0", inputs.h0, 1), ("colour", inputs.color, 3)];
+        let wide_heads = [
+            ("logits", inputs.logits, cfg.num_classes),
+            ("feature", inputs.feature, cfg.feature_dim),
+        ];
+        for (name, source, width) in heads.into_iter().chain(wide_heads) {
+            let needed = (samples as u64 - 1) * u64::from(source.stride) + u64::from(source.offset) + u64::from(width);
+            if source.stride < width || needed * 4 > source.buffer.size() {
+                return Err(GpuError::invalid_argument(
+                    "composite pass",
+                    format!(
+                        "{name} head source (stride {}, offset {}) must hold {width} values for each of {samples} \
+                         samples in its {} bytes",
+                        source.stride,
+                        source.offset,
+                        source.buffer.size()
+                    ),
+                ));
+            }
+        }
+        let uniforms = CompositeUniforms {
+            classes: cfg.num_classes,
+            feature_dim: cfg.feature_dim,
+            supervise_features: u32::from(cfg.feature_supervision),
+            target_stride: TARGET_HEADER_WORDS as u32 + cfg.feature_dim,
+            h0_stride: inputs.h0.stride,
+            h0_offset: inputs.h0.offset,
+            color_stride: inputs.color.stride,
+            color_offset: inputs.color.offset,
+            logits_stride: inputs.logits.stride,
+            logits_offset: inputs.logits.offset,
+            feature_stride: inputs.feature.stride,
+            feature_offset: inputs.feature.offset,
+            weight_rgb: cfg.loss.rgb,
+            weight_depth: cfg.loss.depth,
+            weight_semantic: cfg.loss.semantic,
+            weight_feature: cfg.loss.feature,
+        };
+        let grad_heads = storage_buffer_zeroed::<f32>(ctx, "head gradients", samples * layout.grad_stride())?;
+        let ray_outputs =
+            storage_buffer_zeroed::<f32>(ctx, "ray losses and renders", batch * layout.ray_output_stride())?;
+        let uniform = uniform_buffer_from(ctx, "composite uniforms", &uniforms);
+        let pipeline =
+            create_compute_pipeline(ctx, &KernelSpec::new("composite", shaders::COMPOSITE, "composite")).await?;
+        let dispatch = Dispatch1d::for_device(ctx, batch as u64, RAY_WORKGROUP_SIZE)?;
+        let buffers = [
+            inputs.step_uniforms,
+            &uniform,
+            inputs.h0.buffer,
+            inputs.color.buffer,
+            inputs.logits.buffer,
+            inputs.feature.buffer,
+            inputs.intervals,
+            inputs.targets,
+            &grad_heads,
+            &ray_outputs,
+        ];
+        let bind_group = bind_buffers(ctx, "composite", &pipeline.get_bind_group_layout(0), &buffers);
+        Ok(CompositePass {
+            pipeline,
+            bind_group,
+            dispatch,
+            layout,
+            grad_heads,
+            ray_outputs,
+        })
+    }
+
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        self.dispatch.record(pass);
+    }
+}

@@ -1,0 +1,498 @@
+//! The input encodings on the GPU: the position encoding (hash grid + frequencies) and its
+//! hash-table gradient, and the spherical harmonics of the view direction. The GPU twins of
+//! `reference::{hash_grid, frequency, sh}`; tested against them in `tests/gpu_field_encoding.rs`.
+//!
+//! - [`PositionEncodePass`] (`shaders/hash_encode.wgsl`): N positions (`vec4<f32>`, xyz in
+//!   [0,1]³) → N rows of `cfg.encoding_dim()` values, `[hash levels… | frequencies]`, exactly
+//!   `FieldModel::encode_position`.
+//! - [`HashGridBackwardPass`] (`shaders/hash_backward.wgsl`): N rows of ∂L/∂encoding → adds
+//!   ∂L/∂table into the table range of the flat gradient buffer with f32 compare-exchange
+//!   atomics. The table range must be zero first: [`HashGridBackwardPass::record_clear`] does
+//!   that (or the trainer clears the whole gradient buffer, once per step, before any backward).
+//! - [`DirectionShPass`] (`shaders/sh_encode.wgsl`): one unit direction per ray → the 16 SH
+//!   values of every sample of the ray, in given columns of a strided per-sample buffer.
+//!
+//! Passes are built once with their buffers and only record dispatches, so a training step can
+//! record all of them into one encoder. The sample count is fixed at creation.
+use std::ops::Range;
+
+use crate::field::config::FieldConfig;
+use crate::field::reference::hash_grid::HashGrid;
+use crate::field::reference::sh::SH_COEFFS;
+use crate::gpu::buffers::uniform_buffer_from;
+use crate::gpu::pipeline::{Dispatch1d, KernelSpec, bind_buffers, create_compute_pipeline};
+use crate::gpu::{GpuContext, GpuError, shaders};
+
+/// Invocations per workgroup of the three kernels (their `WORKGROUP_SIZE`).
+pub const WORKGROUP_SIZE: u32 = 64;
+/// Levels the uniform block has room for (`MAX_HASH_LEVELS` in `_hash_grid.wgsl`); the config
+/// allows at most this many.
+pub const MAX_HASH_LEVELS: usize = 32;
+/// Features per level the backward's workgroup memory has room for (`MAX_FEATURES`).
+pub const MAX_HASH_FEATURES: usize = 8;
+
+/// Bytes per position or direction: a `vec4<f32>`.
+const VEC4_BYTES: u64 = 16;
+const F32_BYTES: u64 = 4;
+
+/// Uniform block of `hash_encode.wgsl` and `hash_backward.wgsl` (`HashGridUniforms` in
+/// `_hash_grid.wgsl`, field by field).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct HashGridUniforms {
+    pub sample_count: u32,
+    /// Hash-grid levels; 0 for the frequency-only encoding.
+    pub levels: u32,
+    pub features: u32,
+    pub table_size: u32,
+    /// Index of the table's first value in the flat params / gradient buffer.
+    pub table_offset: u32,
+    /// Values per encoding row (`cfg.encoding_dim()`).
+    pub row_stride: u32,
+    /// Column of the first frequency value (`cfg.hash_encoding_dim()`).
+    pub frequency_column: u32,
+    pub frequencies: u32,
+    /// Backward: workgroups covering the samples of one level.
+    pub groups_per_level: u32,
+    pub _pad: [u32; 3],
+    /// Per level: [cells per axis, vertices per axis if indexed densely else 0, 0, 0].
+    pub level_geometry: [[u32; 4]; MAX_HASH_LEVELS],
+}
+
+impl HashGridUniforms {
+    /// The uniforms for `samples` positions encoded with `cfg`, the table starting at
+    /// `table_offset` in the flat buffer.
+    pub fn new(cfg: &FieldConfig, samples: usize, table_offset: usize) -> Result<Self, GpuError> {
+        cfg.validate()
+            .map_err(|error| GpuError::invalid_argument("hash grid config", error.to_string()))?;
+        let grid = HashGrid::from_config(cfg);
+        if grid.levels > MAX_HASH_LEVELS || grid.features > MAX_HASH_FEATURES {
+            return Err(GpuError::invalid_argument(
+                "hash grid config",
+                format!(
+                    "{} levels of {} features exceed the kernels' {MAX_HASH_LEVELS} levels of {MAX_HASH_FEATURES}",
+                    grid.levels, grid.features
+                ),
+            ));
+        }
+        let mut level_geometry = [[0u32; 4]; MAX_HASH_LEVELS];
+        for (level, geometry) in level_geometry.iter_mut().enumerate().take(grid.levels) {
+            let resolution = grid.resolutions[level];
+            let dense_side = if grid.is_dense(level) { resolution + 1 } else { 0 };
+            *geometry = [resolution, dense_side, 0, 0];
+        }
+        let groups_per_level = samples.div_ceil(WORKGROUP_SIZE as usize);
+        Ok(HashGridUniforms {
+            sample_count: index_u32("sample count", samples)?,
+            levels: grid.levels as u32,
+            features: grid.features as u32,
+            table_size: index_u32("hash table size", grid.table_size)?,
+            table_offset: index_u32("hash table offset", table_offset)?,
+            row_stride: index_u32("encoding width", cfg.encoding_dim())?,
+            frequency_column: index_u32("hash encoding width", cfg.hash_encoding_dim())?,
+            frequencies: cfg.encoding.frequencies(),
+            groups_per_level: index_u32("workgroups per level", groups_per_level)?,
+            _pad: [0; 3],
+            level_geometry,
+        })
+    }
+}
+
+/// Uniform block of `sh_encode.wgsl` (`ShUniforms`, field by field).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ShUniforms {
+    pub sample_count: u32,
+    pub samples_per_ray: u32,
+    pub row_stride: u32,
+    pub column_offset: u32,
+}
+
+/// The buffers of [`PositionEncodePass`].
+#[derive(Debug, Clone, Copy)]
+pub struct PositionEncodeBuffers<'a> {
+    /// N sample positions as `vec4<f32>` (xyz normalized to [0,1]³, w unused).
+    pub positions: &'a wgpu::Buffer,
+    /// The flat parameter buffer holding the hash table (bound read-only).
+    pub params: &'a wgpu::Buffer,
+    /// Index of the table's first value in `params` (`ParamLayout::hash_table.start`).
+    pub table_offset: usize,
+    /// Output: N rows of `cfg.encoding_dim()` f32.
+    pub encoding: &'a wgpu::Buffer,
+}
+
+/// Forward of the position encoding (see the module docs).
+#[derive(Debug)]
+pub struct PositionEncodePass {
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    dispatch: Dispatch1d,
+    /// Kept with the pass that reads it.
+    _uniforms: wgpu::Buffer,
+}
+
+impl PositionEncodePass {
+    /// A pass encoding `samples` positions with `cfg`'s encoding.
+    pub async fn new(
+        ctx: &GpuContext,
+        cfg: &FieldConfig,
+        samples: usize,
+        buffers: PositionEncodeBuffers<'_>,
+    ) -> Result<Self, GpuError> {
+        const WHAT: &str = "position encoding";
+        let uniforms = HashGridUniforms::new(cfg, samples, buffers.table_offset)?;
+        check_samples(WHAT, samples)?;
+        let table_len = HashGrid::from_config(cfg).param_count();
+        check_buffer(ctx, WHAT, "positions", buffers.positions, samples as u64 * VEC4_BYTES)?;
+        check_buffer(
+            ctx,
+            WHAT,
+            "params",
+            buffers.params,
+            (buffers.table_offset + table_len) as u64 * F32_BYTES,
+        )?;
+        let encoding_values = samples as u64 * cfg.encoding_dim() as u64;
+        check_buffer(ctx, WHAT, "encoding", buffers.encoding, encoding_values * F32_BYTES)?;
+        check_index_range(WHAT, encoding_values)?;
+        check_index_range(WHAT, (buffers.table_offset + table_len) as u64)?;
+
+        // Slots: one per hash level, plus one for the frequency encoding when there is one.
+        let slots = uniforms.levels + u32::from(uniforms.frequencies > 0);
+        let items = u64::from(slots) * samples as u64;
+        check_index_range(WHAT, items + u64::from(WORKGROUP_SIZE) * u64::from(u16::MAX))?;
+        let dispatch = Dispatch1d::for_device(ctx, items, WORKGROUP_SIZE)?;
+
+        let pipeline =
+            create_compute_pipeline(ctx, &KernelSpec::new(WHAT, shaders::HASH_ENCODE, "hash_encode")).await?;
+        let uniform_buffer = uniform_buffer_from(ctx, "position encoding uniforms", &uniforms);
+        let bind_group = bind_buffers(
+            ctx,
+            WHAT,
+            &pipeline.get_bind_group_layout(0),
+            &[&uniform_buffer, buffers.positions, buffers.params, buffers.encoding],
+        );
+        Ok(PositionEncodePass {
+            pipeline,
+            bind_group,
+            dispatch,
+            _uniforms: uniform_buffer,
+        })
+    }
+
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        if self.dispatch.workgroups() == 0 {
+            return;
+        }
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        self.dispatch.record(pass);
+    }
+}
+
+/// How the hash-grid backward cuts down its atomic adds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum BackwardStrategy {
+    /// Runs of consecutive samples in the same cell (common on coarse levels, as samples of a
+    /// ray are adjacent) are summed in registers and added once. The default.
+    #[default]
+    MergeRuns,
+    /// Every sample adds its own 8 corners: the plain baseline, kept for measurements.
+    PerSample,
+}
+
+/// The buffers of [`HashGridBackwardPass`].
+#[derive(Debug, Clone, Copy)]
+pub struct HashGridBackwardBuffers<'a> {
+    /// The N positions the forward encoded.
+    pub positions: &'a wgpu::Buffer,
+    /// ∂L/∂encoding: N rows of `cfg.encoding_dim()` f32 (only the hash columns are read).
+    pub encoding_grad: &'a wgpu::Buffer,
+    /// The flat gradient buffer, bound as `array<atomic<u32>>`.
+    pub gradient: &'a wgpu::Buffer,
+    /// Index of the table's first value in `gradient` (`ParamLayout::hash_table.start`).
+    pub table_offset: usize,
+}
+
+/// Backward of the hash grid (see the module docs). For the frequency-only encoding there is
+/// nothing to do and recording is a no-op.
+#[derive(Debug)]
+pub struct HashGridBackwardPass {
+    kernel: Option<BoundKernel>,
+    gradient: wgpu::Buffer,
+    /// Bytes of the table's range in the gradient buffer.
+    table_bytes: Range<u64>,
+}
+
+#[derive(Debug)]
+struct BoundKernel {
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    dispatch: Dispatch1d,
+    _uniforms: wgpu::Buffer,
+}
+
+impl HashGridBackwardPass {
+    /// A pass for `samples` samples with the default [`BackwardStrategy`].
+    pub async fn new(
+        ctx: &GpuContext,
+        cfg: &FieldConfig,
+        samples: usize,
+        buffers: HashGridBackwardBuffers<'_>,
+    ) -> Result<Self, GpuError> {
+        Self::with_strategy(ctx, cfg, samples, buffers, BackwardStrategy::default()).await
+    }
+
+    pub async fn with_strategy(
+        ctx: &GpuContext,
+        cfg: &FieldConfig,
+        samples: usize,
+        buffers: HashGridBackwardBuffers<'_>,
+        strategy: BackwardStrategy,
+    ) -> Result<Self, GpuError> {
+        const WHAT: &str = "hash grid backward";
+        let uniforms = HashGridUniforms::new(cfg, samples, buffers.table_offset)?;
+        check_samples(WHAT, samples)?;
+        let table_len = HashGrid::from_config(cfg).param_count();
+        let table_end = (buffers.table_offset + table_len) as u64;
+        check_buffer(ctx, WHAT, "positions", buffers.positions, samples as u64 * VEC4_BYTES)?;
+        let grad_values = samples as u64 * cfg.encoding_dim() as u64;
+        check_buffer(
+            ctx,
+            WHAT,
+            "encoding gradient",
+            buffers.encoding_grad,
+            grad_values * F32_BYTES,
+        )?;
+        check_buffer(ctx, WHAT, "gradient", buffers.gradient, table_end * F32_BYTES)?;
+        check_index_range(WHAT, grad_values)?;
+        check_index_range(WHAT, table_end)?;
+        let table_bytes = buffers.table_offset as u64 * F32_BYTES..table_end * F32_BYTES;
+        if uniforms.levels == 0 || samples == 0 {
+            return Ok(HashGridBackwardPass {
+                kernel: None,
+                gradient: buffers.gradient.clone(),
+                table_bytes,
+            });
+        }
+
+        // One workgroup per (level, WORKGROUP_SIZE consecutive samples).
+        let workgroups = u64::from(uniforms.levels) * u64::from(uniforms.groups_per_level);
+        check_index_range(WHAT, workgroups + u64::from(u16::MAX))?;
+        let dispatch = Dispatch1d::for_device(ctx, workgroups * u64::from(WORKGROUP_SIZE), WORKGROUP_SIZE)?;
+        let workgroup_bytes = u64::from(WORKGROUP_SIZE) * (16 + 16 + MAX_HASH_FEATURES as u64 * F32_BYTES);
+        ctx.ensure_workgroup_storage_fits("hash grid backward run merging", workgroup_bytes)?;
+
+        let merge_runs = f64::from(u8::from(strategy == BackwardStrategy::MergeRuns));
+        let constants = [("MERGE_RUNS", merge_runs)];
+        let spec = KernelSpec {
+            constants: &constants,
+            ..KernelSpec::new(WHAT, shaders::HASH_BACKWARD, "hash_backward")
+        };
+        let pipeline = create_compute_pipeline(ctx, &spec).await?;
+        let uniform_buffer = uniform_buffer_from(ctx, "hash grid backward uniforms", &uniforms);
+        let bind_group = bind_buffers(
+            ctx,
+            WHAT,
+            &pipeline.get_bind_group_layout(0),
+            &[
+                &uniform_buffer,
+                buffers.positions,
+                buffers.encoding_grad,
+                buffers.gradient,
+            ],
+        );
+        Ok(HashGridBackwardPass {
+            kernel: Some(BoundKernel {
+                pipeline,
+                bind_group,
+                dispatch,
+                _uniforms: uniform_buffer,
+            }),
+            gradient: buffers.gradient.clone(),
+            table_bytes,
+        })
+    }
+
+    /// Records zeroing the table's range of the gradient buffer; record it before the compute
+    /// pass holding [`HashGridBackwardPass::record`] (the buffer needs COPY_DST).
+    pub fn record_clear(&self, encoder: &mut wgpu::CommandEncoder) {
+        let Range { start, end } = self.table_bytes;
+        if end > start {
+            encoder.clear_buffer(&self.gradient, start, Some(end - start));
+        }
+    }
+
+    /// Records the accumulation of ∂L/∂table into the (zeroed) gradient buffer.
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        let Some(kernel) = &self.kernel else { return };
+        pass.set_pipeline(&kernel.pipeline);
+        pass.set_bind_group(0, &kernel.bind_group, &[]);
+        kernel.dispatch.record(pass);
+    }
+}
+
+/// Where [`DirectionShPass`] writes: 16 columns of a per-sample buffer whose rows also hold
+/// other values (the colour MLP's input `[SH 16 | geometry]`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ShOutputLayout {
+    /// Samples of one ray: sample n takes the direction of ray n / samples_per_ray.
+    pub samples_per_ray: usize,
+    /// Values per output row.
+    pub row_stride: usize,
+    /// Column of the first SH value; columns `column_offset..column_offset + 16` are written.
+    pub column_offset: usize,
+}
+
+/// The buffers of [`DirectionShPass`].
+#[derive(Debug, Clone, Copy)]
+pub struct DirectionShBuffers<'a> {
+    /// One unit direction per ray as `vec4<f32>` (xyz; w unused).
+    pub directions: &'a wgpu::Buffer,
+    /// Output: N rows of `row_stride` f32; only the SH columns are written.
+    pub output: &'a wgpu::Buffer,
+}
+
+/// Degree-4 SH of each ray's direction, written for each of its samples (see the module docs).
+#[derive(Debug)]
+pub struct DirectionShPass {
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    dispatch: Dispatch1d,
+    _uniforms: wgpu::Buffer,
+}
+
+impl DirectionShPass {
+    pub async fn new(
+        ctx: &GpuContext,
+        samples: usize,
+        layout: ShOutputLayout,
+        buffers: DirectionShBuffers<'_>,
+    ) -> Result<Self, GpuError> {
+        const WHAT: &str = "view direction SH";
+        check_samples(WHAT, samples)?;
+        if layout.samples_per_ray == 0 || layout.column_offset + SH_COEFFS > layout.row_stride {
+            return Err(GpuError::invalid_argument(
+                WHAT,
+                format!("{layout:?}: needs samples_per_ray >= 1 and column_offset + {SH_COEFFS} <= row_stride"),
+            ));
+        }
+        let rays = samples.div_ceil(layout.samples_per_ray) as u64;
+        check_buffer(ctx, WHAT, "directions", buffers.directions, rays * VEC4_BYTES)?;
+        let output_values = samples as u64 * layout.row_stride as u64;
+        check_buffer(ctx, WHAT, "output", buffers.output, output_values * F32_BYTES)?;
+        check_index_range(WHAT, output_values)?;
+        check_index_range(WHAT, samples as u64 + u64::from(WORKGROUP_SIZE) * u64::from(u16::MAX))?;
+        let uniforms = ShUniforms {
+            sample_count: samples as u32,
+            samples_per_ray: index_u32("samples per ray", layout.samples_per_ray)?,
+            row_stride: index_u32("SH row stride", layout.row_stride)?,
+            column_offset: index_u32("SH column offset", layout.column_offset)?,
+        };
+        let dispatch = Dispatch1d::for_device(ctx, samples as u64, WORKGROUP_SIZE)?;
+        let pipeline = create_compute_pipeline(ctx, &KernelSpec::new(WHAT, shaders::SH_ENCODE, "sh_encode")).await?;
+        let uniform_buffer = uniform_buffer_from(ctx, "view direction SH uniforms", &uniforms);
+        let bind_group = bind_buffers(
+            ctx,
+            WHAT,
+            &pipeline.get_bind_group_layout(0),
+            &[&uniform_buffer, buffers.directions, buffers.output],
+        );
+        Ok(DirectionShPass {
+            pipeline,
+            bind_group,
+            dispatch,
+            _uniforms: uniform_buffer,
+        })
+    }
+
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        if self.dispatch.workgroups() == 0 {
+            return;
+        }
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        self.dispatch.record(pass);
+    }
+}
+
+fn index_u32(what: &str, value: usize) -> Result<u32, GpuError> {
+    u32::try_from(value).map_err(|_| GpuError::invalid_argument(what, format!("{value} does not fit the kernels' u32")))
+}
+
+/// The kernels index with u32: every element index (and the dispatch's overshoot) must fit.
+fn check_index_range(what: &str, elements: u64) -> Result<(), GpuError> {
+    if elements > u64::from(u32::MAX) {
+        return Err(GpuError::invalid_argument(
+            what,
+            format!("{elements} elements exceed the kernels' u32 indices"),
+        ));
+    }
+    Ok(())
+}
+
+fn check_samples(what: &str, samples: usize) -> Result<(), GpuError> {
+    index_u32(what, samples).map(|_| ())
+}
+
+/// The buffer holds at least `needed` bytes and can be bound whole on this device.
+fn check_buffer(ctx: &GpuContext, what: &str, role: &str, buffer: &wgpu::Buffer, needed: u64) -> Result<(), GpuError> {
+    if buffer.size() < needed {
+        return Err(GpuError::invalid_argument(
+            format!("{what}: {role} buffer"),
+            format!("holds {} bytes but {needed} are needed", buffer.size()),
+        ));
+    }
+    ctx.ensure_storage_binding_fits(&format!("{what}: {role} buffer"), buffer.size())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::config::Encoding;
+
+    #[test]
+    fn uniform_blocks_match_the_wgsl_layout() {
+        // 12 scalars then 32 vec4<u32> (stride 16 in the uniform address space).
+        assert_eq!(size_of::<HashGridUniforms>(), 12 * 4 + MAX_HASH_LEVELS * 16);
+        assert_eq!(size_of::<ShUniforms>(), 16);
+    }
+
+    #[test]
+    fn uniforms_follow_the_reference_grid() {
+        let cfg = FieldConfig::default();
+        let u = HashGridUniforms::new(&cfg, 1000, 7).unwrap();
+        assert_eq!(
+            (u.levels, u.features, u.table_size, u.table_offset),
+            (16, 2, 1 << 19, 7)
+        );
+        assert_eq!((u.row_stride, u.frequency_column, u.frequencies), (44, 32, 2));
+        assert_eq!(u.groups_per_level, 1000usize.div_ceil(WORKGROUP_SIZE as usize) as u32);
+        // 16, 32, 64 cells are dense (65³ ≤ 2^19); 128 is hashed.
+        assert_eq!(
+            &u.level_geometry[..4],
+            &[[16, 17, 0, 0], [32, 33, 0, 0], [64, 65, 0, 0], [128, 0, 0, 0]]
+        );
+        assert_eq!(u.level_geometry[15][0], 16 << 15);
+        assert_eq!(u.level_geometry[16], [0; 4]);
+
+        let freq = FieldConfig {
+            encoding: Encoding::freq_only_baseline(),
+            ..FieldConfig::default()
+        };
+        let u = HashGridUniforms::new(&freq, 10, 0).unwrap();
+        assert_eq!(
+            (u.levels, u.row_stride, u.frequency_column, u.frequencies),
+            (0, 60, 0, 10)
+        );
+    }
+
+    #[test]
+    fn invalid_configs_are_refused() {
+        let cfg = FieldConfig {
+            hash_levels: 0,
+            ..FieldConfig::default()
+        };
+        assert!(HashGridUniforms::new(&cfg, 10, 0).is_err());
+        assert!(HashGridUniforms::new(&FieldConfig::default(), 10, usize::MAX).is_err());
+    }
+}

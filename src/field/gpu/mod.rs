@@ -1,0 +1,13 @@
+//! The GPU twin of `reference`: one WGSL kernel per stage, each wrapped by a pass that owns its
+//! pipeline and bind groups, and tested against the CPU reference on lavapipe.
+//!
+//! Buffers shared between passes are sample-major: with B rays of S samples, sample `n = ray·S + s`
+//! owns row `n` of every per-sample buffer (positions, encodings, MLP activations, head outputs
+//! and their gradients). Parameters, gradients and Adam moments are the flat layout of
+//! `field::params::ParamLayout`, bound whole; a pass is told the offset of its range.
+pub mod adam;
+pub mod composite;
+pub mod dense;
+pub mod encoding;
+pub mod rays;
+pub mod scene_buffers;

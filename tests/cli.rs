@@ -1,0 +1,166 @@
+//! The `scribblefield` binary as a user runs it: exit codes, messages, and that bad input never
+//! panics.
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn run(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_scribblefield"))
+        .args(args)
+        .output()
+        .expect("binary runs")
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// Fails on a Rust panic, which is never an acceptable answer to bad input.
+fn assert_clean_failure(o: &Output, mentions: &[&str]) {
+    let t = text(o);
+    assert!(!o.status.success(), "expected failure, got success:\n{t}");
+    assert!(!t.contains("panicked"), "panicked instead of reporting an error:\n{t}");
+    for m in mentions {
+        assert!(t.contains(m), "output should mention {m:?}:\n{t}");
+    }
+}
+
+fn shared_data(name: &str) -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(name);
+    if p.is_dir() {
+        Some(p)
+    } else {
+        eprintln!(
+            "SKIPPED: {} is absent; this test needs ../shared/data beside the repo",
+            p.display()
+        );
+        None
+    }
+}
+
+#[test]
+fn demo_scene_then_info() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo.scene.zip");
+    let o = run(&[
+        "demo-scene",
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "64x48",
+        "--frames",
+        "24",
+        "--seed",
+        "3",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let o = run(&["info", out.to_str().unwrap()]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(
+        t.contains("frames:      24") && t.contains("64 x 48") && t.contains("ground truth: yes"),
+        "{t}"
+    );
+}
+
+#[test]
+fn pack_real_autolabel_scene() {
+    let Some(src) = shared_data("ycb-video-0000") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ycb.scene.zip");
+    let o = run(&[
+        "pack",
+        src.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--max-size",
+        "320",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let t = text(&run(&["info", out.to_str().unwrap()]));
+    assert!(t.contains("frames:      10") && t.contains("320 x 240"), "{t}");
+    assert!(t.contains("mug") && t.contains("ground truth: yes"), "{t}");
+}
+
+#[test]
+fn pack_real_seven_scenes_subset() {
+    let Some(src) = shared_data("7scenes-subset") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("7s.scene.zip");
+    let o = run(&[
+        "pack",
+        src.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--every",
+        "10",
+        "--max-size",
+        "160",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let t = text(&run(&["info", out.to_str().unwrap()]));
+    assert!(
+        t.contains("frames:      10") && t.contains("160 x 120") && t.contains("depth:       yes"),
+        "{t}"
+    );
+}
+
+#[test]
+fn bad_inputs_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let missing = d.join("nope");
+    assert_clean_failure(&run(&["info", missing.to_str().unwrap()]), &["nope"]);
+    let junk = d.join("junk.scene.zip");
+    std::fs::write(&junk, b"PK\x03\x04 definitely not a whole zip").unwrap();
+    assert_clean_failure(&run(&["info", junk.to_str().unwrap()]), &["junk.scene.zip", "zip"]);
+    let empty = d.join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    assert_clean_failure(
+        &run(&[
+            "pack",
+            empty.to_str().unwrap(),
+            "-o",
+            d.join("o.scene.zip").to_str().unwrap(),
+        ]),
+        &["empty"],
+    );
+    assert_clean_failure(
+        &run(&[
+            "pack",
+            missing.to_str().unwrap(),
+            "-o",
+            d.join("o.scene.zip").to_str().unwrap(),
+        ]),
+        &["nope"],
+    );
+    assert_clean_failure(
+        &run(&[
+            "demo-scene",
+            "-o",
+            d.join("x.scene.zip").to_str().unwrap(),
+            "--size",
+            "64by48",
+        ]),
+        &["64by48"],
+    );
+    assert_clean_failure(
+        &run(&["demo-scene", "-o", d.join("x.txt").to_str().unwrap()]),
+        &["x.txt", ".scene.zip"],
+    );
+    assert_clean_failure(
+        &run(&["demo-scene", "-o", d.join("no/such/dir/x.scene.zip").to_str().unwrap()]),
+        &["does not exist"],
+    );
+    assert!(
+        !d.join("o.scene.zip").exists(),
+        "a failed pack must not leave an archive behind"
+    );
+}

@@ -1,0 +1,153 @@
+//! `AdamPass` against `reference::adam` over several steps, with the step values coming from the
+//! trainer's `StepUniforms` buffer rewritten between submits, also when the buffers are split
+//! into segments.
+//!
+//! Tolerance: the kernel does the reference's f32 operations in the same order, but a Vulkan
+//! device may fuse a multiply-add and its `sqrt` and division are not correctly rounded (a few
+//! ulp). Those differences are relative to the quantity computed, so after a few steps the
+//! moments agree within 1e-6 relative, and a parameter within 1e-6 of max(|p|, the total step
+//! length lr·steps) (a step's error is relative to the step, not to a p near zero).
+use scribblefield::field::FieldConfig;
+use scribblefield::field::gpu::adam::{AdamBuffers, AdamPass};
+use scribblefield::field::gpu::rays::StepUniforms;
+use scribblefield::field::reference::Adam;
+use scribblefield::field::rng::SplitMix64;
+use scribblefield::gpu::GpuContext;
+use scribblefield::gpu::buffers::{
+    read_buffer_blocking, storage_buffer_from, storage_buffer_zeroed, uniform_buffer_from,
+};
+use scribblefield::gpu::test_support::gpu_for_tests;
+
+const STEPS: u32 = 5;
+const RELATIVE_TOLERANCE: f32 = 1e-6;
+
+fn assert_close(what: &str, gpu: &[f32], reference: &[f32], floor: f32) {
+    assert_eq!(gpu.len(), reference.len(), "{what}");
+    for (i, (&g, &r)) in gpu.iter().zip(reference).enumerate() {
+        let allowed = RELATIVE_TOLERANCE * r.abs().max(floor);
+        assert!(
+            (g - r).abs() <= allowed,
+            "{what}[{i}]: GPU {g}, reference {r}, allowed {allowed:e}"
+        );
+    }
+}
+
+/// Runs `STEPS` Adam steps of `count` parameters on the GPU (segments of `segment_len` when
+/// given) and on the reference, with learning rates changing every step.
+fn check_adam(ctx: &GpuContext, count: usize, segment_len: Option<u64>) {
+    let cfg = FieldConfig::small();
+    let mut rng = SplitMix64::new(count as u64);
+    let mut params: Vec<f32> = (0..count).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+    // Gradients of mixed scales, including exact zeros (an untouched hash entry).
+    let gradient = |rng: &mut SplitMix64| -> Vec<f32> {
+        (0..count)
+            .map(|i| {
+                if i % 7 == 0 {
+                    0.0
+                } else {
+                    (rng.uniform(-1.0, 1.0) * 10f64.powi((i % 5) as i32 - 3)) as f32
+                }
+            })
+            .collect()
+    };
+    let params_buffer = storage_buffer_from(ctx, "params", &params).unwrap();
+    let grads_buffer = storage_buffer_zeroed::<f32>(ctx, "grads", count).unwrap();
+    let m_buffer = storage_buffer_zeroed::<f32>(ctx, "m", count).unwrap();
+    let v_buffer = storage_buffer_zeroed::<f32>(ctx, "v", count).unwrap();
+    let step_buffer = uniform_buffer_from(ctx, "step", &StepUniforms::for_step(&cfg, 1, 0, 0.0));
+    let buffers = AdamBuffers {
+        params: &params_buffer,
+        grads: &grads_buffer,
+        first_moment: &m_buffer,
+        second_moment: &v_buffer,
+    };
+    let adam_pass = match segment_len {
+        None => pollster::block_on(AdamPass::new(ctx, &cfg.adam, count, buffers, &step_buffer)),
+        Some(len) => pollster::block_on(AdamPass::with_segment_length(
+            ctx,
+            &cfg.adam,
+            count,
+            buffers,
+            &step_buffer,
+            len,
+        )),
+    }
+    .unwrap();
+    if let Some(len) = segment_len {
+        assert_eq!(adam_pass.segment_count(), count.div_ceil(len as usize));
+    }
+
+    let mut reference = Adam::new(cfg.adam, count);
+    let mut total_lr = 0.0f32;
+    for t in 1..=STEPS {
+        let lr = 1e-2 / t as f32;
+        total_lr += lr;
+        let grads = gradient(&mut rng);
+        let uniforms = StepUniforms::for_step(&cfg, t, 7, lr);
+        assert_eq!((uniforms.adam_c1, uniforms.adam_c2), reference.bias_corrections(t));
+        ctx.queue.write_buffer(&step_buffer, 0, bytemuck::bytes_of(&uniforms));
+        ctx.queue.write_buffer(&grads_buffer, 0, bytemuck::cast_slice(&grads));
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            adam_pass.record(&mut pass);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        reference.update(&mut params, &grads, lr);
+    }
+    let what = format!("{count} parameters, segments {segment_len:?}");
+    let gpu_params: Vec<f32> = read_buffer_blocking(ctx, &params_buffer).unwrap();
+    let gpu_m: Vec<f32> = read_buffer_blocking(ctx, &m_buffer).unwrap();
+    let gpu_v: Vec<f32> = read_buffer_blocking(ctx, &v_buffer).unwrap();
+    assert_close(&format!("{what}: m"), &gpu_m[..count], &reference.m, 0.0);
+    assert_close(&format!("{what}: v"), &gpu_v[..count], &reference.v, 0.0);
+    assert_close(&format!("{what}: params"), &gpu_params[..count], &params, total_lr);
+    let moved = gpu_params.iter().zip(&params).filter(|(g, p)| g != p).count();
+    eprintln!("{what}: {moved} of {count} parameters differ in some bit from the reference");
+}
+
+#[test]
+fn adam_matches_the_reference_over_several_steps() {
+    let Some(ctx) = gpu_for_tests("adam_matches_the_reference_over_several_steps") else {
+        return;
+    };
+    // Not a multiple of the workgroup size; then one long enough to need a 2D dispatch when the
+    // device allows only 65535 workgroups per dimension (> 65535 · 256).
+    check_adam(&ctx, 100_003, None);
+    check_adam(&ctx, 17_000_001, None);
+}
+
+#[test]
+fn adam_in_segments_matches_the_reference() {
+    let Some(ctx) = gpu_for_tests("adam_in_segments_matches_the_reference") else {
+        return;
+    };
+    let align = u64::from(ctx.limits.min_storage_buffer_offset_alignment.max(4)) / 4;
+    check_adam(&ctx, 10_001, Some(align * 13));
+}
+
+#[test]
+fn adam_rejects_short_buffers_and_bad_segments() {
+    let Some(ctx) = gpu_for_tests("adam_rejects_short_buffers_and_bad_segments") else {
+        return;
+    };
+    let cfg = FieldConfig::small();
+    let long = storage_buffer_zeroed::<f32>(&ctx, "long", 100).unwrap();
+    let short = storage_buffer_zeroed::<f32>(&ctx, "short", 99).unwrap();
+    let step = uniform_buffer_from(&ctx, "step", &StepUniforms::for_step(&cfg, 1, 0, 0.1));
+    let buffers = AdamBuffers {
+        params: &long,
+        grads: &long,
+        first_moment: &long,
+        second_moment: &short,
+    };
+    assert!(pollster::block_on(AdamPass::new(&ctx, &cfg.adam, 100, buffers, &step)).is_err());
+    let buffers = AdamBuffers {
+        params: &long,
+        grads: &short,
+        first_moment: &long,
+        second_moment: &long,
+    };
+    assert!(pollster::block_on(AdamPass::with_segment_length(&ctx, &cfg.adam, 99, buffers, &step, 0)).is_err());
+    assert!(pollster::block_on(AdamPass::new(&ctx, &cfg.adam, 0, buffers, &step)).is_err());
+}

@@ -1,0 +1,398 @@
+//! The dense-layer kernels and `MlpPass` against `reference::mlp` (in f64) on every MLP of
+//! `FieldConfig::small()` and of the default widths, with row views that have a stride and an
+//! offset, garbage-filled outputs and a row count that is no multiple of any tile.
+//!
+//! Tolerance: a GPU value is a sum of K f32 products, whose rounding error is bounded by about
+//! K·2⁻²⁴ times the sum of the absolute terms (the "magnitude"; for K ≤ 128 and the tiled order
+//! far less in practice). We accept |gpu − f64 reference| ≤ 1e-5 · magnitude + 1e-6, the
+//! magnitude coming from the same reference run on absolute values. dW sums over all N rows
+//! (K = N = 777 here, in chunks), so it gets 4e-5 · magnitude.
+use scribblefield::field::gpu::dense::{DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView};
+use scribblefield::field::params::{MlpLayout, ParamLayout};
+use scribblefield::field::reference::mlp::{MlpTrace, backward, forward};
+use scribblefield::field::rng::SplitMix64;
+use scribblefield::field::{Encoding, FieldConfig};
+use scribblefield::gpu::GpuContext;
+use scribblefield::gpu::buffers::{
+    GARBAGE_WORDS, fill_with_garbage, read_buffer_blocking, storage_buffer_from, storage_buffer_garbage,
+};
+use scribblefield::gpu::test_support::gpu_for_tests;
+
+const ROWS: usize = 777;
+const FORWARD_TOLERANCE: f64 = 1e-5;
+const WEIGHT_GRAD_TOLERANCE: f64 = 4e-5;
+const ABSOLUTE_TOLERANCE: f64 = 1e-6;
+/// Initial value of every gradient element: dW must be added to it, and elements outside the
+/// MLP's layers must keep it bit for bit.
+const GRAD_PRESET: f32 = 0.25;
+
+/// Rows laid out in a wider buffer: `width` values at `offset` of rows of `stride`.
+#[derive(Clone, Copy)]
+struct ViewLayout {
+    width: usize,
+    stride: usize,
+    offset: usize,
+}
+
+impl ViewLayout {
+    fn padded(width: usize, before: usize, after: usize) -> ViewLayout {
+        ViewLayout {
+            width,
+            stride: before + width + after,
+            offset: before,
+        }
+    }
+
+    fn len(&self, rows: usize) -> usize {
+        rows * self.stride
+    }
+
+    fn view(&self, buffer: &wgpu::Buffer) -> RowView {
+        RowView {
+            buffer: buffer.clone(),
+            stride: self.stride as u32,
+            offset: self.offset as u32,
+        }
+    }
+
+    fn row<'a>(&self, data: &'a [f32], n: usize) -> &'a [f32] {
+        &data[n * self.stride + self.offset..][..self.width]
+    }
+
+    /// Every element outside the view must still hold the garbage pattern.
+    fn assert_gaps_untouched(&self, what: &str, data: &[f32], rows: usize) {
+        for (index, value) in data.iter().enumerate().take(self.len(rows)) {
+            let column = index % self.stride;
+            if column < self.offset || column >= self.offset + self.width {
+                assert_eq!(
+                    value.to_bits(),
+                    GARBAGE_WORDS[index % GARBAGE_WORDS.len()],
+                    "{what}: element {index} outside the view was written"
+                );
+            }
+        }
+    }
+}
+
+fn random_values(rng: &mut SplitMix64, count: usize, scale: f64) -> Vec<f32> {
+    (0..count).map(|_| rng.uniform(-scale, scale) as f32).collect()
+}
+
+fn to_f64(values: &[f32]) -> Vec<f64> {
+    values.iter().map(|&v| f64::from(v)).collect()
+}
+
+fn abs(values: &[f64]) -> Vec<f64> {
+    values.iter().map(|v| v.abs()).collect()
+}
+
+fn assert_close(what: &str, gpu: &[f32], reference: &[f64], magnitude: &[f64], relative: f64) -> f64 {
+    assert_eq!(gpu.len(), reference.len(), "{what}");
+    let mut worst = 0.0f64;
+    for (i, ((&g, &r), &m)) in gpu.iter().zip(reference).zip(magnitude).enumerate() {
+        let error = (f64::from(g) - r).abs();
+        let allowed = relative * m + ABSOLUTE_TOLERANCE;
+        assert!(
+            error <= allowed,
+            "{what}[{i}]: GPU {g}, reference {r} (magnitude {m}, allowed {allowed:e})"
+        );
+        worst = worst.max(error / (m + ABSOLUTE_TOLERANCE));
+    }
+    worst
+}
+
+/// Configs with MLPs of every kind of shape: the small one (width 32) and the default widths
+/// with a small hash table (the widths are what matters here, the table only pads the buffer).
+fn configs() -> Vec<(&'static str, FieldConfig)> {
+    let default_widths = FieldConfig {
+        log2_hash_table_size: 12,
+        ..FieldConfig::default()
+    };
+    let freq_only = FieldConfig {
+        encoding: Encoding::freq_only_baseline(),
+        num_classes: 5,
+        ..FieldConfig::small()
+    };
+    vec![
+        ("small", FieldConfig::small()),
+        ("default widths", default_widths),
+        ("freq-only, 5 classes", freq_only),
+    ]
+}
+
+struct MlpCase<'a> {
+    ctx: &'a GpuContext,
+    pipelines: &'a mut DensePipelines,
+    name: String,
+    layout: &'a MlpLayout,
+    params: &'a [f32],
+    rows: usize,
+    /// Whether the input gets a gradient (the colour MLP's SH input does not).
+    input_grad: bool,
+    /// Write the output into a slice of a wider row instead of the pass's own buffer.
+    output_view: bool,
+    seed: u64,
+}
+
+fn check_mlp(case: MlpCase<'_>) {
+    let MlpCase {
+        ctx,
+        pipelines,
+        name,
+        layout,
+        params,
+        rows,
+        input_grad,
+        output_view,
+        seed,
+    } = case;
+    let dims = &layout.dims;
+    let (in_dim, out_dim) = (layout.input_dim(), layout.output_dim());
+    let mut rng = SplitMix64::new(seed);
+    let input_layout = ViewLayout::padded(in_dim, 3, 2);
+    let output_layout = ViewLayout::padded(out_dim, 5, 1);
+    let output_grad_layout = ViewLayout::padded(out_dim, 1, 4);
+    let input_grad_layout = ViewLayout::padded(in_dim, 2, 3);
+
+    let input = random_values(&mut rng, input_layout.len(rows), 1.0);
+    let output_grad = random_values(&mut rng, output_grad_layout.len(rows), 1.0);
+    let mut grads = vec![GRAD_PRESET; params.len()];
+    // Neighbours of the MLP's range get a different value so an overrun is visible either way.
+    grads[..layout.range().start].fill(-1.5);
+    grads[layout.range().end..].fill(-1.5);
+
+    let params_buffer = storage_buffer_from(ctx, "params", params).unwrap();
+    let grads_buffer = storage_buffer_from(ctx, "grads", &grads).unwrap();
+    let input_buffer = storage_buffer_from(ctx, "input", &input).unwrap();
+    let output_grad_buffer = storage_buffer_from(ctx, "output grad", &output_grad).unwrap();
+    let input_grad_buffer = storage_buffer_garbage::<f32>(ctx, "input grad", input_grad_layout.len(rows)).unwrap();
+    let output_buffer = storage_buffer_garbage::<f32>(ctx, "output", output_layout.len(rows)).unwrap();
+
+    let desc = MlpPassDesc {
+        label: &name,
+        layout,
+        rows: rows as u32,
+        params: &params_buffer,
+        input: input_layout.view(&input_buffer),
+        output: output_view.then(|| output_layout.view(&output_buffer)),
+        gradients: Some(MlpGradients {
+            grads: grads_buffer.clone(),
+            output_grad: output_grad_layout.view(&output_grad_buffer),
+            input_grad: input_grad.then(|| input_grad_layout.view(&input_grad_buffer)),
+        }),
+    };
+    let mlp = pollster::block_on(MlpPass::new(ctx, pipelines, desc)).unwrap();
+    let layers = layout.layers.len();
+    for k in 0..layers {
+        fill_with_garbage(ctx, &mlp.layer_output(k).unwrap().buffer);
+        if let Some(buffer) = mlp.hidden_gradient(k) {
+            fill_with_garbage(ctx, buffer);
+        }
+    }
+    assert!(mlp.hidden_gradient(0).is_none() && mlp.hidden_gradient(layers).is_none());
+
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    {
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        mlp.record_forward(&mut pass);
+        mlp.record_backward(&mut pass).unwrap();
+    }
+    ctx.queue.submit([encoder.finish()]);
+
+    // Every layer's output, as the GPU stored it.
+    let mut gpu_outputs: Vec<Vec<f32>> = Vec::new();
+    for k in 0..layers {
+        gpu_outputs.push(read_buffer_blocking(ctx, &mlp.layer_output(k).unwrap().buffer).unwrap());
+    }
+    let output_views: Vec<ViewLayout> = (0..layers)
+        .map(|k| match (k + 1 == layers, output_view) {
+            (true, true) => output_layout,
+            _ => ViewLayout {
+                width: dims[k + 1],
+                stride: dims[k + 1],
+                offset: 0,
+            },
+        })
+        .collect();
+    if output_view {
+        output_layout.assert_gaps_untouched(&format!("{name} output"), &gpu_outputs[layers - 1], rows);
+    }
+
+    let weights = to_f64(&params[layout.range()]);
+    let abs_weights = abs(&weights);
+    let mut worst_forward = 0.0f64;
+    let mut weight_grad = vec![0.0f64; weights.len()];
+    let mut weight_grad_magnitude = vec![0.0f64; weights.len()];
+    let gpu_input_grad: Vec<f32> = if input_grad {
+        read_buffer_blocking(ctx, &input_grad_buffer).unwrap()
+    } else {
+        Vec::new()
+    };
+    let mut worst_input_grad = 0.0f64;
+    for n in 0..rows {
+        let x = to_f64(input_layout.row(&input, n));
+        let reference = forward(dims, &weights, &x);
+        let magnitude = forward(dims, &abs_weights, &abs(&x));
+        for k in 0..layers {
+            let gpu = output_views[k].row(&gpu_outputs[k], n);
+            let what = format!("{name} row {n} layer {k} output");
+            let worst = assert_close(
+                &what,
+                gpu,
+                &reference.activations[k + 1],
+                &magnitude.activations[k + 1],
+                FORWARD_TOLERANCE,
+            );
+            worst_forward = worst_forward.max(worst);
+        }
+        // The backward is checked on the GPU's own activations, so both take the same ReLU
+        // branches even where a pre-activation is within rounding of 0.
+        let mut activations = vec![x.clone()];
+        activations.extend((0..layers).map(|k| to_f64(output_views[k].row(&gpu_outputs[k], n))));
+        let trace = MlpTrace { activations };
+        let abs_trace = MlpTrace {
+            activations: trace.activations.iter().map(|a| abs(a)).collect(),
+        };
+        let dy = to_f64(output_grad_layout.row(&output_grad, n));
+        let dx = backward(dims, &weights, &trace, &dy, &mut weight_grad);
+        let dx_magnitude = backward(dims, &abs_weights, &abs_trace, &abs(&dy), &mut weight_grad_magnitude);
+        if input_grad {
+            let what = format!("{name} row {n} input gradient");
+            let gpu = input_grad_layout.row(&gpu_input_grad, n);
+            worst_input_grad = worst_input_grad.max(assert_close(&what, gpu, &dx, &dx_magnitude, FORWARD_TOLERANCE));
+        }
+    }
+    if input_grad {
+        input_grad_layout.assert_gaps_untouched(&format!("{name} input gradient"), &gpu_input_grad, rows);
+    } else {
+        let untouched: Vec<f32> = read_buffer_blocking(ctx, &input_grad_buffer).unwrap();
+        assert!(
+            untouched
+                .iter()
+                .enumerate()
+                .all(|(i, v)| v.to_bits() == GARBAGE_WORDS[i % GARBAGE_WORDS.len()]),
+            "{name}: input gradient written although none was asked for"
+        );
+    }
+
+    let gpu_grads: Vec<f32> = read_buffer_blocking(ctx, &grads_buffer).unwrap();
+    let range = layout.range();
+    for (i, (g, preset)) in gpu_grads.iter().zip(&grads).enumerate() {
+        if !range.contains(&i) {
+            assert_eq!(
+                g.to_bits(),
+                preset.to_bits(),
+                "{name}: gradient element {i} outside the MLP was written"
+            );
+        }
+    }
+    let expected: Vec<f64> = weight_grad.iter().map(|g| g + f64::from(GRAD_PRESET)).collect();
+    let magnitude: Vec<f64> = weight_grad_magnitude
+        .iter()
+        .map(|m| m + f64::from(GRAD_PRESET))
+        .collect();
+    let worst_weight = assert_close(
+        &format!("{name} weight gradient"),
+        &gpu_grads[range],
+        &expected,
+        &magnitude,
+        WEIGHT_GRAD_TOLERANCE,
+    );
+    eprintln!(
+        "{name} {dims:?} × {rows} rows: worst error / magnitude: forward {worst_forward:.2e}, \
+         input gradient {worst_input_grad:.2e}, weight gradient {worst_weight:.2e}"
+    );
+}
+
+#[test]
+fn every_mlp_matches_the_reference() {
+    let Some(ctx) = gpu_for_tests("every_mlp_matches_the_reference") else {
+        return;
+    };
+    let mut pipelines = DensePipelines::new();
+    for (config_name, cfg) in configs() {
+        cfg.validate().unwrap();
+        let layout = ParamLayout::new(&cfg);
+        let params = layout.init(17);
+        for (index, (mlp_name, mlp)) in layout.mlps().into_iter().enumerate() {
+            check_mlp(MlpCase {
+                ctx: &ctx,
+                pipelines: &mut pipelines,
+                name: format!("{config_name} {mlp_name}"),
+                layout: mlp,
+                params: &params,
+                rows: ROWS,
+                // Colour input is [SH | geometry]: SH needs no gradient.
+                input_grad: mlp_name != "color",
+                output_view: index % 2 == 1,
+                seed: 100 + index as u64,
+            });
+        }
+    }
+}
+
+#[test]
+fn tiny_and_multi_chunk_row_counts_match_the_reference() {
+    let Some(ctx) = gpu_for_tests("tiny_and_multi_chunk_row_counts_match_the_reference") else {
+        return;
+    };
+    let mut pipelines = DensePipelines::new();
+    let cfg = FieldConfig::small();
+    let layout = ParamLayout::new(&cfg);
+    let params = layout.init(5);
+    // 1 row; fewer rows than a tile; many weight-gradient chunks with a ragged last one.
+    for (rows, seed) in [(1, 1), (61, 2), (5003, 3)] {
+        check_mlp(MlpCase {
+            ctx: &ctx,
+            pipelines: &mut pipelines,
+            name: format!("small density, {rows} rows"),
+            layout: &layout.density,
+            params: &params,
+            rows,
+            input_grad: true,
+            output_view: rows > 1,
+            seed,
+        });
+    }
+}
+
+#[test]
+fn forward_only_pass_refuses_backward_and_bad_views_are_errors() {
+    let Some(ctx) = gpu_for_tests("forward_only_pass_refuses_backward_and_bad_views_are_errors") else {
+        return;
+    };
+    let mut pipelines = DensePipelines::new();
+    let layout = ParamLayout::new(&FieldConfig::small());
+    let params = storage_buffer_from(&ctx, "params", &layout.init(1)).unwrap();
+    let rows = 10;
+    let input = storage_buffer_garbage::<f32>(&ctx, "input", rows * layout.density.input_dim()).unwrap();
+    let desc = |input: RowView| MlpPassDesc {
+        label: "density",
+        layout: &layout.density,
+        rows: rows as u32,
+        params: &params,
+        input,
+        output: None,
+        gradients: None,
+    };
+    let width = layout.density.input_dim() as u32;
+    let mlp = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc(RowView::packed(&input, width)))).unwrap();
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let mut pass = encoder.begin_compute_pass(&Default::default());
+    mlp.record_forward(&mut pass);
+    assert!(mlp.record_backward(&mut pass).is_err());
+    drop(pass);
+    // One row too many for the buffer, and columns spilling past the stride.
+    let too_long = RowView {
+        buffer: input.clone(),
+        stride: width + 1,
+        offset: 0,
+    };
+    assert!(pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc(too_long))).is_err());
+    let spilling = RowView {
+        buffer: input.clone(),
+        stride: width,
+        offset: 1,
+    };
+    assert!(pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc(spilling))).is_err());
+}
