@@ -6,6 +6,11 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 
+# setup.sh installed a Vulkan device (lavapipe at least): GPU tests must run, never skip.
+export SCRIBBLEFIELD_REQUIRE_GPU=1
+# The Vulkan loader complains on every start without it.
+export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp}"
+
 step() { echo; echo "=== $* ($(date +%T))"; }
 
 step "cargo fmt --check"

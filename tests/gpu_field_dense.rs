@@ -396,3 +396,96 @@ fn forward_only_pass_refuses_backward_and_bad_views_are_errors() {
     };
     assert!(pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc(spilling))).is_err());
 }
+
+/// Measurement, not a check: GFLOP/s of the default density MLP's forward and backward at
+/// N = 262144 rows (4096 rays × 64 samples) next to the plain matmul's, in the same run:
+/// `cargo test --release --test gpu_field_dense -- --ignored --nocapture`.
+#[test]
+#[ignore = "measurement; run explicitly in release mode"]
+fn density_mlp_throughput_report() {
+    use scribblefield::gpu::matmul_bench::matmul_gflops;
+    use scribblefield::gpu::timing::{PassTimer, Stopwatch};
+
+    let Some(ctx) = gpu_for_tests("density_mlp_throughput_report") else { return };
+    let rows: usize = std::env::var("DENSE_BENCH_ROWS").ok().and_then(|v| v.parse().ok()).unwrap_or(262_144);
+    let iterations = 3;
+    let cfg = FieldConfig::default();
+    let layout = ParamLayout::new(&cfg);
+    let mlp_layout = &layout.density;
+    let mut rng = SplitMix64::new(9);
+    let params = storage_buffer_from(&ctx, "params", &layout.init(1)).unwrap();
+    let grads = storage_buffer_from(&ctx, "grads", &vec![0.0f32; layout.total]).unwrap();
+    let (in_dim, out_dim) = (mlp_layout.input_dim(), mlp_layout.output_dim());
+    let input = storage_buffer_from(&ctx, "input", &random_values(&mut rng, rows * in_dim, 1.0)).unwrap();
+    let output_grad = storage_buffer_from(&ctx, "output grad", &random_values(&mut rng, rows * out_dim, 1.0)).unwrap();
+    let input_grad = storage_buffer_garbage::<f32>(&ctx, "input grad", rows * in_dim).unwrap();
+    let mut pipelines = DensePipelines::new();
+    let desc = MlpPassDesc {
+        label: "density",
+        layout: mlp_layout,
+        rows: rows as u32,
+        params: &params,
+        input: RowView::packed(&input, in_dim as u32),
+        output: None,
+        gradients: Some(MlpGradients {
+            grads: grads.clone(),
+            output_grad: RowView::packed(&output_grad, out_dim as u32),
+            input_grad: Some(RowView::packed(&input_grad, in_dim as u32)),
+        }),
+    };
+    let mlp = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc)).unwrap();
+    let weights: f64 = mlp_layout.layers.iter().map(|r| r.len() as f64).sum();
+    let forward_flops = 2.0 * rows as f64 * weights;
+    // dX of every layer (the input needs it: hash-grid gradients) and dW of every layer.
+    let backward_flops = 2.0 * forward_flops;
+
+    let run = |backward: bool, repeats: u32| -> f64 {
+        let mut timer = PassTimer::new(&ctx, repeats);
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        for _ in 0..repeats {
+            let timestamp_writes = timer.as_mut().and_then(|t| t.timestamp_writes("mlp"));
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
+            if backward {
+                mlp.record_backward(&mut pass).unwrap();
+            } else {
+                mlp.record_forward(&mut pass);
+            }
+        }
+        if let Some(timer) = &timer {
+            timer.resolve(&mut encoder);
+        }
+        let stopwatch = Stopwatch::start();
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait_idle().unwrap();
+        let wall = stopwatch.elapsed_seconds();
+        match timer.as_mut() {
+            Some(timer) => {
+                let times = pollster::block_on(timer.read(&ctx).times()).unwrap();
+                let gpu: f64 = times.iter().map(|t| t.seconds).sum();
+                if gpu > 0.0 { gpu } else { wall }
+            }
+            None => wall,
+        }
+    };
+    // Warm-up: first touch of the buffers and lazy compilation stay out of the figures.
+    run(false, 1);
+    run(true, 1);
+    let forward_seconds = run(false, iterations) / f64::from(iterations);
+    let backward_seconds = run(true, iterations) / f64::from(iterations);
+    let matmul = pollster::block_on(matmul_gflops(&ctx, 512, 5)).unwrap();
+    println!("adapter: {} (timestamps: {})", ctx.describe(), ctx.has_timestamps);
+    println!("density MLP {:?}, N = {rows} rows", mlp_layout.dims);
+    println!(
+        "forward:  {:.3} s, {:.2} GFLOP/s ({:.2} GFLOP)",
+        forward_seconds,
+        forward_flops / forward_seconds / 1e9,
+        forward_flops / 1e9
+    );
+    println!(
+        "backward: {:.3} s, {:.2} GFLOP/s ({:.2} GFLOP: dX and dW)",
+        backward_seconds,
+        backward_flops / backward_seconds / 1e9,
+        backward_flops / 1e9
+    );
+    println!("plain matmul n=512: {matmul:.2} GFLOP/s");
+}

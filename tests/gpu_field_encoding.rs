@@ -230,15 +230,21 @@ fn check_backward(
         );
     }
 
-    // Reference sum and sum of |terms| (weights are ≥ 0, so that is the backward of |g|).
+    // The reference's f32 corners (the cells and weights the f32 kernel must pick), summed in
+    // f64, with the sum of |terms| beside it: a scale for the summation error that cancellation
+    // cannot shrink.
     let mut expect = vec![0.0f64; table_len];
     let mut magnitude = vec![0.0f64; table_len];
     for (p, row) in positions.iter().zip(encoding_grad.chunks_exact(dim)) {
-        let p64 = xyz(p).map(f64::from);
-        let g: Vec<f64> = row[..hash_dim].iter().map(|&v| f64::from(v)).collect();
-        let abs: Vec<f64> = g.iter().map(|v| v.abs()).collect();
-        hash_grid::backward(&grid, p64, &g, &mut expect);
-        hash_grid::backward(&grid, p64, &abs, &mut magnitude);
+        for level in 0..grid.levels {
+            for corner in grid.corners::<f32>(level, xyz(p)) {
+                for f in 0..grid.features {
+                    let term = f64::from(corner.weight) * f64::from(row[level * grid.features + f]);
+                    expect[corner.offset + f] += term;
+                    magnitude[corner.offset + f] += term.abs();
+                }
+            }
+        }
     }
     let mut worst = 0.0f64;
     for (i, (&e, &m)) in expect.iter().zip(&magnitude).enumerate() {

@@ -1,8 +1,10 @@
 //! Subcommands of the `scribblefield` binary, one module each.
 mod demo;
+mod eval;
 mod info;
 mod pack;
 mod progress;
+mod scribble;
 
 use std::path::PathBuf;
 
@@ -32,6 +34,10 @@ enum Command {
     },
     /// Render the built-in demo scene into a scene archive.
     DemoScene(demo::DemoArgs),
+    /// Draw realistic synthetic scribbles from ground truth (to measure quality without a person).
+    ScribbleFromGt(scribble::ScribbleArgs),
+    /// Score masks against the archive's ground truth: per-class IoU, mean IoU, pixel accuracy.
+    Eval(eval::EvalArgs),
     /// Serve a directory (the web app) over HTTP on localhost.
     Serve {
         /// Directory to serve, e.g. `www`.
@@ -49,6 +55,8 @@ pub fn run(cli: Cli) -> CliResult {
         Command::Pack(args) => pack::run(args),
         Command::Info { archive } => info::run(&archive),
         Command::DemoScene(args) => demo::run(args),
+        Command::ScribbleFromGt(args) => scribble::run(args),
+        Command::Eval(args) => eval::run(args),
         Command::Serve { dir, port, bind } => {
             if !dir.is_dir() {
                 return Err(format!("{}: not a directory to serve", dir.display()).into());
@@ -67,10 +75,10 @@ fn check_output(out: &std::path::Path) -> CliResult {
     if !name.ends_with(".zip") {
         return Err(format!("{}: output must be a .scene.zip file", out.display()).into());
     }
-    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        if !parent.is_dir() {
-            return Err(format!("{}: output directory does not exist", parent.display()).into());
-        }
+    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty())
+        && !parent.is_dir()
+    {
+        return Err(format!("{}: output directory does not exist", parent.display()).into());
     }
     Ok(())
 }

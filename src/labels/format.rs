@@ -106,13 +106,13 @@ impl LabelSet {
             }
             for (i, s) in fl.strokes.iter().enumerate() {
                 let at = format!("frame {} stroke {i}", fl.frame);
-                if let Some(c) = s.class {
-                    if c as usize >= self.classes.len() {
-                        return Err(SceneError::invalid(
-                            file,
-                            format!("{at}: class {c} but only {} classes are defined", self.classes.len()),
-                        ));
-                    }
+                if let Some(c) = s.class
+                    && c as usize >= self.classes.len()
+                {
+                    return Err(SceneError::invalid(
+                        file,
+                        format!("{at}: class {c} but only {} classes are defined", self.classes.len()),
+                    ));
                 }
                 if !(s.radius.is_finite() && s.radius > 0.0 && s.radius <= MAX_RADIUS) {
                     return Err(SceneError::invalid(

@@ -208,8 +208,8 @@ fn check_manifest(m: &Manifest, at: &str) -> Result<()> {
             limits::MAX_TOTAL_PIXELS
         ));
     }
-    m.intrinsics.check().or_else(|p| bad(p))?;
-    m.bounds.check().or_else(|p| bad(p))?;
+    m.intrinsics.check().or_else(bad)?;
+    m.bounds.check().or_else(bad)?;
     if !(m.depth_scale.is_finite() && m.depth_scale > 0.0) {
         return bad(format!("depth_scale must be a positive number, got {}", m.depth_scale));
     }
@@ -427,13 +427,13 @@ pub fn write_archive<W: Write + Seek>(scene: &Scene, out: W) -> Result<W> {
             ));
         }
     }
-    if let Some(f) = &scene.features {
-        if f.data.len() != f.values_per_frame() * scene.frames.len() {
-            return Err(SceneError::invalid(
-                "scene to write",
-                "feature codes do not match frames x grid x dim",
-            ));
-        }
+    if let Some(f) = &scene.features
+        && f.data.len() != f.values_per_frame() * scene.frames.len()
+    {
+        return Err(SceneError::invalid(
+            "scene to write",
+            "feature codes do not match frames x grid x dim",
+        ));
     }
     if let Some(l) = &scene.labels {
         l.check("scene to write: labels", scene.frames.len() as u32)?;
@@ -453,8 +453,7 @@ pub fn write_archive<W: Write + Seek>(scene: &Scene, out: W) -> Result<W> {
     let json = serde_json::to_vec_pretty(&manifest).expect("manifest always serializes");
     zip.start_file(MANIFEST_FILE, deflated).map_err(zip_err)?;
     zip.write_all(&json).map_err(io_err)?;
-    for (i, (f, fe)) in scene.frames.iter().zip(&manifest.frames).enumerate() {
-        let _ = i;
+    for (f, fe) in scene.frames.iter().zip(&manifest.frames) {
         zip.start_file(fe.rgb.as_str(), stored).map_err(zip_err)?;
         zip.write_all(&encode_png(&DynamicImage::ImageRgb8(f.rgb.clone())))
             .map_err(io_err)?;

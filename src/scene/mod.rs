@@ -6,6 +6,9 @@ pub mod demo;
 pub mod error;
 pub mod import;
 pub mod manifest;
+// `scene::scene` reads oddly, but it is where the decoded Scene lives; everything else
+// re-exports it as `scene::Scene`.
+#[allow(clippy::module_inception)]
 pub mod scene;
 
 pub use archive::{read_archive, read_archive_path, write_archive, write_archive_path};

@@ -73,7 +73,7 @@ impl Scene {
     /// Depth in metres at pixel (x, y) of frame `i`, or None where there is no reading.
     pub fn depth_m(&self, i: usize, x: u32, y: u32) -> Option<f64> {
         let d = self.frames.get(i)?.depth.as_ref()?.get_pixel_checked(x, y)?.0[0];
-        (d != 0).then(|| d as f64 * self.depth_scale)
+        (d != 0).then_some(d as f64 * self.depth_scale)
     }
 
     /// A human-readable summary (what `scribblefield info` prints).

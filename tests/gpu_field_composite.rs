@@ -1,0 +1,388 @@
+//! `composite.wgsl` against the CPU reference: from random head outputs, the whole per-ray chain
+//! (activations, rendering, the four losses, and every per-sample gradient) on lavapipe.
+//!
+//! Run in release: `cargo test --release --test gpu_field_composite`.
+use std::time::Instant;
+
+use scribblefield::field::FieldConfig;
+use scribblefield::field::gpu::composite::{CompositeInputs, CompositeLayout, CompositePass, CompositeUniforms, HeadSource};
+use scribblefield::field::gpu::rays::{
+    NO_LABEL, RAY_HAS_CODE, RAY_HITS_BOX, StepUniforms, TARGET_DEPTH, TARGET_FLAGS, TARGET_HEADER_WORDS, TARGET_LABEL,
+    TARGET_RGB,
+};
+use scribblefield::field::reference::loss::{RayTarget, ray_loss};
+use scribblefield::field::reference::{Channels, activations, render};
+use scribblefield::field::rng::SplitMix64;
+use scribblefield::gpu::GpuContext;
+use scribblefield::gpu::buffers::{fill_with_garbage, read_buffer_blocking, storage_buffer_from, uniform_buffer_from};
+use scribblefield::gpu::test_support::gpu_for_tests;
+
+/// Stride of the density MLP's output rows in these tests ([h₀, geometry feature]).
+const DENSITY_STRIDE: u32 = 16;
+
+/// Random inputs of the pass, laid out as the GPU reads them.
+struct Batch {
+    cfg: FieldConfig,
+    /// B·S rows of DENSITY_STRIDE (h₀ in column 0, noise after it).
+    density: Vec<f32>,
+    /// B·S rows of 3.
+    color: Vec<f32>,
+    /// B·S rows of [logits (C), feature (D), 1 spare]: one buffer bound twice.
+    logits_and_feature: Vec<f32>,
+    /// B·S (δ, z).
+    intervals: Vec<[f32; 2]>,
+    /// B rows of TARGET_HEADER_WORDS + D.
+    targets: Vec<u32>,
+}
+
+impl Batch {
+    fn samples(&self) -> usize {
+        self.cfg.samples_per_ray()
+    }
+
+    fn heads_stride(&self) -> usize {
+        (self.cfg.num_classes + self.cfg.feature_dim + 1) as usize
+    }
+
+    fn target_stride(&self) -> usize {
+        TARGET_HEADER_WORDS + self.cfg.feature_dim as usize
+    }
+
+    fn random(cfg: FieldConfig, seed: u64) -> Batch {
+        let mut rng = SplitMix64::new(seed);
+        let (b, s) = (cfg.batch_rays as usize, cfg.samples_per_ray());
+        let (c, d) = (cfg.num_classes as usize, cfg.feature_dim as usize);
+        let n = b * s;
+        let density = (0..n * DENSITY_STRIDE as usize)
+            .map(|i| {
+                let r = rng.next_f64();
+                // Mostly moderate densities; a few far outside the clamp on both sides.
+                let h0 = if r < 0.02 {
+                    40.0
+                } else if r < 0.04 {
+                    -40.0
+                } else {
+                    rng.uniform(-4.0, 5.0)
+                };
+                if i % DENSITY_STRIDE as usize == 0 { h0 as f32 } else { rng.uniform(-9.0, 9.0) as f32 }
+            })
+            .collect();
+        let color = (0..n * 3).map(|_| rng.uniform(-4.0, 4.0) as f32).collect();
+        let logits_and_feature = (0..n * (c + d + 1)).map(|_| rng.uniform(-2.0, 2.0) as f32).collect();
+        let intervals = (0..n)
+            .map(|_| {
+                let delta = if rng.next_f64() < 0.05 { 0.0 } else { rng.uniform(0.0, 0.25) };
+                [delta as f32, rng.uniform(0.3, 3.0) as f32]
+            })
+            .collect();
+        let mut targets = Vec::with_capacity(b * (TARGET_HEADER_WORDS + d));
+        for _ in 0..b {
+            let rgb: [f32; 3] = std::array::from_fn(|_| rng.next_f32());
+            let depth = if rng.next_f64() < 0.6 { rng.uniform(0.3, 3.0) as f32 } else { 0.0 };
+            let label = match rng.below(4) {
+                0 => NO_LABEL,
+                // Out of range: treated as unlabelled, as in the reference.
+                1 => c as u32 + 2,
+                _ => rng.below(c as u64) as u32,
+            };
+            let hits = rng.next_f64() < 0.9;
+            let has_code = rng.next_f64() < 0.8;
+            let flags = if hits { RAY_HITS_BOX } else { 0 } | if has_code { RAY_HAS_CODE } else { 0 };
+            let mut header = [0u32; TARGET_HEADER_WORDS];
+            header[TARGET_RGB..TARGET_RGB + 3].copy_from_slice(&rgb.map(f32::to_bits));
+            header[TARGET_DEPTH] = depth.to_bits();
+            header[TARGET_LABEL] = label;
+            header[TARGET_FLAGS] = flags;
+            targets.extend_from_slice(&header);
+            targets.extend((0..d).map(|_| if has_code { rng.uniform(-1.5, 1.5) as f32 } else { 0.0 }.to_bits()));
+        }
+        Batch { cfg, density, color, logits_and_feature, intervals, targets }
+    }
+}
+
+/// The reference's answer for one ray: (loss terms, rendered, dL/drendered, grad rows).
+struct Expected {
+    losses: [f64; 4],
+    rendered: Vec<f64>,
+    grad_rendered: Vec<f64>,
+    grad_heads: Vec<f64>,
+}
+
+fn reference_ray(batch: &Batch, ray: usize) -> Expected {
+    let cfg = &batch.cfg;
+    let s_count = batch.samples();
+    let channels = Channels { classes: cfg.num_classes as usize, feature_dim: cfg.feature_dim as usize };
+    let (c, d, k) = (channels.classes, channels.feature_dim, channels.count());
+    let row = &batch.targets[ray * batch.target_stride()..(ray + 1) * batch.target_stride()];
+    if row[TARGET_FLAGS] & RAY_HITS_BOX == 0 {
+        return Expected {
+            losses: [0.0; 4],
+            rendered: vec![0.0; k],
+            grad_rendered: vec![0.0; k],
+            grad_heads: vec![0.0; s_count * k],
+        };
+    }
+    let hs = batch.heads_stride();
+    let mut sigmas = Vec::new();
+    let mut deltas = Vec::new();
+    let mut values = Vec::new();
+    let mut h0s = Vec::new();
+    let mut colours = Vec::new();
+    for s in 0..s_count {
+        let n = ray * s_count + s;
+        let h0 = f64::from(batch.density[n * DENSITY_STRIDE as usize]);
+        h0s.push(h0);
+        sigmas.push(activations::density(h0));
+        deltas.push(f64::from(batch.intervals[n][0]));
+        let rgb: [f64; 3] = std::array::from_fn(|i| activations::sigmoid(f64::from(batch.color[n * 3 + i])));
+        colours.push(rgb);
+        values.extend_from_slice(&rgb);
+        values.push(f64::from(batch.intervals[n][1]));
+        values.extend(batch.logits_and_feature[n * hs..n * hs + c + d].iter().map(|v| f64::from(*v)));
+    }
+    let forward = render::composite(&sigmas, &deltas, &values, k);
+    let f = |w: usize| f32::from_bits(row[w]);
+    let depth = f(TARGET_DEPTH);
+    let target = RayTarget {
+        rgb: [f(TARGET_RGB), f(TARGET_RGB + 1), f(TARGET_RGB + 2)],
+        depth: (depth > 0.0).then_some(depth),
+        label: (row[TARGET_LABEL] != NO_LABEL).then_some(row[TARGET_LABEL]),
+        code: (row[TARGET_FLAGS] & RAY_HAS_CODE != 0)
+            .then(|| (0..d).map(|i| f(TARGET_HEADER_WORDS + i)).collect()),
+    };
+    let (terms, grad_rendered) = ray_loss(
+        &cfg.loss,
+        cfg.feature_supervision,
+        &channels,
+        &forward.output,
+        &target,
+        cfg.batch_rays as usize,
+    );
+    let (grad_sigma, grad_values) = render::composite_backward(&forward, &deltas, &values, k, &grad_rendered);
+    let mut grad_heads = Vec::with_capacity(s_count * k);
+    for s in 0..s_count {
+        let gv = &grad_values[s * k..(s + 1) * k];
+        grad_heads.push(activations::density_backward(h0s[s], grad_sigma[s]));
+        for i in 0..3 {
+            grad_heads.push(activations::sigmoid_backward(colours[s][i], gv[Channels::RGB + i]));
+        }
+        grad_heads.extend_from_slice(&gv[Channels::SEMANTIC..]);
+    }
+    Expected {
+        losses: [terms.rgb, terms.depth, terms.semantic, terms.feature],
+        rendered: forward.output,
+        grad_rendered,
+        grad_heads,
+    }
+}
+
+struct GpuRun {
+    grad_heads: Vec<f32>,
+    ray_outputs: Vec<f32>,
+}
+
+fn run_on_gpu(ctx: &GpuContext, batch: &Batch) -> GpuRun {
+    let cfg = &batch.cfg;
+    let step = uniform_buffer_from(ctx, "step", &StepUniforms::for_step(cfg, 1, 0, 1e-3));
+    let density = storage_buffer_from(ctx, "density out", &batch.density).unwrap();
+    let color = storage_buffer_from(ctx, "colour out", &batch.color).unwrap();
+    let heads = storage_buffer_from(ctx, "logits and feature", &batch.logits_and_feature).unwrap();
+    let intervals = storage_buffer_from(ctx, "intervals", &batch.intervals).unwrap();
+    let targets = storage_buffer_from(ctx, "targets", &batch.targets).unwrap();
+    let hs = batch.heads_stride() as u32;
+    let inputs = CompositeInputs {
+        step_uniforms: &step,
+        h0: HeadSource { buffer: &density, stride: DENSITY_STRIDE, offset: 0 },
+        color: HeadSource { buffer: &color, stride: 3, offset: 0 },
+        logits: HeadSource { buffer: &heads, stride: hs, offset: 0 },
+        feature: HeadSource { buffer: &heads, stride: hs, offset: cfg.num_classes },
+        intervals: &intervals,
+        targets: &targets,
+    };
+    let pass = pollster::block_on(CompositePass::new(ctx, cfg, &inputs)).unwrap();
+    fill_with_garbage(ctx, &pass.grad_heads);
+    fill_with_garbage(ctx, &pass.ray_outputs);
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    {
+        let mut compute = encoder.begin_compute_pass(&Default::default());
+        pass.record(&mut compute);
+    }
+    ctx.queue.submit([encoder.finish()]);
+    GpuRun {
+        grad_heads: read_buffer_blocking(ctx, &pass.grad_heads).unwrap(),
+        ray_outputs: read_buffer_blocking(ctx, &pass.ray_outputs).unwrap(),
+    }
+}
+
+/// f32 on the GPU against the f64 reference. Each group of values (one ray's rendered channels,
+/// gradients, one ray's per-sample gradients of one kind) is compared relative to its largest
+/// magnitude: the GPU sums S terms in f32, so errors are a few ulps of the largest term, and a
+/// value that cancels to near zero (a gradient behind an opaque surface) can only be judged
+/// against the scale of its neighbours. 2e-4 is ~1000 ulps, far below any real mistake (a
+/// missing term or a wrong weight changes values by O(1) of that scale).
+fn assert_group_close(what: &str, gpu: &[f32], expected: &[f64]) {
+    assert_eq!(gpu.len(), expected.len(), "{what}");
+    let scale = expected.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    for (i, (g, e)) in gpu.iter().zip(expected).enumerate() {
+        let g = f64::from(*g);
+        assert!(g.is_finite(), "{what}[{i}]: GPU wrote {g} (expected {e})");
+        let tolerance = 2e-4 * scale + 1e-6 * e.abs() + 1e-12;
+        assert!((g - e).abs() <= tolerance, "{what}[{i}]: GPU {g}, reference {e} (group scale {scale:e})");
+    }
+}
+
+fn check_batch(ctx: &GpuContext, batch: &Batch) {
+    let cfg = &batch.cfg;
+    let layout = CompositeLayout::new(cfg);
+    let gpu = run_on_gpu(ctx, batch);
+    let (s_count, k) = (batch.samples(), layout.grad_stride());
+    assert_eq!(gpu.grad_heads.len(), cfg.batch_rays as usize * s_count * k);
+    let stride = layout.ray_output_stride();
+    let mut totals = [0.0f64; 4];
+    let mut gpu_totals = [0.0f64; 4];
+    let mut labelled_rays = 0;
+    for ray in 0..cfg.batch_rays as usize {
+        let expected = reference_ray(batch, ray);
+        let out = &gpu.ray_outputs[ray * stride..(ray + 1) * stride];
+        let loss_scale = expected.losses.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for term in 0..4 {
+            let (g, e) = (f64::from(out[term]), expected.losses[term]);
+            assert!((g - e).abs() <= 1e-4 * loss_scale + 1e-12, "ray {ray} loss term {term}: GPU {g}, reference {e}");
+            totals[term] += e;
+            gpu_totals[term] += g;
+        }
+        labelled_rays += usize::from(expected.losses[2] > 0.0);
+        let rendered = &out[layout.rendered_offset()..layout.grad_rendered_offset()];
+        assert_group_close(&format!("ray {ray} rendered"), rendered, &expected.rendered);
+        let grad_rendered = &out[layout.grad_rendered_offset()..];
+        assert_group_close(&format!("ray {ray} dL/drendered"), grad_rendered, &expected.grad_rendered);
+        // Per kind of head gradient over the ray's samples: h₀, colour, logits, feature.
+        let rows = &gpu.grad_heads[ray * s_count * k..(ray + 1) * s_count * k];
+        let kinds = [
+            ("dh0", 0..1),
+            ("dcolour", 1..4),
+            ("dlogits", layout.grad_logits_offset()..layout.grad_feature_offset()),
+            ("dfeature", layout.grad_feature_offset()..k),
+        ];
+        for (name, columns) in kinds {
+            let pick = |values: &[f64]| -> Vec<f64> {
+                (0..s_count).flat_map(|s| values[s * k + columns.start..s * k + columns.end].to_vec()).collect()
+            };
+            let gpu_values: Vec<f32> =
+                (0..s_count).flat_map(|s| rows[s * k + columns.start..s * k + columns.end].to_vec()).collect();
+            assert_group_close(&format!("ray {ray} {name}"), &gpu_values, &pick(&expected.grad_heads));
+        }
+    }
+    // The inputs exercise every term (a case where one is silently zero proves nothing).
+    assert!(totals.iter().enumerate().all(|(i, t)| *t > 0.0 || (i == 3 && !cfg.feature_supervision)), "{totals:?}");
+    assert!(labelled_rays > 0);
+    eprintln!("batch loss terms: reference {totals:?}, GPU {gpu_totals:?}");
+}
+
+fn config(classes: u32, feature_dim: u32, coarse: u32, fine: u32, batch: u32, features: bool) -> FieldConfig {
+    FieldConfig {
+        num_classes: classes,
+        feature_dim,
+        samples_coarse: coarse,
+        samples_fine: fine,
+        batch_rays: batch,
+        feature_supervision: features,
+        ..FieldConfig::small()
+    }
+}
+
+#[test]
+fn uniform_block_matches_wgsl_size() {
+    assert_eq!(size_of::<CompositeUniforms>(), 64);
+}
+
+#[test]
+fn composite_matches_reference_on_small_shapes() {
+    let Some(ctx) = gpu_for_tests("composite_matches_reference_on_small_shapes") else { return };
+    // 300 rays: not a multiple of the 64-ray workgroup; S = 12, C = 3, D = 5.
+    check_batch(&ctx, &Batch::random(config(3, 5, 5, 7, 300, true), 11));
+}
+
+#[test]
+fn composite_matches_reference_with_default_widths() {
+    let Some(ctx) = gpu_for_tests("composite_matches_reference_with_default_widths") else { return };
+    let d = FieldConfig::default();
+    // The default model's C, D and S (16 + 48), feature supervision on and off.
+    let on = config(d.num_classes, d.feature_dim, d.samples_coarse, d.samples_fine, 130, true);
+    check_batch(&ctx, &Batch::random(on, 12));
+    let off = config(d.num_classes, d.feature_dim, d.samples_coarse, d.samples_fine, 70, false);
+    check_batch(&ctx, &Batch::random(off, 13));
+}
+
+#[test]
+fn composite_rejects_head_sources_too_small() {
+    let Some(ctx) = gpu_for_tests("composite_rejects_head_sources_too_small") else { return };
+    let batch = Batch::random(config(3, 5, 5, 7, 10, true), 1);
+    let step = uniform_buffer_from(&ctx, "step", &StepUniforms::for_step(&batch.cfg, 1, 0, 1e-3));
+    let small = storage_buffer_from(&ctx, "small", &[0.0f32; 16]).unwrap();
+    let inputs = CompositeInputs {
+        step_uniforms: &step,
+        h0: HeadSource { buffer: &small, stride: 1, offset: 0 },
+        color: HeadSource { buffer: &small, stride: 3, offset: 0 },
+        logits: HeadSource { buffer: &small, stride: 3, offset: 0 },
+        feature: HeadSource { buffer: &small, stride: 5, offset: 0 },
+        intervals: &small,
+        targets: &small,
+    };
+    let error = pollster::block_on(CompositePass::new(&ctx, &batch.cfg, &inputs)).err().expect("must fail");
+    assert!(error.to_string().contains("head source"), "{error}");
+}
+
+/// Measurement, not a check: `cargo test --release --test gpu_field_composite -- --ignored --nocapture`.
+#[test]
+#[ignore = "measurement; run explicitly in release mode"]
+fn composite_throughput_report() {
+    let Some(ctx) = gpu_for_tests("composite_throughput_report") else { return };
+    let d = FieldConfig::default();
+    let cfg = config(d.num_classes, d.feature_dim, d.samples_coarse, d.samples_fine, 4096, true);
+    let batch = Batch::random(cfg.clone(), 5);
+    let step = uniform_buffer_from(&ctx, "step", &StepUniforms::for_step(&cfg, 1, 0, 1e-3));
+    let density = storage_buffer_from(&ctx, "density out", &batch.density).unwrap();
+    let color = storage_buffer_from(&ctx, "colour out", &batch.color).unwrap();
+    let heads = storage_buffer_from(&ctx, "logits and feature", &batch.logits_and_feature).unwrap();
+    let intervals = storage_buffer_from(&ctx, "intervals", &batch.intervals).unwrap();
+    let targets = storage_buffer_from(&ctx, "targets", &batch.targets).unwrap();
+    let hs = batch.heads_stride() as u32;
+    let inputs = CompositeInputs {
+        step_uniforms: &step,
+        h0: HeadSource { buffer: &density, stride: DENSITY_STRIDE, offset: 0 },
+        color: HeadSource { buffer: &color, stride: 3, offset: 0 },
+        logits: HeadSource { buffer: &heads, stride: hs, offset: 0 },
+        feature: HeadSource { buffer: &heads, stride: hs, offset: cfg.num_classes },
+        intervals: &intervals,
+        targets: &targets,
+    };
+    let pass = pollster::block_on(CompositePass::new(&ctx, &cfg, &inputs)).unwrap();
+    let run = |repeats: u32| {
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut compute = encoder.begin_compute_pass(&Default::default());
+            for _ in 0..repeats {
+                pass.record(&mut compute);
+            }
+        }
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait_idle().unwrap();
+    };
+    run(1);
+    let repeats = 10;
+    let start = Instant::now();
+    run(repeats);
+    let seconds = start.elapsed().as_secs_f64();
+    let rays = f64::from(repeats * cfg.batch_rays);
+    println!(
+        "composite (B = {}, S = {}, C = {}, D = {}) on {}: {:.0} rays/s, {:.0} samples/s",
+        cfg.batch_rays,
+        cfg.samples_per_ray(),
+        cfg.num_classes,
+        cfg.feature_dim,
+        ctx.describe(),
+        rays / seconds,
+        rays * cfg.samples_per_ray() as f64 / seconds
+    );
+}
