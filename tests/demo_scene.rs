@@ -365,3 +365,18 @@ fn debug_tmp_stats() {
         eprintln!("seed {seed}: frames {:?} min {:?}", frames, minc);
     }
 }
+
+#[test]
+fn debug_tmp_preview() {
+    let scene = demo_scene(&DemoOptions::default()).unwrap();
+    for i in [0usize, 9, 18, 27] {
+        scene.frames[i].rgb.save(format!("/tmp/demo_rgb{i}.png")).unwrap();
+        let gt = scene.frames[i].gt.as_ref().unwrap();
+        let img = image::RgbImage::from_fn(gt.width(), gt.height(), |x, y| {
+            image::Rgb(scene.classes[gt.get_pixel(x, y).0[0] as usize].color)
+        });
+        img.save(format!("/tmp/demo_gt{i}.png")).unwrap();
+    }
+    let big = demo_scene(&DemoOptions { seed: 7, width: 480, height: 360, frames: 36 }).unwrap();
+    big.frames[5].rgb.save("/tmp/demo_big_seed7.png").unwrap();
+}

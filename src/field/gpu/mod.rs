@@ -9,5 +9,6 @@ pub mod adam;
 pub mod composite;
 pub mod dense;
 pub mod encoding;
+pub mod head_glue;
 pub mod rays;
 pub mod scene_buffers;

@@ -142,6 +142,19 @@ impl Shape {
         }
     }
 
+    /// A sphere (centre, radius) holding the solid, for cheap rejection of rays that pass
+    /// far from it; None for the room, which every ray hits.
+    pub fn bounding_sphere(&self) -> Option<(DVec3, f64)> {
+        match *self {
+            Shape::RoomInterior { .. } => None,
+            Shape::Cuboid { centre, half, .. } => Some((centre, half.length())),
+            Shape::Sphere { centre, radius } => Some((centre, radius)),
+            Shape::Cylinder { base, radius, height } | Shape::Cone { base, radius, height } => {
+                Some((base + DVec3::Z * height * 0.5, DVec2::new(radius, height * 0.5).length()))
+            }
+        }
+    }
+
     /// Radius of a vertical cylinder around the shape's axis that holds it (for placement).
     pub fn footprint_radius(&self) -> f64 {
         match *self {
@@ -160,6 +173,20 @@ impl Shape {
             Shape::Cylinder { base, .. } | Shape::Cone { base, .. } => base.z,
         }
     }
+}
+
+/// Whether `ray` can meet the sphere (centre, radius) with t below `t_max`: a necessary
+/// condition for hitting anything inside it, far cheaper than most exact tests.
+pub fn may_hit_sphere(ray: &Ray, t_max: f64, (centre, radius): (DVec3, f64)) -> bool {
+    let to_centre = centre - ray.origin;
+    let dd = ray.dir.length_squared();
+    let along = to_centre.dot(ray.dir) / dd;
+    let miss_distance_sq = (to_centre - ray.dir * along).length_squared();
+    if miss_distance_sq > radius * radius {
+        return false;
+    }
+    // The nearest point of the sphere along the ray lies beyond t_max.
+    along - ((radius * radius - miss_distance_sq) / dd).sqrt() < t_max
 }
 
 /// Rotates `v` about z by the angle whose cosine and sine are given.
@@ -543,6 +570,30 @@ mod tests {
                 hits > 800 && hits < 3900,
                 "{shape:?}: only {hits} hits, the test rays are badly aimed"
             );
+        }
+    }
+
+    #[test]
+    fn bounding_spheres_hold_their_shapes_and_never_reject_a_hit() {
+        let mut rng = SplitMix64::new(12);
+        for (shape, inner) in shapes_and_inner_points() {
+            let sphere = shape.bounding_sphere().unwrap();
+            for _ in 0..2000 {
+                let p = inner + random_unit(&mut rng) * rng.range(0.0, 0.6);
+                if shape.signed_distance(p) <= 0.0 {
+                    assert!((p - sphere.0).length() <= sphere.1 + 1e-12, "{shape:?}: {p} pokes out");
+                }
+                let origin = random_unit(&mut rng) * 2.0;
+                let ray = Ray { origin, dir: (p - origin) * rng.range(0.3, 3.0) };
+                let t_max = rng.range(0.0, 3.0);
+                if shape.intersect(&ray, 0.0, t_max).is_some() {
+                    assert!(may_hit_sphere(&ray, t_max, sphere), "{shape:?}: a hit was rejected");
+                }
+            }
+            let away = Ray { origin: sphere.0 + DVec3::X * (sphere.1 + 1.0), dir: DVec3::Y };
+            assert!(!may_hit_sphere(&away, f64::INFINITY, sphere));
+            let short = Ray { origin: sphere.0 + DVec3::X * (sphere.1 + 1.0), dir: DVec3::NEG_X };
+            assert!(!may_hit_sphere(&short, 0.9, sphere) && may_hit_sphere(&short, 1.1, sphere));
         }
     }
 

@@ -2,7 +2,7 @@
 //! on it, jittered by the seed; plus the queries the renderer and the checks need.
 use glam::DVec3;
 
-use super::geometry::{Ray, Shape, SurfaceHit};
+use super::geometry::{Ray, Shape, SurfaceHit, may_hit_sphere};
 use super::rng::SplitMix64;
 use super::textures::{Colour, Texture};
 use crate::scene::camera::Bounds;
@@ -67,6 +67,8 @@ pub struct WorldHit {
 #[derive(Clone, Debug)]
 pub struct DemoWorld {
     parts: Vec<Part>,
+    /// `Shape::bounding_sphere` of each part.
+    part_spheres: Vec<Option<(DVec3, f64)>>,
     /// Box around everything but the room: rays that miss it can only hit the room.
     cluster: Shape,
 }
@@ -192,7 +194,8 @@ impl DemoWorld {
         });
 
         let cluster = cluster_box(&parts[1..]);
-        DemoWorld { parts, cluster }
+        let part_spheres = parts.iter().map(|p| p.shape.bounding_sphere()).collect();
+        DemoWorld { parts, part_spheres, cluster }
     }
 
     pub fn parts(&self) -> &[Part] {
@@ -206,9 +209,12 @@ impl DemoWorld {
         let mut t_max = f64::INFINITY;
         let near_cluster = self.cluster.intersect(&ray, f64::NEG_INFINITY, f64::INFINITY).is_some()
             || self.cluster.signed_distance(origin) <= 0.0;
-        for (i, part) in self.parts.iter().enumerate() {
+        for (i, (part, sphere)) in self.parts.iter().zip(&self.part_spheres).enumerate() {
             if i > 0 && !near_cluster {
                 break;
+            }
+            if sphere.is_some_and(|s| !may_hit_sphere(&ray, t_max, s)) {
+                continue;
             }
             if let Some(hit) = part.shape.intersect(&ray, 0.0, t_max) {
                 t_max = hit.t;
@@ -241,9 +247,9 @@ impl DemoWorld {
             dir: to_light,
         };
         self.cluster.intersect(&ray, f64::NEG_INFINITY, f64::INFINITY).is_some()
-            && self.parts[1..]
-                .iter()
-                .any(|p| p.shape.intersect(&ray, 0.0, 1.0).is_some())
+            && self.parts[1..].iter().zip(&self.part_spheres[1..]).any(|(p, s)| {
+                s.is_none_or(|s| may_hit_sphere(&ray, 1.0, s)) && p.shape.intersect(&ray, 0.0, 1.0).is_some()
+            })
     }
 
     /// Exact signed distance to the scene's surfaces (positive in the free space of the room).
@@ -281,10 +287,6 @@ impl DemoWorld {
     /// Table-top half extents, for the placement checks.
     pub fn table_half_size(&self) -> DVec3 {
         TABLE_SIZE * 0.5
-    }
-
-    pub fn table_height(&self) -> f64 {
-        TABLE_HEIGHT
     }
 }
 

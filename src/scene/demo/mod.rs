@@ -106,19 +106,12 @@ pub fn demo_scene(opts: &DemoOptions) -> Result<Scene> {
         &mut SplitMix64::new(opts.seed ^ 0x0c0f_fee0_0b17_ca11),
     );
     let intrinsics = demo_intrinsics(opts.width, opts.height);
-    let frames = (0..opts.frames)
-        .map(|i| {
-            let pose = orbit.pose(i, opts.frames);
-            let r = render_frame(&world, &intrinsics, &pose, opts.width, opts.height);
-            Frame {
-                pose,
-                rgb: r.rgb,
-                depth: Some(r.depth),
-                gt: Some(r.gt),
-                source: Some(format!("demo-{i:03}")),
-            }
-        })
-        .collect();
+    let render_view = |i: u32| {
+        let pose = orbit.pose(i, opts.frames);
+        let r = render_frame(&world, &intrinsics, &pose, opts.width, opts.height);
+        Frame { pose, rgb: r.rgb, depth: Some(r.depth), gt: Some(r.gt), source: Some(format!("demo-{i:03}")) }
+    };
+    let frames = render_views(opts.frames, &render_view);
     Ok(Scene {
         width: opts.width,
         height: opts.height,
@@ -139,4 +132,28 @@ pub fn demo_scene(opts: &DemoOptions) -> Result<Scene> {
             )],
         },
     })
+}
+
+/// Renders views `0..count` in order. Views are independent, so natively they are spread over
+/// the cores (the result does not depend on how); the browser has no threads to spare.
+fn render_views(count: u32, render_view: &(dyn Fn(u32) -> Frame + Sync)) -> Vec<Frame> {
+    #[cfg(not(target_arch = "wasm32"))]
+    {
+        let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).min(count as usize);
+        if workers > 1 {
+            let mut slots: Vec<Option<Frame>> = (0..count).map(|_| None).collect();
+            let per_worker = (count as usize).div_ceil(workers);
+            std::thread::scope(|scope| {
+                for (w, chunk) in slots.chunks_mut(per_worker).enumerate() {
+                    scope.spawn(move || {
+                        for (j, slot) in chunk.iter_mut().enumerate() {
+                            *slot = Some(render_view((w * per_worker + j) as u32));
+                        }
+                    });
+                }
+            });
+            return slots.into_iter().map(|f| f.expect("every worker fills its views")).collect();
+        }
+    }
+    (0..count).map(render_view).collect()
 }

@@ -1,0 +1,106 @@
+// Glue between the density MLP and the three heads (see field/reference/model.rs):
+//   colour input   = [SH(d) (written by sh_encode) | g]
+//   semantic input = [relu(f) | g]
+// and, backwards, the sums that route the heads' input gradients to f and to the density output
+// [h0 | g]. One invocation per sample; rows are sample-major.
+//!include _dispatch.wgsl
+
+const WORKGROUP_SIZE: u32 = 128u;
+
+// Mirrors `GlueDims` in src/field/gpu/head_glue.rs.
+struct GlueDims {
+    samples: u32,
+    geometry: u32,
+    feature: u32,
+    sh: u32,
+}
+
+// Each entry point uses its own subset of these bindings (derived layouts).
+@group(0) @binding(0) var<uniform> dims: GlueDims;
+// [h0 | g] per sample, row stride 1 + geometry.
+@group(0) @binding(1) var<storage, read> density_out: array<f32>;
+// f per sample, row stride feature.
+@group(0) @binding(2) var<storage, read> feature_out: array<f32>;
+// [SH | g], row stride sh + geometry.
+@group(0) @binding(3) var<storage, read_write> color_in: array<f32>;
+// [relu(f) | g], row stride feature + geometry.
+@group(0) @binding(4) var<storage, read_write> semantic_in: array<f32>;
+// Gradients, same strides as their forward buffers.
+@group(0) @binding(5) var<storage, read> semantic_in_grad: array<f32>;
+@group(0) @binding(6) var<storage, read_write> feature_out_grad: array<f32>;
+@group(0) @binding(7) var<storage, read_write> density_out_grad: array<f32>;
+@group(0) @binding(8) var<storage, read> color_in_grad: array<f32>;
+// The feature MLP's input gradient dL/dg, row stride geometry.
+@group(0) @binding(9) var<storage, read> feature_in_grad: array<f32>;
+
+fn sample_index(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
+    return linear_item_index(wid, nwg, lid, WORKGROUP_SIZE);
+}
+
+// Forward: copy g into the colour and semantic inputs, relu(f) into the semantic input.
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn assemble(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let n = sample_index(wid, nwg, lid);
+    if n >= dims.samples {
+        return;
+    }
+    let g = dims.geometry;
+    let d = dims.feature;
+    let density_row = n * (1u + g) + 1u;
+    let color_row = n * (dims.sh + g) + dims.sh;
+    let semantic_row = n * (d + g);
+    for (var j = 0u; j < g; j++) {
+        let v = density_out[density_row + j];
+        color_in[color_row + j] = v;
+        semantic_in[semantic_row + d + j] = v;
+    }
+    for (var k = 0u; k < d; k++) {
+        semantic_in[semantic_row + k] = max(feature_out[n * d + k], 0.0);
+    }
+}
+
+// Backward, step 1 (after the semantic head's backward): the gradient of f is the composite's
+// (already in feature_out_grad) plus the semantic input's relu(f) part.
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn gather_feature(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let n = sample_index(wid, nwg, lid);
+    if n >= dims.samples {
+        return;
+    }
+    let d = dims.feature;
+    let semantic_row = n * (d + dims.geometry);
+    for (var k = 0u; k < d; k++) {
+        if feature_out[n * d + k] > 0.0 {
+            feature_out_grad[n * d + k] += semantic_in_grad[semantic_row + k];
+        }
+    }
+}
+
+// Backward, step 2 (after all three heads' backward): dL/dg = colour input grad's g part +
+// semantic input grad's g part + feature MLP input grad, written next to dL/dh0 (which the
+// composite pass already wrote into column 0 of density_out_grad).
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn gather_geometry(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let n = sample_index(wid, nwg, lid);
+    if n >= dims.samples {
+        return;
+    }
+    let g = dims.geometry;
+    let d = dims.feature;
+    for (var j = 0u; j < g; j++) {
+        density_out_grad[n * (1u + g) + 1u + j] = color_in_grad[n * (dims.sh + g) + dims.sh + j]
+            + semantic_in_grad[n * (d + g) + d + j] + feature_in_grad[n * g + j];
+    }
+}

@@ -1,0 +1,138 @@
+//! The glue between the density MLP and the heads (`shaders/head_glue.wgsl`): builds the colour
+//! and semantic inputs from the geometry feature and f, and routes the heads' input gradients
+//! back to f and to the density output, exactly as `reference::model` does per sample.
+use bytemuck::{Pod, Zeroable};
+
+use crate::gpu::buffers::uniform_buffer_from;
+use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
+use crate::gpu::{GpuContext, GpuError, shaders};
+
+const WORKGROUP_SIZE: u32 = 128;
+
+/// Mirrors `GlueDims` in shaders/head_glue.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct GlueDims {
+    pub samples: u32,
+    pub geometry: u32,
+    pub feature: u32,
+    pub sh: u32,
+}
+
+/// The per-sample buffers the glue reads and writes (row strides in `GlueDims` terms).
+pub struct GlueBuffers<'a> {
+    /// [h0 | g], stride 1 + geometry.
+    pub density_out: &'a wgpu::Buffer,
+    /// f, stride feature.
+    pub feature_out: &'a wgpu::Buffer,
+    /// [SH | g], stride sh + geometry.
+    pub color_in: &'a wgpu::Buffer,
+    /// [relu(f) | g], stride feature + geometry.
+    pub semantic_in: &'a wgpu::Buffer,
+    pub semantic_in_grad: &'a wgpu::Buffer,
+    /// Holds the composite's dL/df on entry; `gather_feature` adds the semantic path.
+    pub feature_out_grad: &'a wgpu::Buffer,
+    /// Column 0 (dL/dh0) is written by the composite; `gather_geometry` writes the rest.
+    pub density_out_grad: &'a wgpu::Buffer,
+    pub color_in_grad: &'a wgpu::Buffer,
+    /// The feature MLP's input gradient, stride geometry.
+    pub feature_in_grad: &'a wgpu::Buffer,
+}
+
+struct Stage {
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+}
+
+pub struct HeadGluePass {
+    assemble: Stage,
+    gather_feature: Stage,
+    gather_geometry: Stage,
+    dispatch: Dispatch1d,
+}
+
+async fn stage(ctx: &GpuContext, entry: &str, bindings: &[(u32, &wgpu::Buffer)]) -> Result<Stage, GpuError> {
+    let pipeline = create_compute_pipeline(ctx, &KernelSpec::new(entry, shaders::HEAD_GLUE, entry)).await?;
+    let entries: Vec<wgpu::BindGroupEntry<'_>> = bindings
+        .iter()
+        .map(|&(binding, buffer)| wgpu::BindGroupEntry {
+            binding,
+            resource: buffer.as_entire_binding(),
+        })
+        .collect();
+    let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(entry),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &entries,
+    });
+    Ok(Stage { pipeline, bind_group })
+}
+
+impl HeadGluePass {
+    pub async fn new(ctx: &GpuContext, dims: GlueDims, b: &GlueBuffers<'_>) -> Result<Self, GpuError> {
+        let uniform = uniform_buffer_from(ctx, "head glue dims", &dims);
+        let assemble = stage(
+            ctx,
+            "assemble",
+            &[
+                (0, &uniform),
+                (1, b.density_out),
+                (2, b.feature_out),
+                (3, b.color_in),
+                (4, b.semantic_in),
+            ],
+        )
+        .await?;
+        let gather_feature = stage(
+            ctx,
+            "gather_feature",
+            &[
+                (0, &uniform),
+                (2, b.feature_out),
+                (5, b.semantic_in_grad),
+                (6, b.feature_out_grad),
+            ],
+        )
+        .await?;
+        let gather_geometry = stage(
+            ctx,
+            "gather_geometry",
+            &[
+                (0, &uniform),
+                (5, b.semantic_in_grad),
+                (7, b.density_out_grad),
+                (8, b.color_in_grad),
+                (9, b.feature_in_grad),
+            ],
+        )
+        .await?;
+        let dispatch = Dispatch1d::for_device(ctx, dims.samples.into(), WORKGROUP_SIZE)?;
+        Ok(HeadGluePass {
+            assemble,
+            gather_feature,
+            gather_geometry,
+            dispatch,
+        })
+    }
+
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>, stage: &Stage) {
+        pass.set_pipeline(&stage.pipeline);
+        pass.set_bind_group(0, &stage.bind_group, &[]);
+        self.dispatch.record(pass);
+    }
+
+    /// Forward: colour input's g columns and the whole semantic input.
+    pub fn record_assemble(&self, pass: &mut wgpu::ComputePass<'_>) {
+        self.record(pass, &self.assemble);
+    }
+
+    /// Backward, after the semantic head: dL/df += relu'(f) · dL/d(semantic input)[f part].
+    pub fn record_gather_feature(&self, pass: &mut wgpu::ComputePass<'_>) {
+        self.record(pass, &self.gather_feature);
+    }
+
+    /// Backward, after all heads: dL/dg into columns 1.. of the density output gradient.
+    pub fn record_gather_geometry(&self, pass: &mut wgpu::ComputePass<'_>) {
+        self.record(pass, &self.gather_geometry);
+    }
+}
