@@ -1,6 +1,6 @@
 // Shared by the dense-layer kernels (src/field/gpu/dense.rs): the uniform describing one layer
 // and the register-tiled product C += A·B of a TM x KC tile of A and a KC x TN tile of B staged
-// in workgroup memory. Each invocation owns RM x RN elements of the TM x TN tile of C, strided by
+// in workgroup memory. Each invocation owns RM x RN (4 x 4) elements of the TM x TN tile of C, strided by
 // the invocation grid (row ty + r·TY, column tx + c·TX) so neighbouring invocations read
 // neighbouring workgroup words.
 //
@@ -53,31 +53,46 @@ fn tile_n() -> u32 {
     return TX * RN;
 }
 
-// acc[r][c] += Σ_k a_tile[k][ty + r·TY] · b_tile[k][tx + c·TX] over the staged chunk.
-fn multiply_staged(acc: ptr<function, array<array<f32, RN>, RM>>, tx: u32, ty: u32) {
-    let tm = tile_m();
-    let tn = tile_n();
-    for (var k = 0u; k < KC; k++) {
-        var a: array<f32, RM>;
-        var b: array<f32, RN>;
-        for (var r = 0u; r < RM; r++) {
-            a[r] = a_tile[k * tm + ty + r * TY];
-        }
-        for (var c = 0u; c < RN; c++) {
-            b[c] = b_tile[k * tn + tx + c * TX];
-        }
-        for (var r = 0u; r < RM; r++) {
-            for (var c = 0u; c < RN; c++) {
-                (*acc)[r][c] += a[r] * b[c];
-            }
-        }
-    }
+// The RM x RN = 4 x 4 outputs of one invocation: row r of its block in `rows[r]`. Four named
+// vectors rather than an indexed array, so no compiler has to keep them in memory (a private
+// array indexed in a loop that is not unrolled ends up in scratch memory, e.g. on lavapipe).
+struct Block {
+    r0: vec4<f32>,
+    r1: vec4<f32>,
+    r2: vec4<f32>,
+    r3: vec4<f32>,
 }
 
-// dL/dZ of one element: dY, masked by the ReLU's derivative (taken as 0 at 0, as the reference).
-fn output_gradient(dy: f32, y: f32) -> f32 {
-    if dims.relu != 0u && !(y > 0.0) {
+// block.r[r][c] += Σ_k a_tile[k][ty + r·TY] · b_tile[k][tx + c·TX] over the staged chunk.
+fn multiply_staged(block: ptr<function, Block>, tx: u32, ty: u32) {
+    let tm = tile_m();
+    let tn = tile_n();
+    var r0 = (*block).r0;
+    var r1 = (*block).r1;
+    var r2 = (*block).r2;
+    var r3 = (*block).r3;
+    for (var k = 0u; k < KC; k++) {
+        let a_base = k * tm + ty;
+        let b_base = k * tn + tx;
+        let a = vec4<f32>(a_tile[a_base], a_tile[a_base + TY], a_tile[a_base + 2u * TY], a_tile[a_base + 3u * TY]);
+        let b = vec4<f32>(b_tile[b_base], b_tile[b_base + TX], b_tile[b_base + 2u * TX], b_tile[b_base + 3u * TX]);
+        r0 += a.x * b;
+        r1 += a.y * b;
+        r2 += a.z * b;
+        r3 += a.w * b;
+    }
+    (*block).r0 = r0;
+    (*block).r1 = r1;
+    (*block).r2 = r2;
+    (*block).r3 = r3;
+}
+
+// dL/dZ of one element: dY, masked by the ReLU's derivative (0 at 0, as the reference) read
+// from the stored activation Y at `y_index`. Uses the stage's own `y` binding; Y is only read
+// for ReLU layers.
+fn output_gradient(dy_value: f32, y_index: u32) -> f32 {
+    if dims.relu != 0u && !(y[y_index] > 0.0) {
         return 0.0;
     }
-    return dy;
+    return dy_value;
 }

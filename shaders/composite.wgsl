@@ -115,9 +115,10 @@ fn composite(
         return;
     }
 
-    // Forward (reference::render::composite). Logits and features accumulate in this ray's own
-    // output row, so C and D need no fixed-size local array. The weights and transmittances are
-    // parked in the first two words of each sample's gradient row for the backward walk.
+    // Forward (reference::render::composite). The weights and transmittances are parked in the
+    // first two words of each sample's gradient row (overwritten by the backward walk), so the
+    // logits and features can be summed channel by channel in a register: C and D need no
+    // fixed-size local array, and each sum runs over the samples in the reference's order.
     var rgb = vec3<f32>(0.0);
     var depth = 0.0;
     var optical_depth = 0.0;
@@ -131,14 +132,22 @@ fn composite(
         let w = t_before - t_after;
         rgb += w * vec3<f32>(colour_of(n, 0u), colour_of(n, 1u), colour_of(n, 2u));
         depth += w * interval.y;
-        for (var c = 0u; c < classes; c++) {
-            ray_outputs[rendered_at + semantic_at + c] += w * logit_of(n, c);
-        }
-        for (var d = 0u; d < feature_dim; d++) {
-            ray_outputs[rendered_at + feature_at + d] += w * feature_of(n, d);
-        }
         grad_heads[n * k] = w;
         grad_heads[n * k + 1u] = t_after;
+    }
+    for (var c = 0u; c < classes; c++) {
+        var sum = 0.0;
+        for (var s = 0u; s < samples; s++) {
+            sum += grad_heads[(first + s) * k] * logit_of(first + s, c);
+        }
+        ray_outputs[rendered_at + semantic_at + c] = sum;
+    }
+    for (var d = 0u; d < feature_dim; d++) {
+        var sum = 0.0;
+        for (var s = 0u; s < samples; s++) {
+            sum += grad_heads[(first + s) * k] * feature_of(first + s, d);
+        }
+        ray_outputs[rendered_at + feature_at + d] = sum;
     }
     ray_outputs[rendered_at] = rgb.x;
     ray_outputs[rendered_at + 1u] = rgb.y;

@@ -11,6 +11,19 @@
 @group(0) @binding(3) var<storage, read> weights: array<f32>;
 @group(0) @binding(4) var<storage, read_write> dx: array<f32>;
 
+// Writes the 4 values of one block row (columns col + c·TX) that lie inside dX.
+fn store_row(row: u32, col: u32, values: vec4<f32>) {
+    if row >= dims.rows {
+        return;
+    }
+    for (var c = 0u; c < RN; c++) {
+        let i = col + c * TX;
+        if i < dims.in_dim {
+            dx[row * dims.dx_stride + dims.dx_offset + i] = values[c];
+        }
+    }
+}
+
 @compute @workgroup_size(TX, TY)
 fn backward_input(
     @builtin(workgroup_id) workgroup_id: vec3<u32>,
@@ -27,7 +40,7 @@ fn backward_input(
     }
     let col0 = workgroup_id.z * tn;
     let threads = TX * TY;
-    var acc: array<array<f32, RN>, RM>;
+    var block: Block;
     for (var k0 = 0u; k0 < dims.out_dim; k0 += KC) {
         // A = dZ rows (k = output unit), read along a row.
         for (var e = local_index; e < tm * KC; e += threads) {
@@ -38,7 +51,7 @@ fn backward_input(
             var value = 0.0;
             if row < dims.rows && o < dims.out_dim {
                 let g = dy[row * dims.dy_stride + dims.dy_offset + o];
-                value = output_gradient(g, y[row * dims.y_stride + dims.y_offset + o]);
+                value = output_gradient(g, row * dims.y_stride + dims.y_offset + o);
             }
             a_tile[k * tm + m] = value;
         }
@@ -55,16 +68,13 @@ fn backward_input(
             b_tile[k * tn + n] = value;
         }
         workgroupBarrier();
-        multiply_staged(&acc, local_id.x, local_id.y);
+        multiply_staged(&block, local_id.x, local_id.y);
         workgroupBarrier();
     }
-    for (var r = 0u; r < RM; r++) {
-        let row = row0 + local_id.y + r * TY;
-        for (var c = 0u; c < RN; c++) {
-            let i = col0 + local_id.x + c * TX;
-            if row < dims.rows && i < dims.in_dim {
-                dx[row * dims.dx_stride + dims.dx_offset + i] = acc[r][c];
-            }
-        }
-    }
+    let row = row0 + local_id.y;
+    let col = col0 + local_id.x;
+    store_row(row, col, block.r0);
+    store_row(row + TY, col, block.r1);
+    store_row(row + 2u * TY, col, block.r2);
+    store_row(row + 3u * TY, col, block.r3);
 }

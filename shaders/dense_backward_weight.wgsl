@@ -15,6 +15,20 @@
 @group(0) @binding(4) var<storage, read_write> partials: array<f32>;
 @group(0) @binding(5) var<storage, read_write> grads: array<f32>;
 
+// Writes the 4 partial sums of one block row (output unit o, inputs i + c·TX) of a chunk.
+fn store_row(chunk: u32, o: u32, i: u32, values: vec4<f32>) {
+    if o >= dims.out_dim {
+        return;
+    }
+    let base = (chunk * dims.out_dim + o) * dims.in_dim;
+    for (var c = 0u; c < RN; c++) {
+        let column = i + c * TX;
+        if column < dims.in_dim {
+            partials[base + column] = values[c];
+        }
+    }
+}
+
 @compute @workgroup_size(TX, TY)
 fn partial_sums(
     @builtin(workgroup_id) workgroup_id: vec3<u32>,
@@ -29,7 +43,7 @@ fn partial_sums(
     let first_row = chunk * dims.chunk_rows;
     let end_row = min(first_row + dims.chunk_rows, dims.rows);
     let threads = TX * TY;
-    var acc: array<array<f32, RN>, RM>;
+    var block: Block;
     for (var k0 = 0u; k0 < dims.chunk_rows; k0 += KC) {
         // A[m][k] = dZ[row k][output m]: consecutive invocations read along a row of dY.
         for (var e = local_index; e < tm * KC; e += threads) {
@@ -40,7 +54,7 @@ fn partial_sums(
             var value = 0.0;
             if row < end_row && o < dims.out_dim {
                 let g = dy[row * dims.dy_stride + dims.dy_offset + o];
-                value = output_gradient(g, y[row * dims.y_stride + dims.y_offset + o]);
+                value = output_gradient(g, row * dims.y_stride + dims.y_offset + o);
             }
             a_tile[k * tm + m] = value;
         }
@@ -57,19 +71,15 @@ fn partial_sums(
             b_tile[k * tn + n] = value;
         }
         workgroupBarrier();
-        multiply_staged(&acc, local_id.x, local_id.y);
+        multiply_staged(&block, local_id.x, local_id.y);
         workgroupBarrier();
     }
-    let matrix = dims.out_dim * dims.in_dim;
-    for (var r = 0u; r < RM; r++) {
-        let o = o0 + local_id.y + r * TY;
-        for (var c = 0u; c < RN; c++) {
-            let i = i0 + local_id.x + c * TX;
-            if o < dims.out_dim && i < dims.in_dim {
-                partials[chunk * matrix + o * dims.in_dim + i] = acc[r][c];
-            }
-        }
-    }
+    let o = o0 + local_id.y;
+    let i = i0 + local_id.x;
+    store_row(chunk, o, i, block.r0);
+    store_row(chunk, o + TY, i, block.r1);
+    store_row(chunk, o + 2u * TY, i, block.r2);
+    store_row(chunk, o + 3u * TY, i, block.r3);
 }
 
 const REDUCE_WORKGROUP: u32 = 256u;

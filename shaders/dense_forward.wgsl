@@ -10,6 +10,23 @@
 @group(0) @binding(2) var<storage, read> weights: array<f32>;
 @group(0) @binding(3) var<storage, read_write> y: array<f32>;
 
+// Writes the 4 outputs of one block row (columns col + c·TX) that lie inside Y, activated.
+fn store_row(row: u32, col: u32, values: vec4<f32>) {
+    if row >= dims.rows {
+        return;
+    }
+    for (var c = 0u; c < RN; c++) {
+        let o = col + c * TX;
+        if o < dims.out_dim {
+            var value = values[c];
+            if dims.relu != 0u {
+                value = max(value, 0.0);
+            }
+            y[row * dims.y_stride + dims.y_offset + o] = value;
+        }
+    }
+}
+
 @compute @workgroup_size(TX, TY)
 fn forward(
     @builtin(workgroup_id) workgroup_id: vec3<u32>,
@@ -27,7 +44,7 @@ fn forward(
     }
     let col0 = workgroup_id.z * tn;
     let threads = TX * TY;
-    var acc: array<array<f32, RN>, RM>;
+    var block: Block;
     for (var k0 = 0u; k0 < dims.in_dim; k0 += KC) {
         // A = X rows: consecutive invocations read consecutive inputs of a row.
         for (var e = local_index; e < tm * KC; e += threads) {
@@ -54,20 +71,13 @@ fn forward(
             b_tile[k * tn + n] = value;
         }
         workgroupBarrier();
-        multiply_staged(&acc, local_id.x, local_id.y);
+        multiply_staged(&block, local_id.x, local_id.y);
         workgroupBarrier();
     }
-    for (var r = 0u; r < RM; r++) {
-        let row = row0 + local_id.y + r * TY;
-        for (var c = 0u; c < RN; c++) {
-            let o = col0 + local_id.x + c * TX;
-            if row < dims.rows && o < dims.out_dim {
-                var value = acc[r][c];
-                if dims.relu != 0u {
-                    value = max(value, 0.0);
-                }
-                y[row * dims.y_stride + dims.y_offset + o] = value;
-            }
-        }
-    }
+    let row = row0 + local_id.y;
+    let col = col0 + local_id.x;
+    store_row(row, col, block.r0);
+    store_row(row + TY, col, block.r1);
+    store_row(row + 2u * TY, col, block.r2);
+    store_row(row + 3u * TY, col, block.r3);
 }

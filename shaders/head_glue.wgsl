@@ -13,6 +13,11 @@ struct GlueDims {
     geometry: u32,
     feature: u32,
     sh: u32,
+    // Layout of the composite pass's per-sample gradient rows (`CompositeLayout`).
+    grad_stride: u32,
+    grad_h0: u32,
+    grad_feature: u32,
+    _pad: u32,
 }
 
 // Each entry point uses its own subset of these bindings (derived layouts).
@@ -27,7 +32,8 @@ struct GlueDims {
 @group(0) @binding(4) var<storage, read_write> semantic_in: array<f32>;
 // Gradients, same strides as their forward buffers.
 @group(0) @binding(5) var<storage, read> semantic_in_grad: array<f32>;
-@group(0) @binding(6) var<storage, read_write> feature_out_grad: array<f32>;
+// The composite's [dL/dh0, dL/dcolour, dL/dlogits, dL/df] rows; gather_feature adds into dL/df.
+@group(0) @binding(6) var<storage, read_write> grad_heads: array<f32>;
 @group(0) @binding(7) var<storage, read_write> density_out_grad: array<f32>;
 @group(0) @binding(8) var<storage, read> color_in_grad: array<f32>;
 // The feature MLP's input gradient dL/dg, row stride geometry.
@@ -64,7 +70,7 @@ fn assemble(
 }
 
 // Backward, step 1 (after the semantic head's backward): the gradient of f is the composite's
-// (already in feature_out_grad) plus the semantic input's relu(f) part.
+// (in grad_heads) plus the semantic input's relu(f) part.
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn gather_feature(
     @builtin(workgroup_id) wid: vec3<u32>,
@@ -79,14 +85,15 @@ fn gather_feature(
     let semantic_row = n * (d + dims.geometry);
     for (var k = 0u; k < d; k++) {
         if feature_out[n * d + k] > 0.0 {
-            feature_out_grad[n * d + k] += semantic_in_grad[semantic_row + k];
+            let at = n * dims.grad_stride + dims.grad_feature + k;
+            grad_heads[at] += semantic_in_grad[semantic_row + k];
         }
     }
 }
 
 // Backward, step 2 (after all three heads' backward): dL/dg = colour input grad's g part +
-// semantic input grad's g part + feature MLP input grad, written next to dL/dh0 (which the
-// composite pass already wrote into column 0 of density_out_grad).
+// semantic input grad's g part + feature MLP input grad, written next to the composite's dL/dh0
+// as the density MLP's output gradient row [dL/dh0 | dL/dg].
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn gather_geometry(
     @builtin(workgroup_id) wid: vec3<u32>,
@@ -99,6 +106,7 @@ fn gather_geometry(
     }
     let g = dims.geometry;
     let d = dims.feature;
+    density_out_grad[n * (1u + g)] = grad_heads[n * dims.grad_stride + dims.grad_h0];
     for (var j = 0u; j < g; j++) {
         density_out_grad[n * (1u + g) + 1u + j] = color_in_grad[n * (dims.sh + g) + dims.sh + j]
             + semantic_in_grad[n * (d + g) + d + j] + feature_in_grad[n * g + j];

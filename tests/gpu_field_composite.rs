@@ -5,7 +5,9 @@
 use std::time::Instant;
 
 use scribblefield::field::FieldConfig;
-use scribblefield::field::gpu::composite::{CompositeInputs, CompositeLayout, CompositePass, CompositeUniforms, HeadSource};
+use scribblefield::field::gpu::composite::{
+    CompositeInputs, CompositeLayout, CompositePass, CompositeUniforms, HeadSource,
+};
 use scribblefield::field::gpu::rays::{
     NO_LABEL, RAY_HAS_CODE, RAY_HITS_BOX, StepUniforms, TARGET_DEPTH, TARGET_FLAGS, TARGET_HEADER_WORDS, TARGET_LABEL,
     TARGET_RGB,
@@ -64,21 +66,33 @@ impl Batch {
                 } else {
                     rng.uniform(-4.0, 5.0)
                 };
-                if i % DENSITY_STRIDE as usize == 0 { h0 as f32 } else { rng.uniform(-9.0, 9.0) as f32 }
+                if i % DENSITY_STRIDE as usize == 0 {
+                    h0 as f32
+                } else {
+                    rng.uniform(-9.0, 9.0) as f32
+                }
             })
             .collect();
         let color = (0..n * 3).map(|_| rng.uniform(-4.0, 4.0) as f32).collect();
         let logits_and_feature = (0..n * (c + d + 1)).map(|_| rng.uniform(-2.0, 2.0) as f32).collect();
         let intervals = (0..n)
             .map(|_| {
-                let delta = if rng.next_f64() < 0.05 { 0.0 } else { rng.uniform(0.0, 0.25) };
+                let delta = if rng.next_f64() < 0.05 {
+                    0.0
+                } else {
+                    rng.uniform(0.0, 0.25)
+                };
                 [delta as f32, rng.uniform(0.3, 3.0) as f32]
             })
             .collect();
         let mut targets = Vec::with_capacity(b * (TARGET_HEADER_WORDS + d));
         for _ in 0..b {
             let rgb: [f32; 3] = std::array::from_fn(|_| rng.next_f32());
-            let depth = if rng.next_f64() < 0.6 { rng.uniform(0.3, 3.0) as f32 } else { 0.0 };
+            let depth = if rng.next_f64() < 0.6 {
+                rng.uniform(0.3, 3.0) as f32
+            } else {
+                0.0
+            };
             let label = match rng.below(4) {
                 0 => NO_LABEL,
                 // Out of range: treated as unlabelled, as in the reference.
@@ -96,7 +110,14 @@ impl Batch {
             targets.extend_from_slice(&header);
             targets.extend((0..d).map(|_| if has_code { rng.uniform(-1.5, 1.5) as f32 } else { 0.0 }.to_bits()));
         }
-        Batch { cfg, density, color, logits_and_feature, intervals, targets }
+        Batch {
+            cfg,
+            density,
+            color,
+            logits_and_feature,
+            intervals,
+            targets,
+        }
     }
 }
 
@@ -111,7 +132,10 @@ struct Expected {
 fn reference_ray(batch: &Batch, ray: usize) -> Expected {
     let cfg = &batch.cfg;
     let s_count = batch.samples();
-    let channels = Channels { classes: cfg.num_classes as usize, feature_dim: cfg.feature_dim as usize };
+    let channels = Channels {
+        classes: cfg.num_classes as usize,
+        feature_dim: cfg.feature_dim as usize,
+    };
     let (c, d, k) = (channels.classes, channels.feature_dim, channels.count());
     let row = &batch.targets[ray * batch.target_stride()..(ray + 1) * batch.target_stride()];
     if row[TARGET_FLAGS] & RAY_HITS_BOX == 0 {
@@ -138,7 +162,11 @@ fn reference_ray(batch: &Batch, ray: usize) -> Expected {
         colours.push(rgb);
         values.extend_from_slice(&rgb);
         values.push(f64::from(batch.intervals[n][1]));
-        values.extend(batch.logits_and_feature[n * hs..n * hs + c + d].iter().map(|v| f64::from(*v)));
+        values.extend(
+            batch.logits_and_feature[n * hs..n * hs + c + d]
+                .iter()
+                .map(|v| f64::from(*v)),
+        );
     }
     let forward = render::composite(&sigmas, &deltas, &values, k);
     let f = |w: usize| f32::from_bits(row[w]);
@@ -147,8 +175,7 @@ fn reference_ray(batch: &Batch, ray: usize) -> Expected {
         rgb: [f(TARGET_RGB), f(TARGET_RGB + 1), f(TARGET_RGB + 2)],
         depth: (depth > 0.0).then_some(depth),
         label: (row[TARGET_LABEL] != NO_LABEL).then_some(row[TARGET_LABEL]),
-        code: (row[TARGET_FLAGS] & RAY_HAS_CODE != 0)
-            .then(|| (0..d).map(|i| f(TARGET_HEADER_WORDS + i)).collect()),
+        code: (row[TARGET_FLAGS] & RAY_HAS_CODE != 0).then(|| (0..d).map(|i| f(TARGET_HEADER_WORDS + i)).collect()),
     };
     let (terms, grad_rendered) = ray_loss(
         &cfg.loss,
@@ -192,10 +219,26 @@ fn run_on_gpu(ctx: &GpuContext, batch: &Batch) -> GpuRun {
     let hs = batch.heads_stride() as u32;
     let inputs = CompositeInputs {
         step_uniforms: &step,
-        h0: HeadSource { buffer: &density, stride: DENSITY_STRIDE, offset: 0 },
-        color: HeadSource { buffer: &color, stride: 3, offset: 0 },
-        logits: HeadSource { buffer: &heads, stride: hs, offset: 0 },
-        feature: HeadSource { buffer: &heads, stride: hs, offset: cfg.num_classes },
+        h0: HeadSource {
+            buffer: &density,
+            stride: DENSITY_STRIDE,
+            offset: 0,
+        },
+        color: HeadSource {
+            buffer: &color,
+            stride: 3,
+            offset: 0,
+        },
+        logits: HeadSource {
+            buffer: &heads,
+            stride: hs,
+            offset: 0,
+        },
+        feature: HeadSource {
+            buffer: &heads,
+            stride: hs,
+            offset: cfg.num_classes,
+        },
         intervals: &intervals,
         targets: &targets,
     };
@@ -227,7 +270,10 @@ fn assert_group_close(what: &str, gpu: &[f32], expected: &[f64]) {
         let g = f64::from(*g);
         assert!(g.is_finite(), "{what}[{i}]: GPU wrote {g} (expected {e})");
         let tolerance = 2e-4 * scale + 1e-6 * e.abs() + 1e-12;
-        assert!((g - e).abs() <= tolerance, "{what}[{i}]: GPU {g}, reference {e} (group scale {scale:e})");
+        assert!(
+            (g - e).abs() <= tolerance,
+            "{what}[{i}]: GPU {g}, reference {e} (group scale {scale:e})"
+        );
     }
 }
 
@@ -247,7 +293,10 @@ fn check_batch(ctx: &GpuContext, batch: &Batch) {
         let loss_scale = expected.losses.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         for term in 0..4 {
             let (g, e) = (f64::from(out[term]), expected.losses[term]);
-            assert!((g - e).abs() <= 1e-4 * loss_scale + 1e-12, "ray {ray} loss term {term}: GPU {g}, reference {e}");
+            assert!(
+                (g - e).abs() <= 1e-4 * loss_scale + 1e-12,
+                "ray {ray} loss term {term}: GPU {g}, reference {e}"
+            );
             totals[term] += e;
             gpu_totals[term] += g;
         }
@@ -255,7 +304,11 @@ fn check_batch(ctx: &GpuContext, batch: &Batch) {
         let rendered = &out[layout.rendered_offset()..layout.grad_rendered_offset()];
         assert_group_close(&format!("ray {ray} rendered"), rendered, &expected.rendered);
         let grad_rendered = &out[layout.grad_rendered_offset()..];
-        assert_group_close(&format!("ray {ray} dL/drendered"), grad_rendered, &expected.grad_rendered);
+        assert_group_close(
+            &format!("ray {ray} dL/drendered"),
+            grad_rendered,
+            &expected.grad_rendered,
+        );
         // Per kind of head gradient over the ray's samples: h₀, colour, logits, feature.
         let rows = &gpu.grad_heads[ray * s_count * k..(ray + 1) * s_count * k];
         let kinds = [
@@ -266,15 +319,24 @@ fn check_batch(ctx: &GpuContext, batch: &Batch) {
         ];
         for (name, columns) in kinds {
             let pick = |values: &[f64]| -> Vec<f64> {
-                (0..s_count).flat_map(|s| values[s * k + columns.start..s * k + columns.end].to_vec()).collect()
+                (0..s_count)
+                    .flat_map(|s| values[s * k + columns.start..s * k + columns.end].to_vec())
+                    .collect()
             };
-            let gpu_values: Vec<f32> =
-                (0..s_count).flat_map(|s| rows[s * k + columns.start..s * k + columns.end].to_vec()).collect();
+            let gpu_values: Vec<f32> = (0..s_count)
+                .flat_map(|s| rows[s * k + columns.start..s * k + columns.end].to_vec())
+                .collect();
             assert_group_close(&format!("ray {ray} {name}"), &gpu_values, &pick(&expected.grad_heads));
         }
     }
     // The inputs exercise every term (a case where one is silently zero proves nothing).
-    assert!(totals.iter().enumerate().all(|(i, t)| *t > 0.0 || (i == 3 && !cfg.feature_supervision)), "{totals:?}");
+    assert!(
+        totals
+            .iter()
+            .enumerate()
+            .all(|(i, t)| *t > 0.0 || (i == 3 && !cfg.feature_supervision)),
+        "{totals:?}"
+    );
     assert!(labelled_rays > 0);
     eprintln!("batch loss terms: reference {totals:?}, GPU {gpu_totals:?}");
 }
@@ -298,38 +360,76 @@ fn uniform_block_matches_wgsl_size() {
 
 #[test]
 fn composite_matches_reference_on_small_shapes() {
-    let Some(ctx) = gpu_for_tests("composite_matches_reference_on_small_shapes") else { return };
+    let Some(ctx) = gpu_for_tests("composite_matches_reference_on_small_shapes") else {
+        return;
+    };
     // 300 rays: not a multiple of the 64-ray workgroup; S = 12, C = 3, D = 5.
     check_batch(&ctx, &Batch::random(config(3, 5, 5, 7, 300, true), 11));
 }
 
 #[test]
 fn composite_matches_reference_with_default_widths() {
-    let Some(ctx) = gpu_for_tests("composite_matches_reference_with_default_widths") else { return };
+    let Some(ctx) = gpu_for_tests("composite_matches_reference_with_default_widths") else {
+        return;
+    };
     let d = FieldConfig::default();
     // The default model's C, D and S (16 + 48), feature supervision on and off.
-    let on = config(d.num_classes, d.feature_dim, d.samples_coarse, d.samples_fine, 130, true);
+    let on = config(
+        d.num_classes,
+        d.feature_dim,
+        d.samples_coarse,
+        d.samples_fine,
+        130,
+        true,
+    );
     check_batch(&ctx, &Batch::random(on, 12));
-    let off = config(d.num_classes, d.feature_dim, d.samples_coarse, d.samples_fine, 70, false);
+    let off = config(
+        d.num_classes,
+        d.feature_dim,
+        d.samples_coarse,
+        d.samples_fine,
+        70,
+        false,
+    );
     check_batch(&ctx, &Batch::random(off, 13));
 }
 
 #[test]
 fn composite_rejects_head_sources_too_small() {
-    let Some(ctx) = gpu_for_tests("composite_rejects_head_sources_too_small") else { return };
+    let Some(ctx) = gpu_for_tests("composite_rejects_head_sources_too_small") else {
+        return;
+    };
     let batch = Batch::random(config(3, 5, 5, 7, 10, true), 1);
     let step = uniform_buffer_from(&ctx, "step", &StepUniforms::for_step(&batch.cfg, 1, 0, 1e-3));
     let small = storage_buffer_from(&ctx, "small", &[0.0f32; 16]).unwrap();
     let inputs = CompositeInputs {
         step_uniforms: &step,
-        h0: HeadSource { buffer: &small, stride: 1, offset: 0 },
-        color: HeadSource { buffer: &small, stride: 3, offset: 0 },
-        logits: HeadSource { buffer: &small, stride: 3, offset: 0 },
-        feature: HeadSource { buffer: &small, stride: 5, offset: 0 },
+        h0: HeadSource {
+            buffer: &small,
+            stride: 1,
+            offset: 0,
+        },
+        color: HeadSource {
+            buffer: &small,
+            stride: 3,
+            offset: 0,
+        },
+        logits: HeadSource {
+            buffer: &small,
+            stride: 3,
+            offset: 0,
+        },
+        feature: HeadSource {
+            buffer: &small,
+            stride: 5,
+            offset: 0,
+        },
         intervals: &small,
         targets: &small,
     };
-    let error = pollster::block_on(CompositePass::new(&ctx, &batch.cfg, &inputs)).err().expect("must fail");
+    let error = pollster::block_on(CompositePass::new(&ctx, &batch.cfg, &inputs))
+        .err()
+        .expect("must fail");
     assert!(error.to_string().contains("head source"), "{error}");
 }
 
@@ -337,9 +437,18 @@ fn composite_rejects_head_sources_too_small() {
 #[test]
 #[ignore = "measurement; run explicitly in release mode"]
 fn composite_throughput_report() {
-    let Some(ctx) = gpu_for_tests("composite_throughput_report") else { return };
+    let Some(ctx) = gpu_for_tests("composite_throughput_report") else {
+        return;
+    };
     let d = FieldConfig::default();
-    let cfg = config(d.num_classes, d.feature_dim, d.samples_coarse, d.samples_fine, 4096, true);
+    let cfg = config(
+        d.num_classes,
+        d.feature_dim,
+        d.samples_coarse,
+        d.samples_fine,
+        4096,
+        true,
+    );
     let batch = Batch::random(cfg.clone(), 5);
     let step = uniform_buffer_from(&ctx, "step", &StepUniforms::for_step(&cfg, 1, 0, 1e-3));
     let density = storage_buffer_from(&ctx, "density out", &batch.density).unwrap();
@@ -350,10 +459,26 @@ fn composite_throughput_report() {
     let hs = batch.heads_stride() as u32;
     let inputs = CompositeInputs {
         step_uniforms: &step,
-        h0: HeadSource { buffer: &density, stride: DENSITY_STRIDE, offset: 0 },
-        color: HeadSource { buffer: &color, stride: 3, offset: 0 },
-        logits: HeadSource { buffer: &heads, stride: hs, offset: 0 },
-        feature: HeadSource { buffer: &heads, stride: hs, offset: cfg.num_classes },
+        h0: HeadSource {
+            buffer: &density,
+            stride: DENSITY_STRIDE,
+            offset: 0,
+        },
+        color: HeadSource {
+            buffer: &color,
+            stride: 3,
+            offset: 0,
+        },
+        logits: HeadSource {
+            buffer: &heads,
+            stride: hs,
+            offset: 0,
+        },
+        feature: HeadSource {
+            buffer: &heads,
+            stride: hs,
+            offset: cfg.num_classes,
+        },
         intervals: &intervals,
         targets: &targets,
     };

@@ -406,8 +406,13 @@ fn density_mlp_throughput_report() {
     use scribblefield::gpu::matmul_bench::matmul_gflops;
     use scribblefield::gpu::timing::{PassTimer, Stopwatch};
 
-    let Some(ctx) = gpu_for_tests("density_mlp_throughput_report") else { return };
-    let rows: usize = std::env::var("DENSE_BENCH_ROWS").ok().and_then(|v| v.parse().ok()).unwrap_or(262_144);
+    let Some(ctx) = gpu_for_tests("density_mlp_throughput_report") else {
+        return;
+    };
+    let rows: usize = std::env::var("DENSE_BENCH_ROWS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(262_144);
     let iterations = 3;
     let cfg = FieldConfig::default();
     let layout = ParamLayout::new(&cfg);
@@ -444,7 +449,10 @@ fn density_mlp_throughput_report() {
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         for _ in 0..repeats {
             let timestamp_writes = timer.as_mut().and_then(|t| t.timestamp_writes("mlp"));
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: None,
+                timestamp_writes,
+            });
             if backward {
                 mlp.record_backward(&mut pass).unwrap();
             } else {

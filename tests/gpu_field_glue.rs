@@ -4,25 +4,19 @@ use scribblefield::gpu::buffers::{read_buffer_blocking, storage_buffer_from, sto
 use scribblefield::gpu::test_support::gpu_for_tests;
 
 fn values(len: usize, salt: f32) -> Vec<f32> {
-    (0..len)
-        .map(|i| ((i as f32 * 0.618 + salt).fract() - 0.5) * 3.0)
-        .collect()
+    (0..len).map(|i| ((i as f32 * 0.618 + salt).fract() - 0.5) * 3.0).collect()
 }
 
 #[test]
 fn glue_matches_reference_arithmetic() {
-    let Some(ctx) = gpu_for_tests("glue_matches_reference_arithmetic") else {
-        return;
-    };
+    let Some(ctx) = gpu_for_tests("glue_matches_reference_arithmetic") else { return };
     let (n, g, d, sh) = (1037usize, 15usize, 8usize, 16usize);
+    // Composite rows [dh0, dcolour (3), dlogits (C = 2), df (D)].
+    let (stride, h0_at, f_at) = (1 + 3 + 2 + d, 0usize, 6usize);
     let density_out = values(n * (1 + g), 0.1);
     let feature_out = values(n * d, 0.2);
     let semantic_in_grad = values(n * (d + g), 0.3);
-    let feature_grad0 = values(n * d, 0.4);
-    let mut density_grad0 = storage_init(n * (1 + g));
-    for s in 0..n {
-        density_grad0[s * (1 + g)] = s as f32; // column 0 comes from the composite
-    }
+    let grad_heads0 = values(n * stride, 0.4);
     let color_in_grad = values(n * (sh + g), 0.5);
     let feature_in_grad = values(n * g, 0.6);
     let color_sh = values(n * (sh + g), 0.7);
@@ -33,8 +27,8 @@ fn glue_matches_reference_arithmetic() {
     let color_in_b = buf("color in", &color_sh);
     let semantic_in_b = storage_buffer_garbage::<f32>(&ctx, "semantic in", n * (d + g)).unwrap();
     let semantic_in_grad_b = buf("semantic in grad", &semantic_in_grad);
-    let feature_out_grad_b = buf("feature out grad", &feature_grad0);
-    let density_out_grad_b = buf("density out grad", &density_grad0);
+    let grad_heads_b = buf("grad heads", &grad_heads0);
+    let density_out_grad_b = storage_buffer_garbage::<f32>(&ctx, "density out grad", n * (1 + g)).unwrap();
     let color_in_grad_b = buf("color in grad", &color_in_grad);
     let feature_in_grad_b = buf("feature in grad", &feature_in_grad);
     let dims = GlueDims {
@@ -42,6 +36,10 @@ fn glue_matches_reference_arithmetic() {
         geometry: g as u32,
         feature: d as u32,
         sh: sh as u32,
+        grad_stride: stride as u32,
+        grad_h0: h0_at as u32,
+        grad_feature: f_at as u32,
+        _pad: 0,
     };
     let buffers = GlueBuffers {
         density_out: &density_out_b,
@@ -49,7 +47,7 @@ fn glue_matches_reference_arithmetic() {
         color_in: &color_in_b,
         semantic_in: &semantic_in_b,
         semantic_in_grad: &semantic_in_grad_b,
-        feature_out_grad: &feature_out_grad_b,
+        grad_heads: &grad_heads_b,
         density_out_grad: &density_out_grad_b,
         color_in_grad: &color_in_grad_b,
         feature_in_grad: &feature_in_grad_b,
@@ -66,40 +64,27 @@ fn glue_matches_reference_arithmetic() {
 
     let color_in: Vec<f32> = read_buffer_blocking(&ctx, &color_in_b).unwrap();
     let semantic_in: Vec<f32> = read_buffer_blocking(&ctx, &semantic_in_b).unwrap();
-    let feature_grad: Vec<f32> = read_buffer_blocking(&ctx, &feature_out_grad_b).unwrap();
+    let grad_heads: Vec<f32> = read_buffer_blocking(&ctx, &grad_heads_b).unwrap();
     let density_grad: Vec<f32> = read_buffer_blocking(&ctx, &density_out_grad_b).unwrap();
     for s in 0..n {
         let geo = &density_out[s * (1 + g) + 1..(s + 1) * (1 + g)];
         let f = &feature_out[s * d..(s + 1) * d];
-        assert_eq!(
-            &color_in[s * (sh + g)..s * (sh + g) + sh],
-            &color_sh[s * (sh + g)..s * (sh + g) + sh],
-            "SH kept"
-        );
-        assert_eq!(&color_in[s * (sh + g) + sh..(s + 1) * (sh + g)], geo);
+        let row = s * (sh + g);
+        assert_eq!(&color_in[row..row + sh], &color_sh[row..row + sh], "SH columns untouched");
+        assert_eq!(&color_in[row + sh..row + sh + g], geo);
         let relu: Vec<f32> = f.iter().map(|v| v.max(0.0)).collect();
         assert_eq!(&semantic_in[s * (d + g)..s * (d + g) + d], &relu[..]);
         assert_eq!(&semantic_in[s * (d + g) + d..(s + 1) * (d + g)], geo);
         for k in 0..d {
-            let want = feature_grad0[s * d + k]
-                + if f[k] > 0.0 {
-                    semantic_in_grad[s * (d + g) + k]
-                } else {
-                    0.0
-                };
-            assert_eq!(feature_grad[s * d + k], want);
+            let at = s * stride + f_at + k;
+            let via_semantic = if f[k] > 0.0 { semantic_in_grad[s * (d + g) + k] } else { 0.0 };
+            assert_eq!(grad_heads[at], grad_heads0[at] + via_semantic);
         }
-        assert_eq!(density_grad[s * (1 + g)], s as f32, "dL/dh0 untouched");
+        assert_eq!(&grad_heads[s * stride..s * stride + f_at], &grad_heads0[s * stride..s * stride + f_at]);
+        assert_eq!(density_grad[s * (1 + g)], grad_heads0[s * stride + h0_at], "dL/dh0 copied");
         for j in 0..g {
-            let want = color_in_grad[s * (sh + g) + sh + j]
-                + semantic_in_grad[s * (d + g) + d + j]
-                + feature_in_grad[s * g + j];
+            let want = color_in_grad[row + sh + j] + semantic_in_grad[s * (d + g) + d + j] + feature_in_grad[s * g + j];
             assert!((density_grad[s * (1 + g) + 1 + j] - want).abs() <= 1e-6 * want.abs().max(1.0));
         }
     }
-}
-
-/// Garbage everywhere the glue must write.
-fn storage_init(len: usize) -> Vec<f32> {
-    vec![f32::NAN; len]
 }

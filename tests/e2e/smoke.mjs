@@ -9,6 +9,7 @@
 import { mkdirSync, mkdtempSync, rmSync } from "node:fs";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
+import { inflateSync } from "node:zlib";
 import { chromium } from "playwright-core";
 
 const url = process.env.E2E_URL;
@@ -22,6 +23,8 @@ const chromiumPath = process.env.CHROMIUM || "/usr/bin/chromium";
 // Compiling the wasm and starting WebGPU on a CPU rasterizer is slow on a small machine.
 const LOAD_TIMEOUT_MS = 180_000;
 const STEP_TIMEOUT_MS = 15_000;
+// The demo frame on screen shows far more; an empty canvas or the bare UI far fewer.
+const MIN_FRAME_COLOURS = 200;
 
 const CHROMIUM_ARGS = [
   "--headless=new",
@@ -32,6 +35,12 @@ const CHROMIUM_ARGS = [
   "--disable-sync",
   "--no-first-run",
   "--disable-quic",
+  // Without these the WebGPU canvas is never composited in headless mode (chrome://gpu says
+  // "WebGPU interop: Disabled") and screenshots show an empty canvas: SwiftShader's Vulkan and
+  // GL give the compositor a GPU to share the canvas with.
+  "--use-angle=swiftshader",
+  "--enable-features=Vulkan",
+  "--use-vulkan=swiftshader",
 ];
 
 mkdirSync(outDir, { recursive: true });
@@ -53,6 +62,57 @@ async function check(name, body) {
 
 function assert(condition, message) {
   if (!condition) throw new Error(message);
+}
+
+/// Decodes an 8-bit RGB or RGBA PNG (what Chromium's screenshots are) into {width, height, rgba}.
+function decodePng(png) {
+  let pos = 8;
+  let width = 0, height = 0, colourType = 0;
+  const idat = [];
+  while (pos < png.length) {
+    const length = png.readUInt32BE(pos);
+    const type = png.toString("latin1", pos + 4, pos + 8);
+    const data = png.subarray(pos + 8, pos + 8 + length);
+    if (type === "IHDR") {
+      width = data.readUInt32BE(0);
+      height = data.readUInt32BE(4);
+      assert(data[8] === 8 && (data[9] === 2 || data[9] === 6) && data[12] === 0, "unexpected PNG format");
+      colourType = data[9];
+    } else if (type === "IDAT") {
+      idat.push(data);
+    }
+    pos += 12 + length;
+  }
+  const bpp = colourType === 6 ? 4 : 3;
+  const raw = inflateSync(Buffer.concat(idat));
+  const stride = width * bpp;
+  const rgba = Buffer.alloc(width * height * 4, 255);
+  let prev = Buffer.alloc(stride);
+  for (let y = 0; y < height; y++) {
+    const filter = raw[y * (stride + 1)];
+    const line = Buffer.from(raw.subarray(y * (stride + 1) + 1, (y + 1) * (stride + 1)));
+    for (let i = 0; i < stride; i++) {
+      const a = i >= bpp ? line[i - bpp] : 0, b = prev[i], c = i >= bpp ? prev[i - bpp] : 0;
+      const p = a + b - c, pa = Math.abs(p - a), pb = Math.abs(p - b), pc = Math.abs(p - c);
+      const predictor = [0, a, b, (a + b) >> 1, pa <= pb && pa <= pc ? a : pb <= pc ? b : c][filter];
+      line[i] = (line[i] + predictor) & 255;
+    }
+    for (let x = 0; x < width; x++) line.copy(rgba, (y * width + x) * 4, x * bpp, x * bpp + 3);
+    prev = line;
+  }
+  return { width, height, rgba };
+}
+
+/// Distinct clearly coloured (not grey) pixel values: the UI around the frame is grey with a
+/// few accent colours, a rendered frame has hundreds.
+function saturatedColours(png) {
+  const { rgba } = decodePng(png);
+  const seen = new Set();
+  for (let i = 0; i < rgba.length; i += 4) {
+    const [r, g, b] = [rgba[i], rgba[i + 1], rgba[i + 2]];
+    if (Math.max(r, g, b) - Math.min(r, g, b) > 40) seen.add((r << 16) | (g << 8) | b);
+  }
+  return seen.size;
 }
 
 async function status(page) {
@@ -105,14 +165,18 @@ try {
     assert(statusField(loaded, "frames") === String(expectedFrames), `status is "${loaded}"`);
     assert(statusField(loaded, "frame") === "0", `the first frame shown should be 0: "${loaded}"`);
   });
-  await check("ArrowRight shows the next frame, ArrowLeft the previous", async () => {
+  await check("ArrowRight shows the next frame (visible in a screenshot), ArrowLeft the previous", async () => {
     assert(loaded.startsWith("ready"), "no scene to step through");
     await page.focus("#scribblefield");
     await page.keyboard.press("ArrowRight");
     await page.waitForFunction(() => / frame=1\b/.test(document.body.dataset.status), null, {
       timeout: STEP_TIMEOUT_MS,
     });
-    await page.screenshot({ path: join(outDir, "smoke-frame1.png") });
+    const shot = await page.screenshot({ path: join(outDir, "smoke-frame1.png") });
+    const colours = saturatedColours(shot);
+    assert(colours >= MIN_FRAME_COLOURS, `the screenshot has ${colours} distinct saturated colours, ` +
+      `fewer than the ${MIN_FRAME_COLOURS} of a visible frame: is the canvas blank?`);
+    console.log(`     (screenshot: ${colours} distinct saturated colours)`);
     await page.keyboard.press("ArrowLeft");
     await page.waitForFunction(() => / frame=0\b/.test(document.body.dataset.status), null, {
       timeout: STEP_TIMEOUT_MS,

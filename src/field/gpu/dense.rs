@@ -37,6 +37,8 @@ const A_TILE_CAP: u32 = 2048;
 const B_TILE_CAP: u32 = 1024;
 /// Workgroup size of `reduce_chunks`.
 const REDUCE_WORKGROUP: u32 = 256;
+/// `reduce_chunks` uses no tile constants; its pipeline is built with the shader's defaults.
+const REDUCE_SHAPE: TileShape = TileShape { tx: 16, ty: 16, kc: 16 };
 /// Enough workgroups for the weight gradient to keep a GPU (or lavapipe's threads) busy; more
 /// only lengthens the second reduction.
 const WEIGHT_GRADIENT_TARGET_WORKGROUPS: u64 = 1024;
@@ -81,7 +83,7 @@ impl RowView {
                 ),
             ));
         }
-        let needed = (u64::from(rows) - 1) * u64::from(self.stride) + u64::from(self.offset) + u64::from(width);
+        let needed = u64::from(rows).saturating_sub(1) * u64::from(self.stride) + u64::from(self.offset) + u64::from(width);
         let available = self.buffer.size() / 4;
         if needed > available {
             return Err(GpuError::invalid_argument(

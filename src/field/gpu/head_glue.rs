@@ -17,6 +17,11 @@ pub struct GlueDims {
     pub geometry: u32,
     pub feature: u32,
     pub sh: u32,
+    /// Layout of the composite's gradient rows (`CompositeLayout`).
+    pub grad_stride: u32,
+    pub grad_h0: u32,
+    pub grad_feature: u32,
+    pub _pad: u32,
 }
 
 /// The per-sample buffers the glue reads and writes (row strides in `GlueDims` terms).
@@ -30,9 +35,9 @@ pub struct GlueBuffers<'a> {
     /// [relu(f) | g], stride feature + geometry.
     pub semantic_in: &'a wgpu::Buffer,
     pub semantic_in_grad: &'a wgpu::Buffer,
-    /// Holds the composite's dL/df on entry; `gather_feature` adds the semantic path.
-    pub feature_out_grad: &'a wgpu::Buffer,
-    /// Column 0 (dL/dh0) is written by the composite; `gather_geometry` writes the rest.
+    /// The composite's gradient rows; `gather_feature` adds the semantic path into dL/df.
+    pub grad_heads: &'a wgpu::Buffer,
+    /// [dL/dh0 | dL/dg], stride 1 + geometry: written whole by `gather_geometry`.
     pub density_out_grad: &'a wgpu::Buffer,
     pub color_in_grad: &'a wgpu::Buffer,
     /// The feature MLP's input gradient, stride geometry.
@@ -90,7 +95,7 @@ impl HeadGluePass {
                 (0, &uniform),
                 (2, b.feature_out),
                 (5, b.semantic_in_grad),
-                (6, b.feature_out_grad),
+                (6, b.grad_heads),
             ],
         )
         .await?;
@@ -100,6 +105,7 @@ impl HeadGluePass {
             &[
                 (0, &uniform),
                 (5, b.semantic_in_grad),
+                (6, b.grad_heads),
                 (7, b.density_out_grad),
                 (8, b.color_in_grad),
                 (9, b.feature_in_grad),
