@@ -14,10 +14,16 @@ struct ShUniforms {
     samples_per_ray: u32,
     row_stride: u32,
     column_offset: u32,
+    // Ray r's direction is directions[r * direction_stride + direction_offset] (in vec4s), so
+    // the pass can read the `dir` field of the ray batch's `RayGeometry` records in place.
+    direction_stride: u32,
+    direction_offset: u32,
+    _pad0: u32,
+    _pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> sh_layout: ShUniforms;
-// One unit direction per ray (xyz; w unused).
+// Unit directions (xyz; w unused), see direction_stride.
 @group(0) @binding(1) var<storage, read> directions: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read_write> sh_out: array<f32>;
 
@@ -31,7 +37,8 @@ fn sh_encode(
     if sample >= sh_layout.sample_count {
         return;
     }
-    let d = directions[sample / sh_layout.samples_per_ray].xyz;
+    let ray = sample / sh_layout.samples_per_ray;
+    let d = directions[ray * sh_layout.direction_stride + sh_layout.direction_offset].xyz;
     let x = d.x;
     let y = d.y;
     let z = d.z;

@@ -106,6 +106,24 @@ pub struct ShUniforms {
     pub samples_per_ray: u32,
     pub row_stride: u32,
     pub column_offset: u32,
+    pub direction_stride: u32,
+    pub direction_offset: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+}
+
+/// Where ray r's direction sits in the directions buffer: `vec4` index `r·stride + offset`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DirectionLayout {
+    pub stride: usize,
+    pub offset: usize,
+}
+
+impl DirectionLayout {
+    /// One direction per ray, back to back.
+    pub const PACKED: DirectionLayout = DirectionLayout { stride: 1, offset: 0 };
+    /// The `dir` field of the ray batch's `RayGeometry` records (3 vec4s each, dir second).
+    pub const RAY_GEOMETRY: DirectionLayout = DirectionLayout { stride: 3, offset: 1 };
 }
 
 /// The buffers of [`PositionEncodePass`].
@@ -368,6 +386,17 @@ impl DirectionShPass {
         layout: ShOutputLayout,
         buffers: DirectionShBuffers<'_>,
     ) -> Result<Self, GpuError> {
+        Self::with_directions(ctx, samples, layout, DirectionLayout::PACKED, buffers).await
+    }
+
+    /// As [`DirectionShPass::new`] with directions laid out as `directions_at` says.
+    pub async fn with_directions(
+        ctx: &GpuContext,
+        samples: usize,
+        layout: ShOutputLayout,
+        directions_at: DirectionLayout,
+        buffers: DirectionShBuffers<'_>,
+    ) -> Result<Self, GpuError> {
         const WHAT: &str = "view direction SH";
         check_samples(WHAT, samples)?;
         if layout.samples_per_ray == 0 || layout.column_offset + SH_COEFFS > layout.row_stride {
@@ -377,7 +406,20 @@ impl DirectionShPass {
             ));
         }
         let rays = samples.div_ceil(layout.samples_per_ray) as u64;
-        check_buffer(ctx, WHAT, "directions", buffers.directions, rays * VEC4_BYTES)?;
+        if directions_at.stride == 0 || directions_at.offset >= directions_at.stride {
+            return Err(GpuError::invalid_argument(
+                WHAT,
+                format!("{directions_at:?}: offset must be below a positive stride"),
+            ));
+        }
+        let direction_vec4s = (rays - 1) * directions_at.stride as u64 + directions_at.offset as u64 + 1;
+        check_buffer(
+            ctx,
+            WHAT,
+            "directions",
+            buffers.directions,
+            direction_vec4s * VEC4_BYTES,
+        )?;
         let output_values = samples as u64 * layout.row_stride as u64;
         check_buffer(ctx, WHAT, "output", buffers.output, output_values * F32_BYTES)?;
         check_index_range(WHAT, output_values)?;
@@ -387,6 +429,10 @@ impl DirectionShPass {
             samples_per_ray: index_u32("samples per ray", layout.samples_per_ray)?,
             row_stride: index_u32("SH row stride", layout.row_stride)?,
             column_offset: index_u32("SH column offset", layout.column_offset)?,
+            direction_stride: index_u32("direction stride", directions_at.stride)?,
+            direction_offset: index_u32("direction offset", directions_at.offset)?,
+            _pad0: 0,
+            _pad1: 0,
         };
         let dispatch = Dispatch1d::for_device(ctx, samples as u64, WORKGROUP_SIZE)?;
         let pipeline = create_compute_pipeline(ctx, &KernelSpec::new(WHAT, shaders::SH_ENCODE, "sh_encode")).await?;
@@ -454,7 +500,7 @@ mod tests {
     fn uniform_blocks_match_the_wgsl_layout() {
         // 12 scalars then 32 vec4<u32> (stride 16 in the uniform address space).
         assert_eq!(size_of::<HashGridUniforms>(), 12 * 4 + MAX_HASH_LEVELS * 16);
-        assert_eq!(size_of::<ShUniforms>(), 16);
+        assert_eq!(size_of::<ShUniforms>(), 32);
     }
 
     #[test]
