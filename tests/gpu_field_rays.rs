@@ -259,9 +259,9 @@ fn check_ray_against_scene(scene: &Scene, geometry: &RayGeometry, target: &[u32]
     }
     let f = |w: usize| f32::from_bits(target[w]);
     let rgb = scene.frames[frame as usize].rgb.get_pixel(x, y).0;
-    for c in 0..3 {
+    for (c, value) in rgb.iter().enumerate() {
         assert!(
-            (f(TARGET_RGB + c) - f32::from(rgb[c]) / 255.0).abs() < 1e-6,
+            (f(TARGET_RGB + c) - f32::from(*value) / 255.0).abs() < 1e-6,
             "{what}: colour"
         );
     }

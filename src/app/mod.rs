@@ -139,6 +139,14 @@ fn show_failure(ui: &mut egui::Ui, url: &str, message: &str) {
     });
 }
 
+/// A clicked button or checkbox keeps keyboard focus, and egui then spends the arrow keys on
+/// moving focus between widgets; after a click the arrows should step through frames again.
+fn release_focus_after_click(responses: &[egui::Response]) {
+    for response in responses.iter().filter(|r| r.clicked()) {
+        response.surrender_focus();
+    }
+}
+
 fn megabytes(bytes: u64) -> String {
     format!("{:.1} MB", bytes as f64 / 1e6)
 }
@@ -152,6 +160,8 @@ struct Viewer {
     show_ground_truth: bool,
     overlay_opacity: f32,
     show_depth: bool,
+    /// Widgets that use the arrow keys themselves while focused (from the last frame drawn).
+    arrow_key_widgets: Vec<egui::Id>,
 }
 
 impl Viewer {
@@ -164,41 +174,49 @@ impl Viewer {
             show_ground_truth: false,
             overlay_opacity: 0.5,
             show_depth: true,
+            arrow_key_widgets: Vec::new(),
         }
     }
 
     fn show(&mut self, ui: &mut egui::Ui, gpu: &str) {
         let frame_count = self.scene.frames.len();
         self.handle_keys(ui.ctx());
+        self.arrow_key_widgets.clear();
 
         egui::Panel::left("scene").default_size(260.0).show(ui, |ui| {
             egui::ScrollArea::vertical().show(ui, |ui| {
                 scene_panel::show(ui, &self.scene, &self.url, gpu);
                 ui.add_space(8.0);
                 ui.heading("View");
-                ui.checkbox(&mut self.show_depth, "depth");
-                ui.add_enabled(
+                let depth = ui.checkbox(&mut self.show_depth, "depth");
+                let ground_truth = ui.add_enabled(
                     self.scene.has_gt(),
                     egui::Checkbox::new(&mut self.show_ground_truth, "ground truth"),
                 );
-                ui.add_enabled(
+                release_focus_after_click(&[depth, ground_truth]);
+                let opacity = ui.add_enabled(
                     self.scene.has_gt() && self.show_ground_truth,
                     egui::Slider::new(&mut self.overlay_opacity, 0.0..=1.0).text("opacity"),
                 );
+                self.arrow_key_widgets.push(opacity.id);
             });
         });
         egui::Panel::bottom("frames").show(ui, |ui| {
             ui.add_space(4.0);
             ui.horizontal(|ui| {
-                if ui.button("◀").on_hover_text("previous frame (←)").clicked() {
+                let back = ui.button("◀").on_hover_text("previous frame (←)");
+                let forward = ui.button("▶").on_hover_text("next frame (→)");
+                if back.clicked() {
                     self.step(-1);
                 }
-                if ui.button("▶").on_hover_text("next frame (→)").clicked() {
+                if forward.clicked() {
                     self.step(1);
                 }
+                release_focus_after_click(&[back, forward]);
                 let last = frame_count.saturating_sub(1);
                 ui.spacing_mut().slider_width = (ui.available_width() - 160.0).max(100.0);
-                ui.add(egui::Slider::new(&mut self.frame, 0..=last).text(format!("of {frame_count}")));
+                let slider = ui.add(egui::Slider::new(&mut self.frame, 0..=last).text(format!("of {frame_count}")));
+                self.arrow_key_widgets.push(slider.id);
             });
             ui.add_space(4.0);
         });
@@ -246,19 +264,16 @@ impl Viewer {
         }
     }
 
-    /// Arrow keys step through frames, unless a widget has keyboard focus (a focused slider
-    /// handles the arrows itself).
+    /// Arrow keys step through frames, unless a text field or a slider has keyboard focus:
+    /// those use the arrows themselves.
     fn handle_keys(&mut self, ctx: &egui::Context) {
-        if ctx.memory(|m| m.focused().is_some()) {
+        let focused = ctx.memory(|m| m.focused());
+        if ctx.egui_wants_keyboard_input() || focused.is_some_and(|id| self.arrow_key_widgets.contains(&id)) {
             return;
         }
-        let (back, forward) = ctx.input(|i| (i.key_pressed(Key::ArrowLeft), i.key_pressed(Key::ArrowRight)));
-        if back {
-            self.step(-1);
-        }
-        if forward {
-            self.step(1);
-        }
+        // Count presses: on a slow device several can arrive between two frames.
+        let (back, forward) = ctx.input(|i| (i.num_presses(Key::ArrowLeft), i.num_presses(Key::ArrowRight)));
+        self.step(forward as isize - back as isize);
     }
 
     fn step(&mut self, delta: isize) {

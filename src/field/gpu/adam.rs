@@ -71,7 +71,7 @@ impl AdamPass {
         segment_len: u64,
     ) -> Result<AdamPass, GpuError> {
         let align = u64::from(ctx.limits.min_storage_buffer_offset_alignment.max(4)) / 4;
-        if segment_len == 0 || segment_len % align != 0 || segment_len > segment_length(ctx) {
+        if segment_len == 0 || !segment_len.is_multiple_of(align) || segment_len > segment_length(ctx) {
             return Err(GpuError::invalid_argument(
                 "adam",
                 format!(

@@ -83,7 +83,8 @@ impl RowView {
                 ),
             ));
         }
-        let needed = u64::from(rows).saturating_sub(1) * u64::from(self.stride) + u64::from(self.offset) + u64::from(width);
+        let needed =
+            u64::from(rows).saturating_sub(1) * u64::from(self.stride) + u64::from(self.offset) + u64::from(width);
         let available = self.buffer.size() / 4;
         if needed > available {
             return Err(GpuError::invalid_argument(
@@ -546,9 +547,7 @@ impl DenseBackward {
             workgroups,
         };
 
-        let pipeline = pipelines
-            .get(ctx, DenseKernel::ReduceChunks, TileShape::for_product(16, None))
-            .await?;
+        let pipeline = pipelines.get(ctx, DenseKernel::ReduceChunks, REDUCE_SHAPE).await?;
         let bind = bind_group(
             ctx,
             &label,

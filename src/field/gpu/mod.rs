@@ -12,3 +12,4 @@ pub mod encoding;
 pub mod head_glue;
 pub mod rays;
 pub mod scene_buffers;
+pub mod trainer;

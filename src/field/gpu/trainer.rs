@@ -1,0 +1,598 @@
+//! The whole training step on the GPU: every pass of `field::gpu`, recorded into one command
+//! buffer per step with no CPU readback; losses are read back now and then, asynchronously.
+//!
+//! Order of one step (sample-major buffers, see the module docs of `field::gpu`):
+//! ```text
+//! rays → samples → encoding, SH → density MLP → feature MLP → glue (colour/semantic inputs)
+//!   → colour MLP, semantic MLP → composite + losses + their backward
+//!   → semantic⁻¹ → glue (df) → feature⁻¹ → colour⁻¹ → glue (dg) → density⁻¹ → hash grid⁻¹ → Adam
+//! ```
+//! The same code runs natively and in the browser: nothing here blocks.
+use crate::field::config::FieldConfig;
+use crate::field::params::ParamLayout;
+use crate::field::reference::LossTerms;
+use crate::gpu::buffers::{PendingRead, read_buffer_async, storage_buffer_from, storage_buffer_zeroed};
+use crate::gpu::timing::{PassTime, PassTimer, total_by_name};
+use crate::gpu::{GpuContext, GpuError};
+use crate::labels::LabelSet;
+use crate::scene::Scene;
+
+use super::adam::{AdamBuffers, AdamPass};
+use super::composite::{CompositeInputs, CompositeLayout, CompositePass, HeadSource, LOSS_WORDS};
+use super::dense::{DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView};
+use super::encoding::{
+    DirectionLayout, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
+    PositionEncodeBuffers, PositionEncodePass, ShOutputLayout,
+};
+use super::head_glue::{GlueBuffers, GlueDims, HeadGluePass};
+use super::rays::{RayBatchPass, SamplePointsPass, StepUniforms};
+use super::scene_buffers::{LabelIndex, SceneBuffers};
+
+const SH: u32 = 16;
+
+/// Losses of one step, as read back.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepLosses {
+    pub step: u32,
+    pub terms: LossTerms,
+}
+
+/// The per-sample buffers between passes, owned here so passes can share them.
+struct SampleBuffers {
+    encoding: wgpu::Buffer,
+    encoding_grad: wgpu::Buffer,
+    density_out: wgpu::Buffer,
+    density_out_grad: wgpu::Buffer,
+    feature_out: wgpu::Buffer,
+    feature_in_grad: wgpu::Buffer,
+    color_in: wgpu::Buffer,
+    color_in_grad: wgpu::Buffer,
+    semantic_in: wgpu::Buffer,
+    semantic_in_grad: wgpu::Buffer,
+}
+
+impl SampleBuffers {
+    fn new(ctx: &GpuContext, cfg: &FieldConfig) -> Result<Self, GpuError> {
+        let n = cfg.batch_rays as usize * cfg.samples_per_ray();
+        let (e, g, d) = (cfg.encoding_dim(), cfg.geometry_dim as usize, cfg.feature_dim as usize);
+        let sh = SH as usize;
+        let make = |label: &str, width: usize| {
+            ctx.ensure_storage_binding_fits(label, (n * width * 4) as u64)?;
+            storage_buffer_zeroed::<f32>(ctx, label, n * width)
+        };
+        Ok(SampleBuffers {
+            encoding: make("encoding", e)?,
+            encoding_grad: make("encoding gradient", e)?,
+            density_out: make("density output", 1 + g)?,
+            density_out_grad: make("density output gradient", 1 + g)?,
+            feature_out: make("feature output", d)?,
+            feature_in_grad: make("feature input gradient", g)?,
+            color_in: make("colour input", sh + g)?,
+            color_in_grad: make("colour input gradient", sh + g)?,
+            semantic_in: make("semantic input", d + g)?,
+            semantic_in_grad: make("semantic input gradient", d + g)?,
+        })
+    }
+}
+
+/// The field's parameters and optimizer state on the GPU.
+struct Optimizer {
+    params: wgpu::Buffer,
+    grads: wgpu::Buffer,
+    _first_moment: wgpu::Buffer,
+    _second_moment: wgpu::Buffer,
+}
+
+pub struct Trainer {
+    ctx: GpuContext,
+    cfg: FieldConfig,
+    layout: ParamLayout,
+    scene: SceneBuffers,
+    step_uniforms: wgpu::Buffer,
+    optimizer: Optimizer,
+    /// Bound into the passes; kept here so their lifetime is plain.
+    _samples: SampleBuffers,
+    ray_batch: RayBatchPass,
+    sample_points: SamplePointsPass,
+    encode: PositionEncodePass,
+    sh: DirectionShPass,
+    density: MlpPass,
+    feature: MlpPass,
+    color: MlpPass,
+    semantic: MlpPass,
+    glue: HeadGluePass,
+    composite: CompositePass,
+    hash_backward: HashGridBackwardPass,
+    adam: AdamPass,
+    step: u32,
+    seed: u32,
+    has_labels: bool,
+    pending_losses: Option<(u32, PendingRead<f32>)>,
+    last_losses: Option<StepLosses>,
+}
+
+impl Trainer {
+    /// Uploads `scene` and builds every pass for `cfg` (whose `num_classes` must cover the
+    /// labels' classes). Parameters start from `ParamLayout::init(seed)`.
+    pub async fn new(ctx: &GpuContext, scene: &Scene, cfg: &FieldConfig, seed: u32) -> Result<Self, GpuError> {
+        cfg.validate()
+            .map_err(|e| GpuError::invalid_argument("field config", e.to_string()))?;
+        let layout = ParamLayout::new(cfg);
+        let initial = layout.init(u64::from(seed));
+        let total = initial.len();
+        for what in ["parameters", "gradients", "Adam moments"] {
+            ctx.ensure_storage_binding_fits(what, (total * 4) as u64)?;
+        }
+        let optimizer = Optimizer {
+            params: storage_buffer_from(ctx, "field parameters", &initial)?,
+            grads: storage_buffer_zeroed::<f32>(ctx, "field gradients", total)?,
+            _first_moment: storage_buffer_zeroed::<f32>(ctx, "Adam first moment", total)?,
+            _second_moment: storage_buffer_zeroed::<f32>(ctx, "Adam second moment", total)?,
+        };
+        let scene_buffers = SceneBuffers::upload(ctx, scene, cfg)?;
+        let step_uniforms = crate::gpu::buffers::uniform_buffer_from(
+            ctx,
+            "step uniforms",
+            &StepUniforms::for_step(cfg, 1, seed, cfg.adam.lr_warmup),
+        );
+        let samples = SampleBuffers::new(ctx, cfg)?;
+        let n = cfg.batch_rays * cfg.samples_per_ray() as u32;
+        let (g, d, c) = (cfg.geometry_dim, cfg.feature_dim, cfg.num_classes);
+
+        let ray_batch = RayBatchPass::new(ctx, cfg, &scene_buffers, &step_uniforms).await?;
+        let sample_points = SamplePointsPass::new(ctx, cfg, &scene.bounds, &step_uniforms, &ray_batch.rays).await?;
+        let encode = PositionEncodePass::new(
+            ctx,
+            cfg,
+            n as usize,
+            PositionEncodeBuffers {
+                positions: &sample_points.positions,
+                params: &optimizer.params,
+                table_offset: layout.hash_table.start,
+                encoding: &samples.encoding,
+            },
+        )
+        .await?;
+        let sh = DirectionShPass::with_directions(
+            ctx,
+            n as usize,
+            ShOutputLayout {
+                samples_per_ray: cfg.samples_per_ray(),
+                row_stride: (SH + g) as usize,
+                column_offset: 0,
+            },
+            DirectionLayout::RAY_GEOMETRY,
+            DirectionShBuffers {
+                directions: &ray_batch.rays,
+                output: &samples.color_in,
+            },
+        )
+        .await?;
+
+        // The composite's gradient rows exist only once it is built, but the MLPs' backward
+        // passes read them: build the forward-facing pieces first, then the composite, then the
+        // MLPs with their gradients.
+        let composite_layout = CompositeLayout::new(cfg);
+        let grad_stride = composite_layout.grad_stride() as u32;
+        let mut pipelines = DensePipelines::new();
+        let color_out = storage_buffer_zeroed::<f32>(ctx, "colour output", n as usize * 3)?;
+        let logits = storage_buffer_zeroed::<f32>(ctx, "semantic logits", n as usize * c as usize)?;
+        let composite = CompositePass::new(
+            ctx,
+            cfg,
+            &CompositeInputs {
+                step_uniforms: &step_uniforms,
+                h0: HeadSource {
+                    buffer: &samples.density_out,
+                    stride: 1 + g,
+                    offset: 0,
+                },
+                color: HeadSource {
+                    buffer: &color_out,
+                    stride: 3,
+                    offset: 0,
+                },
+                logits: HeadSource {
+                    buffer: &logits,
+                    stride: c,
+                    offset: 0,
+                },
+                feature: HeadSource {
+                    buffer: &samples.feature_out,
+                    stride: d,
+                    offset: 0,
+                },
+                intervals: &sample_points.intervals,
+                targets: &ray_batch.targets,
+            },
+        )
+        .await?;
+        let grad_view = |offset: usize| RowView {
+            buffer: composite.grad_heads.clone(),
+            stride: grad_stride,
+            offset: offset as u32,
+        };
+        let grads = &optimizer.grads;
+        let density = MlpPass::new(
+            ctx,
+            &mut pipelines,
+            MlpPassDesc {
+                label: "density",
+                layout: &layout.density,
+                rows: n,
+                params: &optimizer.params,
+                input: RowView::packed(&samples.encoding, cfg.encoding_dim() as u32),
+                output: Some(RowView::packed(&samples.density_out, 1 + g)),
+                gradients: Some(MlpGradients {
+                    grads: grads.clone(),
+                    output_grad: RowView::packed(&samples.density_out_grad, 1 + g),
+                    input_grad: cfg
+                        .encoding
+                        .uses_hash_grid()
+                        .then(|| RowView::packed(&samples.encoding_grad, cfg.encoding_dim() as u32)),
+                }),
+            },
+        )
+        .await?;
+        let feature = MlpPass::new(
+            ctx,
+            &mut pipelines,
+            MlpPassDesc {
+                label: "feature",
+                layout: &layout.feature,
+                rows: n,
+                params: &optimizer.params,
+                input: RowView {
+                    buffer: samples.density_out.clone(),
+                    stride: 1 + g,
+                    offset: 1,
+                },
+                output: Some(RowView::packed(&samples.feature_out, d)),
+                gradients: Some(MlpGradients {
+                    grads: grads.clone(),
+                    output_grad: grad_view(composite_layout.grad_feature_offset()),
+                    input_grad: Some(RowView::packed(&samples.feature_in_grad, g)),
+                }),
+            },
+        )
+        .await?;
+        let color = MlpPass::new(
+            ctx,
+            &mut pipelines,
+            MlpPassDesc {
+                label: "colour",
+                layout: &layout.color,
+                rows: n,
+                params: &optimizer.params,
+                input: RowView::packed(&samples.color_in, SH + g),
+                output: Some(RowView::packed(&color_out, 3)),
+                gradients: Some(MlpGradients {
+                    grads: grads.clone(),
+                    output_grad: grad_view(CompositeLayout::GRAD_COLOR),
+                    input_grad: Some(RowView::packed(&samples.color_in_grad, SH + g)),
+                }),
+            },
+        )
+        .await?;
+        let semantic = MlpPass::new(
+            ctx,
+            &mut pipelines,
+            MlpPassDesc {
+                label: "semantic",
+                layout: &layout.semantic,
+                rows: n,
+                params: &optimizer.params,
+                input: RowView::packed(&samples.semantic_in, d + g),
+                output: Some(RowView::packed(&logits, c)),
+                gradients: Some(MlpGradients {
+                    grads: grads.clone(),
+                    output_grad: grad_view(composite_layout.grad_logits_offset()),
+                    input_grad: Some(RowView::packed(&samples.semantic_in_grad, d + g)),
+                }),
+            },
+        )
+        .await?;
+        let glue = HeadGluePass::new(
+            ctx,
+            GlueDims {
+                samples: n,
+                geometry: g,
+                feature: d,
+                sh: SH,
+                grad_stride,
+                grad_h0: CompositeLayout::GRAD_H0 as u32,
+                grad_feature: composite_layout.grad_feature_offset() as u32,
+                _pad: 0,
+            },
+            &GlueBuffers {
+                density_out: &samples.density_out,
+                feature_out: &samples.feature_out,
+                color_in: &samples.color_in,
+                semantic_in: &samples.semantic_in,
+                semantic_in_grad: &samples.semantic_in_grad,
+                grad_heads: &composite.grad_heads,
+                density_out_grad: &samples.density_out_grad,
+                color_in_grad: &samples.color_in_grad,
+                feature_in_grad: &samples.feature_in_grad,
+            },
+        )
+        .await?;
+        let hash_backward = HashGridBackwardPass::new(
+            ctx,
+            cfg,
+            n as usize,
+            HashGridBackwardBuffers {
+                positions: &sample_points.positions,
+                encoding_grad: &samples.encoding_grad,
+                gradient: grads,
+                table_offset: layout.hash_table.start,
+            },
+        )
+        .await?;
+        let adam = AdamPass::new(
+            ctx,
+            &cfg.adam,
+            total,
+            AdamBuffers {
+                params: &optimizer.params,
+                grads,
+                first_moment: &optimizer._first_moment,
+                second_moment: &optimizer._second_moment,
+            },
+            &step_uniforms,
+        )
+        .await?;
+
+        let mut trainer = Trainer {
+            ctx: ctx.clone(),
+            cfg: cfg.clone(),
+            layout,
+            scene: scene_buffers,
+            step_uniforms,
+            optimizer,
+            _samples: samples,
+            ray_batch,
+            sample_points,
+            encode,
+            sh,
+            density,
+            feature,
+            color,
+            semantic,
+            glue,
+            composite,
+            hash_backward,
+            adam,
+            step: 0,
+            seed,
+            has_labels: false,
+            pending_losses: None,
+            last_losses: None,
+        };
+        trainer.set_labels(
+            scene.labels.as_ref(),
+            scene.width,
+            scene.height,
+            scene.frames.len() as u32,
+        )?;
+        Ok(trainer)
+    }
+
+    /// Replaces the labels training draws from (after the user draws, erases or undoes).
+    pub fn set_labels(
+        &mut self,
+        labels: Option<&LabelSet>,
+        width: u32,
+        height: u32,
+        frames: u32,
+    ) -> Result<(), GpuError> {
+        let index = LabelIndex::from_labels(labels, frames, width, height, self.cfg.num_classes);
+        self.has_labels = index.labelled_pixel_count() > 0;
+        self.scene.upload_labels(&self.ctx, &index)?;
+        self.ray_batch.follow_labels(&self.ctx, &self.scene);
+        Ok(())
+    }
+
+    pub fn config(&self) -> &FieldConfig {
+        &self.cfg
+    }
+
+    pub fn layout(&self) -> &ParamLayout {
+        &self.layout
+    }
+
+    pub fn steps_done(&self) -> u32 {
+        self.step
+    }
+
+    pub fn has_labels(&self) -> bool {
+        self.has_labels
+    }
+
+    /// The learning rate of the next step: warm-up until labels exist, then the annotating one.
+    pub fn learning_rate(&self) -> f32 {
+        if self.has_labels {
+            self.cfg.adam.lr_annotating
+        } else {
+            self.cfg.adam.lr_warmup
+        }
+    }
+
+    /// Records and submits `steps` training steps (one submission each, since every step
+    /// rewrites the step uniforms). Returns at once; the GPU works on.
+    pub fn train(&mut self, steps: u32) {
+        for _ in 0..steps {
+            self.step += 1;
+            let uniforms = StepUniforms::for_step(&self.cfg, self.step, self.seed, self.learning_rate());
+            self.ctx
+                .queue
+                .write_buffer(&self.step_uniforms, 0, bytemuck::bytes_of(&uniforms));
+            let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("training step"),
+            });
+            encoder.clear_buffer(&self.optimizer.grads, 0, None);
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("training step"),
+                    timestamp_writes: None,
+                });
+                self.record_forward(&mut pass);
+                self.composite.record(&mut pass);
+                self.record_backward(&mut pass);
+                self.adam.record(&mut pass);
+            }
+            self.ctx.queue.submit([encoder.finish()]);
+        }
+    }
+
+    fn record_forward(&self, pass: &mut wgpu::ComputePass<'_>) {
+        self.ray_batch.record(pass);
+        self.sample_points.record(pass);
+        self.encode.record(pass);
+        self.sh.record(pass);
+        self.density.record_forward(pass);
+        self.feature.record_forward(pass);
+        self.glue.record_assemble(pass);
+        self.color.record_forward(pass);
+        self.semantic.record_forward(pass);
+    }
+
+    fn record_backward(&self, pass: &mut wgpu::ComputePass<'_>) {
+        // Every MLP here was built with gradients, so recording cannot fail.
+        let built = "training MLPs are built with gradients";
+        self.semantic.record_backward(pass).expect(built);
+        self.glue.record_gather_feature(pass);
+        self.feature.record_backward(pass).expect(built);
+        self.color.record_backward(pass).expect(built);
+        self.glue.record_gather_geometry(pass);
+        self.density.record_backward(pass).expect(built);
+        self.hash_backward.record(pass);
+    }
+
+    /// Trains one step with every stage in its own timed compute pass, and returns the GPU time
+    /// of each stage (`None` when the adapter has no timestamp queries). For `bench`.
+    pub async fn profile_step(&mut self) -> Result<Option<Vec<PassTime>>, GpuError> {
+        let Some(mut timer) = PassTimer::new(&self.ctx, 32) else {
+            self.train(1);
+            return Ok(None);
+        };
+        self.step += 1;
+        let uniforms = StepUniforms::for_step(&self.cfg, self.step, self.seed, self.learning_rate());
+        self.ctx
+            .queue
+            .write_buffer(&self.step_uniforms, 0, bytemuck::bytes_of(&uniforms));
+        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        encoder.clear_buffer(&self.optimizer.grads, 0, None);
+        let built = "training MLPs are built with gradients";
+        type Stage<'a> = (&'a str, Box<dyn Fn(&mut wgpu::ComputePass<'_>) + 'a>);
+        let stages: Vec<Stage<'_>> = vec![
+            ("rays", Box::new(|p| self.ray_batch.record(p))),
+            ("samples", Box::new(|p| self.sample_points.record(p))),
+            ("encoding", Box::new(|p| self.encode.record(p))),
+            ("sh", Box::new(|p| self.sh.record(p))),
+            ("density mlp", Box::new(|p| self.density.record_forward(p))),
+            ("feature mlp", Box::new(|p| self.feature.record_forward(p))),
+            ("glue", Box::new(|p| self.glue.record_assemble(p))),
+            ("colour mlp", Box::new(|p| self.color.record_forward(p))),
+            ("semantic mlp", Box::new(|p| self.semantic.record_forward(p))),
+            ("composite", Box::new(|p| self.composite.record(p))),
+            (
+                "semantic mlp backward",
+                Box::new(|p| self.semantic.record_backward(p).expect(built)),
+            ),
+            ("glue backward", Box::new(|p| self.glue.record_gather_feature(p))),
+            (
+                "feature mlp backward",
+                Box::new(|p| self.feature.record_backward(p).expect(built)),
+            ),
+            (
+                "colour mlp backward",
+                Box::new(|p| self.color.record_backward(p).expect(built)),
+            ),
+            ("glue backward", Box::new(|p| self.glue.record_gather_geometry(p))),
+            (
+                "density mlp backward",
+                Box::new(|p| self.density.record_backward(p).expect(built)),
+            ),
+            ("encoding backward", Box::new(|p| self.hash_backward.record(p))),
+            ("adam", Box::new(|p| self.adam.record(p))),
+        ];
+        for (name, record) in &stages {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(name),
+                timestamp_writes: timer.timestamp_writes(name),
+            });
+            record(&mut pass);
+        }
+        drop(stages);
+        timer.resolve(&mut encoder);
+        self.ctx.queue.submit([encoder.finish()]);
+        Ok(Some(total_by_name(&timer.read(&self.ctx).times().await?)))
+    }
+
+    /// Starts reading the losses of the latest step, unless a read is already under way.
+    pub fn request_losses(&mut self) {
+        if self.pending_losses.is_none() && self.step > 0 {
+            let read = read_buffer_async::<f32>(&self.ctx, &self.composite.ray_outputs);
+            self.pending_losses = Some((self.step, read));
+        }
+    }
+
+    /// The most recent losses read back, polling a pending read without blocking.
+    pub fn poll_losses(&mut self) -> Result<Option<StepLosses>, GpuError> {
+        if let Some((step, read)) = &mut self.pending_losses
+            && let Some(result) = read.try_take()
+        {
+            let step = *step;
+            self.pending_losses = None;
+            let rows = result?;
+            let stride = self.composite.layout.ray_output_stride();
+            let mut terms = LossTerms::default();
+            for row in rows.chunks_exact(stride) {
+                let l = &row[..LOSS_WORDS];
+                terms.add(&LossTerms {
+                    rgb: l[0] as f64,
+                    depth: l[1] as f64,
+                    semantic: l[2] as f64,
+                    feature: l[3] as f64,
+                });
+            }
+            self.last_losses = Some(StepLosses { step, terms });
+        }
+        Ok(self.last_losses)
+    }
+
+    /// Native convenience: waits for the GPU and returns the losses of the latest step.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn losses_blocking(&mut self) -> Result<StepLosses, GpuError> {
+        self.request_losses();
+        loop {
+            self.ctx.wait_idle()?;
+            if self.pending_losses.is_none() {
+                break;
+            }
+            self.poll_losses()?;
+        }
+        self.last_losses
+            .ok_or_else(|| GpuError::invalid_argument("losses", "no step has been trained yet"))
+    }
+
+    /// Reads the parameters back (tests, checkpoints).
+    pub fn read_params(&self) -> PendingRead<f32> {
+        read_buffer_async::<f32>(&self.ctx, &self.optimizer.params)
+    }
+
+    /// Replaces the parameters (tests: start from the reference's values).
+    pub fn write_params(&self, params: &[f32]) -> Result<(), GpuError> {
+        if params.len() != self.layout.total {
+            return Err(GpuError::invalid_argument(
+                "parameters",
+                format!("{} values given, the layout has {}", params.len(), self.layout.total),
+            ));
+        }
+        self.ctx
+            .queue
+            .write_buffer(&self.optimizer.params, 0, bytemuck::cast_slice(params));
+        Ok(())
+    }
+}

@@ -1,0 +1,90 @@
+//! The assembled GPU trainer on the demo scene: it trains (losses fall) and nothing is NaN.
+use scribblefield::field::FieldConfig;
+use scribblefield::field::gpu::trainer::Trainer;
+use scribblefield::gpu::test_support::gpu_for_tests;
+use scribblefield::labels::LabelSet;
+use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frame};
+use scribblefield::scene::demo::{DemoOptions, demo_scene};
+
+#[test]
+fn losses_fall_on_the_demo_scene() {
+    let Some(ctx) = gpu_for_tests("losses_fall_on_the_demo_scene") else {
+        return;
+    };
+    let mut scene = demo_scene(&DemoOptions {
+        width: 64,
+        height: 48,
+        frames: 24,
+        ..Default::default()
+    })
+    .unwrap();
+    let mut labels = LabelSet::new(scene.classes.clone());
+    for f in [0u32, 12] {
+        let gt = scene.frames[f as usize].gt.clone().unwrap();
+        scribble_frame(&mut labels, f, &gt, &ScribbleOptions::default());
+    }
+    scene.labels = Some(labels);
+    let cfg = FieldConfig {
+        num_classes: scene.classes.len() as u32,
+        batch_rays: 128,
+        feature_supervision: false,
+        ..FieldConfig::small()
+    };
+    let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, 1)).unwrap();
+    trainer.train(1);
+    let first = trainer.losses_blocking().unwrap();
+    eprintln!("step 1: {:?}", first);
+    let t = std::time::Instant::now();
+    trainer.train(60);
+    let last = trainer.losses_blocking().unwrap();
+    eprintln!(
+        "step {}: {:?} ({:.2} s for 60 steps)",
+        last.step,
+        last,
+        t.elapsed().as_secs_f64()
+    );
+    assert!(last.terms.total().is_finite());
+    assert!(
+        last.terms.rgb < first.terms.rgb * 0.5,
+        "colour loss {} -> {}",
+        first.terms.rgb,
+        last.terms.rgb
+    );
+    assert!(
+        last.terms.semantic < first.terms.semantic * 0.5,
+        "semantic loss {} -> {}",
+        first.terms.semantic,
+        last.terms.semantic
+    );
+}
+
+#[test]
+#[ignore = "measurement: prints where a training step's GPU time goes"]
+fn profile_a_step() {
+    let Some(ctx) = gpu_for_tests("profile_a_step") else {
+        return;
+    };
+    let scene = demo_scene(&DemoOptions {
+        width: 64,
+        height: 48,
+        frames: 24,
+        ..Default::default()
+    })
+    .unwrap();
+    let cfg = FieldConfig {
+        num_classes: scene.classes.len() as u32,
+        batch_rays: 256,
+        ..FieldConfig::small()
+    };
+    let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, 1)).unwrap();
+    trainer.train(2);
+    for _ in 0..2 {
+        if let Some(times) = pollster::block_on(trainer.profile_step()).unwrap() {
+            let total: f64 = times.iter().map(|t| t.seconds).sum();
+            for t in &times {
+                eprintln!("{:<24} {:>9.3} ms", t.name, t.seconds * 1e3);
+            }
+            eprintln!("{:<24} {:>9.3} ms", "total", total * 1e3);
+        }
+    }
+}
