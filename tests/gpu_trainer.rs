@@ -1,5 +1,5 @@
 //! The assembled GPU trainer on the demo scene: it trains (losses fall) and nothing is NaN.
-use scribblefield::field::FieldConfig;
+use scribblefield::field::{AdamConfig, FieldConfig};
 use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::gpu::test_support::gpu_for_tests;
 use scribblefield::labels::LabelSet;
@@ -28,6 +28,8 @@ fn losses_fall_on_the_demo_scene() {
         num_classes: scene.classes.len() as u32,
         batch_rays: 128,
         feature_supervision: false,
+        // A short test: a larger step than the interactive default so 80 steps show the trend.
+        adam: AdamConfig { lr_annotating: 1e-2, ..Default::default() },
         ..FieldConfig::small()
     };
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, 1)).unwrap();
@@ -35,10 +37,10 @@ fn losses_fall_on_the_demo_scene() {
     let first = trainer.losses_blocking().unwrap();
     eprintln!("step 1: {:?}", first);
     let t = std::time::Instant::now();
-    trainer.train(60);
+    trainer.train(80);
     let last = trainer.losses_blocking().unwrap();
     eprintln!(
-        "step {}: {:?} ({:.2} s for 60 steps)",
+        "step {}: {:?} ({:.2} s for 80 steps)",
         last.step,
         last,
         t.elapsed().as_secs_f64()
