@@ -377,6 +377,12 @@ fn debug_tmp_preview() {
         });
         img.save(format!("/tmp/demo_gt{i}.png")).unwrap();
     }
-    let big = demo_scene(&DemoOptions { seed: 7, width: 480, height: 360, frames: 36 }).unwrap();
+    let big = demo_scene(&DemoOptions {
+        seed: 7,
+        width: 480,
+        height: 360,
+        frames: 36,
+    })
+    .unwrap();
     big.frames[5].rgb.save("/tmp/demo_big_seed7.png").unwrap();
 }

@@ -4,12 +4,16 @@ use scribblefield::gpu::buffers::{read_buffer_blocking, storage_buffer_from, sto
 use scribblefield::gpu::test_support::gpu_for_tests;
 
 fn values(len: usize, salt: f32) -> Vec<f32> {
-    (0..len).map(|i| ((i as f32 * 0.618 + salt).fract() - 0.5) * 3.0).collect()
+    (0..len)
+        .map(|i| ((i as f32 * 0.618 + salt).fract() - 0.5) * 3.0)
+        .collect()
 }
 
 #[test]
 fn glue_matches_reference_arithmetic() {
-    let Some(ctx) = gpu_for_tests("glue_matches_reference_arithmetic") else { return };
+    let Some(ctx) = gpu_for_tests("glue_matches_reference_arithmetic") else {
+        return;
+    };
     let (n, g, d, sh) = (1037usize, 15usize, 8usize, 16usize);
     // Composite rows [dh0, dcolour (3), dlogits (C = 2), df (D)].
     let (stride, h0_at, f_at) = (1 + 3 + 2 + d, 0usize, 6usize);
@@ -70,18 +74,33 @@ fn glue_matches_reference_arithmetic() {
         let geo = &density_out[s * (1 + g) + 1..(s + 1) * (1 + g)];
         let f = &feature_out[s * d..(s + 1) * d];
         let row = s * (sh + g);
-        assert_eq!(&color_in[row..row + sh], &color_sh[row..row + sh], "SH columns untouched");
+        assert_eq!(
+            &color_in[row..row + sh],
+            &color_sh[row..row + sh],
+            "SH columns untouched"
+        );
         assert_eq!(&color_in[row + sh..row + sh + g], geo);
         let relu: Vec<f32> = f.iter().map(|v| v.max(0.0)).collect();
         assert_eq!(&semantic_in[s * (d + g)..s * (d + g) + d], &relu[..]);
         assert_eq!(&semantic_in[s * (d + g) + d..(s + 1) * (d + g)], geo);
         for k in 0..d {
             let at = s * stride + f_at + k;
-            let via_semantic = if f[k] > 0.0 { semantic_in_grad[s * (d + g) + k] } else { 0.0 };
+            let via_semantic = if f[k] > 0.0 {
+                semantic_in_grad[s * (d + g) + k]
+            } else {
+                0.0
+            };
             assert_eq!(grad_heads[at], grad_heads0[at] + via_semantic);
         }
-        assert_eq!(&grad_heads[s * stride..s * stride + f_at], &grad_heads0[s * stride..s * stride + f_at]);
-        assert_eq!(density_grad[s * (1 + g)], grad_heads0[s * stride + h0_at], "dL/dh0 copied");
+        assert_eq!(
+            &grad_heads[s * stride..s * stride + f_at],
+            &grad_heads0[s * stride..s * stride + f_at]
+        );
+        assert_eq!(
+            density_grad[s * (1 + g)],
+            grad_heads0[s * stride + h0_at],
+            "dL/dh0 copied"
+        );
         for j in 0..g {
             let want = color_in_grad[row + sh + j] + semantic_in_grad[s * (d + g) + d + j] + feature_in_grad[s * g + j];
             assert!((density_grad[s * (1 + g) + 1 + j] - want).abs() <= 1e-6 * want.abs().max(1.0));

@@ -1,6 +1,6 @@
 //! The assembled GPU trainer on the demo scene: it trains (losses fall) and nothing is NaN.
-use scribblefield::field::{AdamConfig, FieldConfig};
 use scribblefield::field::gpu::trainer::Trainer;
+use scribblefield::field::{AdamConfig, FieldConfig};
 use scribblefield::gpu::test_support::gpu_for_tests;
 use scribblefield::labels::LabelSet;
 use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frame};
@@ -29,7 +29,10 @@ fn losses_fall_on_the_demo_scene() {
         batch_rays: 128,
         feature_supervision: false,
         // A short test: a larger step than the interactive default so 80 steps show the trend.
-        adam: AdamConfig { lr_annotating: 1e-2, ..Default::default() },
+        adam: AdamConfig {
+            lr_annotating: 1e-2,
+            ..Default::default()
+        },
         ..FieldConfig::small()
     };
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, 1)).unwrap();

@@ -149,9 +149,10 @@ impl Shape {
             Shape::RoomInterior { .. } => None,
             Shape::Cuboid { centre, half, .. } => Some((centre, half.length())),
             Shape::Sphere { centre, radius } => Some((centre, radius)),
-            Shape::Cylinder { base, radius, height } | Shape::Cone { base, radius, height } => {
-                Some((base + DVec3::Z * height * 0.5, DVec2::new(radius, height * 0.5).length()))
-            }
+            Shape::Cylinder { base, radius, height } | Shape::Cone { base, radius, height } => Some((
+                base + DVec3::Z * height * 0.5,
+                DVec2::new(radius, height * 0.5).length(),
+            )),
         }
     }
 
@@ -291,7 +292,7 @@ fn disc_hit(ray: &Ray, z: f64, radius: f64, up: bool, t_min: f64, t_max: f64) ->
     let t = (z - ray.origin.z) / ray.dir.z;
     let local = ray.at(t);
     let inside = local.truncate().length_squared() <= radius * radius;
-    (t > t_min && t < t_max && inside).then(|| SurfaceHit {
+    (t > t_min && t < t_max && inside).then_some(SurfaceHit {
         t,
         normal: if up { DVec3::Z } else { DVec3::NEG_Z },
         local,
@@ -584,15 +585,24 @@ mod tests {
                     assert!((p - sphere.0).length() <= sphere.1 + 1e-12, "{shape:?}: {p} pokes out");
                 }
                 let origin = random_unit(&mut rng) * 2.0;
-                let ray = Ray { origin, dir: (p - origin) * rng.range(0.3, 3.0) };
+                let ray = Ray {
+                    origin,
+                    dir: (p - origin) * rng.range(0.3, 3.0),
+                };
                 let t_max = rng.range(0.0, 3.0);
                 if shape.intersect(&ray, 0.0, t_max).is_some() {
                     assert!(may_hit_sphere(&ray, t_max, sphere), "{shape:?}: a hit was rejected");
                 }
             }
-            let away = Ray { origin: sphere.0 + DVec3::X * (sphere.1 + 1.0), dir: DVec3::Y };
+            let away = Ray {
+                origin: sphere.0 + DVec3::X * (sphere.1 + 1.0),
+                dir: DVec3::Y,
+            };
             assert!(!may_hit_sphere(&away, f64::INFINITY, sphere));
-            let short = Ray { origin: sphere.0 + DVec3::X * (sphere.1 + 1.0), dir: DVec3::NEG_X };
+            let short = Ray {
+                origin: sphere.0 + DVec3::X * (sphere.1 + 1.0),
+                dir: DVec3::NEG_X,
+            };
             assert!(!may_hit_sphere(&short, 0.9, sphere) && may_hit_sphere(&short, 1.1, sphere));
         }
     }

@@ -195,7 +195,11 @@ impl DemoWorld {
 
         let cluster = cluster_box(&parts[1..]);
         let part_spheres = parts.iter().map(|p| p.shape.bounding_sphere()).collect();
-        DemoWorld { parts, part_spheres, cluster }
+        DemoWorld {
+            parts,
+            part_spheres,
+            cluster,
+        }
     }
 
     pub fn parts(&self) -> &[Part] {

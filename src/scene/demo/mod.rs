@@ -109,7 +109,13 @@ pub fn demo_scene(opts: &DemoOptions) -> Result<Scene> {
     let render_view = |i: u32| {
         let pose = orbit.pose(i, opts.frames);
         let r = render_frame(&world, &intrinsics, &pose, opts.width, opts.height);
-        Frame { pose, rgb: r.rgb, depth: Some(r.depth), gt: Some(r.gt), source: Some(format!("demo-{i:03}")) }
+        Frame {
+            pose,
+            rgb: r.rgb,
+            depth: Some(r.depth),
+            gt: Some(r.gt),
+            source: Some(format!("demo-{i:03}")),
+        }
     };
     let frames = render_views(opts.frames, &render_view);
     Ok(Scene {
@@ -139,7 +145,9 @@ pub fn demo_scene(opts: &DemoOptions) -> Result<Scene> {
 fn render_views(count: u32, render_view: &(dyn Fn(u32) -> Frame + Sync)) -> Vec<Frame> {
     #[cfg(not(target_arch = "wasm32"))]
     {
-        let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).min(count as usize);
+        let workers = std::thread::available_parallelism()
+            .map_or(1, |n| n.get())
+            .min(count as usize);
         if workers > 1 {
             let mut slots: Vec<Option<Frame>> = (0..count).map(|_| None).collect();
             let per_worker = (count as usize).div_ceil(workers);
@@ -152,7 +160,10 @@ fn render_views(count: u32, render_view: &(dyn Fn(u32) -> Frame + Sync)) -> Vec<
                     });
                 }
             });
-            return slots.into_iter().map(|f| f.expect("every worker fills its views")).collect();
+            return slots
+                .into_iter()
+                .map(|f| f.expect("every worker fills its views"))
+                .collect();
         }
     }
     (0..count).map(render_view).collect()
