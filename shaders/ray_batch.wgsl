@@ -77,6 +77,11 @@ fn ray_batch(
         pixel = labels[start + random_below(ray_random(base, STREAM_ENTRY), count)];
         label = class_id;
     }
+    write_ray(ray, pixel, label);
+}
+
+// Writes ray `ray`'s geometry and targets for the centre of global pixel `pixel`.
+fn write_ray(ray: u32, pixel: u32, label: u32) {
     let frame = pixel / scene.pixels_per_frame;
     let in_frame = pixel - frame * scene.pixels_per_frame;
     let x = in_frame % scene.width;
@@ -150,4 +155,38 @@ fn ray_batch(
         }
         targets[row + TARGET_HEADER_WORDS + d] = bitcast<u32>(value);
     }
+}
+
+// Mirrors `field::gpu::rays::TileUniforms`: the rays of a rendered tile are the consecutive
+// global pixels [first_pixel, first_pixel + count); rays past `count` miss everything.
+struct TileUniforms {
+    first_pixel: u32,
+    count: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+@group(0) @binding(9) var<uniform> tile: TileUniforms;
+
+// Rays of a frame, in pixel order, for rendering (no randomness, no labels).
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn frame_tile(
+    @builtin(workgroup_id) workgroup_id: vec3<u32>,
+    @builtin(num_workgroups) num_workgroups: vec3<u32>,
+    @builtin(local_invocation_index) local_index: u32,
+) {
+    let ray = linear_item_index(workgroup_id, num_workgroups, local_index, WORKGROUP_SIZE);
+    if ray >= step_info.batch_rays {
+        return;
+    }
+    if ray >= tile.count {
+        rays[ray] = RayGeometry(vec3<f32>(0.0), 1.0, vec3<f32>(0.0, 0.0, 1.0), 0.0, 0.0, 0.0, 0u, 0u);
+        let row = ray * (TARGET_HEADER_WORDS + scene.feature_dim);
+        for (var w = 0u; w < TARGET_HEADER_WORDS + scene.feature_dim; w++) {
+            targets[row + w] = 0u;
+        }
+        targets[row + TARGET_LABEL] = NO_LABEL;
+        return;
+    }
+    write_ray(ray, tile.first_pixel + ray, NO_LABEL);
 }

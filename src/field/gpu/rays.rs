@@ -257,6 +257,97 @@ impl RayBatchPass {
     }
 }
 
+/// Uniform block mirrored by `TileUniforms` in `shaders/ray_batch.wgsl` (16 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct TileUniforms {
+    pub first_pixel: u32,
+    pub count: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+}
+
+/// Rays through consecutive pixels of a frame, in pixel order (rendering): fills the same
+/// `rays` and `targets` buffers as [`RayBatchPass`], so every later pass works unchanged.
+/// Rays past the tile's pixel count miss the scene.
+pub struct FrameTilePass {
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    dispatch: Dispatch1d,
+    tile: wgpu::Buffer,
+}
+
+impl FrameTilePass {
+    pub async fn new(
+        ctx: &GpuContext,
+        cfg: &FieldConfig,
+        scene: &SceneBuffers,
+        step_uniforms: &wgpu::Buffer,
+        batch: &RayBatchPass,
+    ) -> Result<Self, GpuError> {
+        check_batch(cfg, "frame tile pass")?;
+        let tile = uniform_buffer_from(
+            ctx,
+            "frame tile",
+            &TileUniforms {
+                first_pixel: 0,
+                count: 0,
+                _pad0: 0,
+                _pad1: 0,
+            },
+        );
+        let pipeline =
+            create_compute_pipeline(ctx, &KernelSpec::new("frame tile", shaders::RAY_BATCH, "frame_tile")).await?;
+        let dispatch = Dispatch1d::for_device(ctx, u64::from(cfg.batch_rays), RAY_WORKGROUP_SIZE)?;
+        let bindings: [(u32, &wgpu::Buffer); 9] = [
+            (0, step_uniforms),
+            (1, &scene.uniforms),
+            (2, &scene.rgb),
+            (3, &scene.depth),
+            (4, &scene.poses),
+            (5, &scene.features),
+            (7, &batch.rays),
+            (8, &batch.targets),
+            (9, &tile),
+        ];
+        let entries: Vec<wgpu::BindGroupEntry<'_>> = bindings
+            .iter()
+            .map(|&(binding, buffer)| wgpu::BindGroupEntry {
+                binding,
+                resource: buffer.as_entire_binding(),
+            })
+            .collect();
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("frame tile"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        Ok(FrameTilePass {
+            pipeline,
+            bind_group,
+            dispatch,
+            tile,
+        })
+    }
+
+    /// Points the next recorded dispatch at pixels `first_pixel .. first_pixel + count`.
+    pub fn set_tile(&self, ctx: &GpuContext, first_pixel: u32, count: u32) {
+        let tile = TileUniforms {
+            first_pixel,
+            count,
+            _pad0: 0,
+            _pad1: 0,
+        };
+        ctx.queue.write_buffer(&self.tile, 0, bytemuck::bytes_of(&tile));
+    }
+
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        self.dispatch.record(pass);
+    }
+}
+
 /// Uniform block mirrored by `SamplePlanUniforms` in `shaders/sample_points.wgsl` (32 bytes).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]

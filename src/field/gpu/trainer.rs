@@ -11,7 +11,9 @@
 use crate::field::config::FieldConfig;
 use crate::field::params::ParamLayout;
 use crate::field::reference::LossTerms;
-use crate::gpu::buffers::{PendingRead, read_buffer_async, storage_buffer_from, storage_buffer_zeroed};
+use crate::gpu::buffers::{
+    PendingRead, read_buffer_async, read_elements_async, storage_buffer_from, storage_buffer_zeroed,
+};
 use crate::gpu::timing::{PassTime, PassTimer, total_by_name};
 use crate::gpu::{GpuContext, GpuError};
 use crate::labels::LabelSet;
@@ -25,7 +27,7 @@ use super::encoding::{
     PositionEncodeBuffers, PositionEncodePass, ShOutputLayout,
 };
 use super::head_glue::{GlueBuffers, GlueDims, HeadGluePass};
-use super::rays::{RayBatchPass, SamplePointsPass, StepUniforms};
+use super::rays::{FrameTilePass, RayBatchPass, SamplePointsPass, StepUniforms};
 use super::scene_buffers::{LabelIndex, SceneBuffers};
 
 const SH: u32 = 16;
@@ -35,6 +37,20 @@ const SH: u32 = 16;
 pub struct StepLosses {
     pub step: u32,
     pub terms: LossTerms,
+}
+
+/// What the field renders for one frame, per pixel in row-major order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderedFrame {
+    pub width: u32,
+    pub height: u32,
+    /// Argmax of the rendered semantic logits.
+    pub classes: Vec<u8>,
+    /// The largest softmax probability of the rendered logits.
+    pub confidence: Vec<f32>,
+    pub rgb: Vec<[f32; 3]>,
+    /// Rendered z-depth in metres.
+    pub depth: Vec<f32>,
 }
 
 /// The per-sample buffers between passes, owned here so passes can share them.
@@ -93,6 +109,9 @@ pub struct Trainer {
     /// Bound into the passes; kept here so their lifetime is plain.
     _samples: SampleBuffers,
     ray_batch: RayBatchPass,
+    frame_tile: FrameTilePass,
+    frame_count: u32,
+    pixels_per_frame: u32,
     sample_points: SamplePointsPass,
     encode: PositionEncodePass,
     sh: DirectionShPass,
@@ -140,6 +159,7 @@ impl Trainer {
         let (g, d, c) = (cfg.geometry_dim, cfg.feature_dim, cfg.num_classes);
 
         let ray_batch = RayBatchPass::new(ctx, cfg, &scene_buffers, &step_uniforms).await?;
+        let frame_tile = FrameTilePass::new(ctx, cfg, &scene_buffers, &step_uniforms, &ray_batch).await?;
         let sample_points = SamplePointsPass::new(ctx, cfg, &scene.bounds, &step_uniforms, &ray_batch.rays).await?;
         let encode = PositionEncodePass::new(
             ctx,
@@ -352,6 +372,9 @@ impl Trainer {
             optimizer,
             _samples: samples,
             ray_batch,
+            frame_tile,
+            frame_count: scene.frames.len() as u32,
+            pixels_per_frame: scene.width * scene.height,
             sample_points,
             encode,
             sh,
@@ -528,6 +551,82 @@ impl Trainer {
         timer.resolve(&mut encoder);
         self.ctx.queue.submit([encoder.finish()]);
         Ok(Some(total_by_name(&timer.read(&self.ctx).times().await?)))
+    }
+
+    /// Renders frame `frame` at its own resolution, in tiles of one batch of rays each, with the
+    /// scene's depth guiding the samples as in training. Each tile is read back before the next
+    /// is recorded, so memory stays at one batch whatever the frame size.
+    pub async fn render_frame(&mut self, frame: u32, width: u32, height: u32) -> Result<RenderedFrame, GpuError> {
+        if frame >= self.frame_count || width * height != self.pixels_per_frame {
+            return Err(GpuError::invalid_argument(
+                "render",
+                format!(
+                    "frame {frame} of {width} x {height} is not in this scene ({} frames)",
+                    self.frame_count
+                ),
+            ));
+        }
+        let pixels = self.pixels_per_frame as usize;
+        let mut out = RenderedFrame {
+            width,
+            height,
+            classes: Vec::with_capacity(pixels),
+            confidence: Vec::with_capacity(pixels),
+            rgb: Vec::with_capacity(pixels),
+            depth: Vec::with_capacity(pixels),
+        };
+        let batch = self.cfg.batch_rays;
+        let stride = self.composite.layout.ray_output_stride();
+        let rendered = self.composite.layout.rendered_offset();
+        let classes = self.cfg.num_classes as usize;
+        let first = frame * self.pixels_per_frame;
+        // A fixed step keeps the sample jitter of a frame the same on every render.
+        let uniforms = StepUniforms::for_step(&self.cfg, 1, self.seed ^ 0x5eed, 0.0);
+        let mut done = 0u32;
+        while done < self.pixels_per_frame {
+            let count = (self.pixels_per_frame - done).min(batch);
+            self.ctx
+                .queue
+                .write_buffer(&self.step_uniforms, 0, bytemuck::bytes_of(&uniforms));
+            self.frame_tile.set_tile(&self.ctx, first + done, count);
+            let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                self.frame_tile.record(&mut pass);
+                self.sample_points.record(&mut pass);
+                self.encode.record(&mut pass);
+                self.sh.record(&mut pass);
+                self.density.record_forward(&mut pass);
+                self.feature.record_forward(&mut pass);
+                self.glue.record_assemble(&mut pass);
+                self.color.record_forward(&mut pass);
+                self.semantic.record_forward(&mut pass);
+                self.composite.record(&mut pass);
+            }
+            self.ctx.queue.submit([encoder.finish()]);
+            let rows = read_elements_async::<f32>(
+                &self.ctx,
+                &self.composite.ray_outputs,
+                0..(count as usize * stride) as u64,
+            )
+            .await?;
+            for row in rows.chunks_exact(stride) {
+                let v = &row[rendered..];
+                out.rgb.push([v[0], v[1], v[2]]);
+                out.depth.push(v[3]);
+                let logits = &v[4..4 + classes];
+                let (best, top) =
+                    logits.iter().enumerate().fold(
+                        (0usize, f32::NEG_INFINITY),
+                        |(bi, bv), (i, &x)| if x > bv { (i, x) } else { (bi, bv) },
+                    );
+                let sum: f32 = logits.iter().map(|&x| (x - top).exp()).sum();
+                out.classes.push(best as u8);
+                out.confidence.push(1.0 / sum);
+            }
+            done += count;
+        }
+        Ok(out)
     }
 
     /// Starts reading the losses of the latest step, unless a read is already under way.
