@@ -164,3 +164,72 @@ fn bad_inputs_fail_cleanly() {
         "a failed pack must not leave an archive behind"
     );
 }
+
+#[test]
+fn scribble_segment_eval_round() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let path = |name: &str| d.join(name).to_str().unwrap().to_string();
+    let ok = |o: Output| assert!(o.status.success(), "{}", text(&o));
+    ok(run(&[
+        "demo-scene",
+        "-o",
+        &path("d.scene.zip"),
+        "--size",
+        "32x24",
+        "--frames",
+        "24",
+    ]));
+    ok(run(&[
+        "scribble-from-gt",
+        &path("d.scene.zip"),
+        "--frames",
+        "0,12",
+        "-o",
+        &path("l.json"),
+    ]));
+    // Small enough for lavapipe in CI: the point is the whole path, not the quality.
+    let config = r#"{"hash_levels": 4, "log2_hash_table_size": 12, "density_width": 16, "color_width": 16,
+        "feature_width": 16, "semantic_width": 16, "samples_coarse": 4, "samples_fine": 12, "batch_rays": 64}"#;
+    std::fs::write(d.join("c.json"), config).unwrap();
+    let o = run(&[
+        "segment",
+        &path("d.scene.zip"),
+        "--labels",
+        &path("l.json"),
+        "-o",
+        &path("masks"),
+        "--config",
+        &path("c.json"),
+        "--warmup",
+        "5",
+        "--steps",
+        "10",
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(t.contains("wrote 24 masks") && t.contains("mean IoU"), "{t}");
+    assert!(d.join("masks/00023.png").is_file() && d.join("masks/preview/00000.png").is_file());
+    let o = run(&["eval", &path("d.scene.zip"), &path("masks"), "--json"]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    let report: serde_json::Value = serde_json::from_str(&String::from_utf8_lossy(&o.stdout)).unwrap();
+    let miou = report["mean_iou"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&miou), "{t}");
+
+    // Labels that do not fit the scene, and a scene without labels, fail cleanly.
+    std::fs::write(d.join("bad.json"), r#"{"format":"scribblefield-labels","version":1,"classes":[{"name":"a","color":[1,2,3]}],"frames":[{"frame":99,"strokes":[]}]}"#).unwrap();
+    let o = run(&[
+        "segment",
+        &path("d.scene.zip"),
+        "--labels",
+        &path("bad.json"),
+        "-o",
+        &path("m2"),
+    ]);
+    assert_clean_failure(&o, &["bad.json", "frame 99"]);
+    let o = run(&["segment", &path("d.scene.zip"), "-o", &path("m2")]);
+    assert_clean_failure(&o, &["ships no labels", "--labels"]);
+    let o = run(&["eval", &path("d.scene.zip"), &path("nowhere")]);
+    assert_clean_failure(&o, &["nowhere"]);
+}

@@ -5,6 +5,7 @@ mod info;
 mod pack;
 mod progress;
 mod scribble;
+mod segment;
 
 use std::path::PathBuf;
 
@@ -36,6 +37,8 @@ enum Command {
     DemoScene(demo::DemoArgs),
     /// Draw realistic synthetic scribbles from ground truth (to measure quality without a person).
     ScribbleFromGt(scribble::ScribbleArgs),
+    /// Train the field on a scene's scribbles (headless, on the GPU) and write masks of every frame.
+    Segment(segment::SegmentArgs),
     /// Score masks against the archive's ground truth: per-class IoU, mean IoU, pixel accuracy.
     Eval(eval::EvalArgs),
     /// Serve a directory (the web app) over HTTP on localhost.
@@ -56,6 +59,7 @@ pub fn run(cli: Cli) -> CliResult {
         Command::Info { archive } => info::run(&archive),
         Command::DemoScene(args) => demo::run(args),
         Command::ScribbleFromGt(args) => scribble::run(args),
+        Command::Segment(args) => segment::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Serve { dir, port, bind } => {
             if !dir.is_dir() {

@@ -1,0 +1,138 @@
+use std::path::PathBuf;
+
+use clap::Args;
+use scribblefield::eval::Confusion;
+use scribblefield::export::MaskSet;
+use scribblefield::field::FieldConfig;
+use scribblefield::field::gpu::trainer::Trainer;
+use scribblefield::gpu::{GpuContext, GpuOptions};
+use scribblefield::labels::LabelSet;
+use scribblefield::scene::read_archive_path;
+
+use super::{CliResult, progress};
+
+#[derive(Args)]
+pub struct SegmentArgs {
+    /// Scene archive.
+    archive: PathBuf,
+    /// Annotations (`labels.json`); default: the labels shipped in the archive.
+    #[arg(long)]
+    labels: Option<PathBuf>,
+    /// Output folder for the masks (class-id PNGs, previews, classes.json, labels.json).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Training steps with labels.
+    #[arg(long, default_value_t = 500)]
+    steps: u32,
+    /// Warm-up steps before labels join (colour, depth and features only).
+    #[arg(long, default_value_t = 100)]
+    warmup: u32,
+    /// Field config as JSON (fields not given keep their defaults); see `FieldConfig`.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Start from the small config (8 levels, 2^14 table, widths 32, 1024 rays): for CPU devices.
+    #[arg(long)]
+    small: bool,
+    #[arg(long, default_value_t = 0)]
+    seed: u32,
+}
+
+fn load_config(args: &SegmentArgs) -> Result<FieldConfig, Box<dyn std::error::Error>> {
+    match &args.config {
+        Some(path) => {
+            let text = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+            Ok(serde_json::from_slice(&text).map_err(|e| format!("{}: {e}", path.display()))?)
+        }
+        None if args.small => Ok(FieldConfig::small()),
+        None => Ok(FieldConfig::default()),
+    }
+}
+
+pub fn run(args: SegmentArgs) -> CliResult {
+    let mut scene = read_archive_path(&args.archive)?;
+    let labels = match &args.labels {
+        Some(path) => {
+            let text = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+            LabelSet::from_json(&text, &path.display().to_string(), scene.frames.len() as u32)?
+        }
+        None => scene.labels.clone().ok_or_else(|| {
+            format!(
+                "{}: ships no labels; give --labels (e.g. from `scribble-from-gt`)",
+                args.archive.display()
+            )
+        })?,
+    };
+    if labels.classes.is_empty() {
+        return Err("labels define no classes".into());
+    }
+    let mut cfg = load_config(&args)?;
+    cfg.num_classes = labels.classes.len() as u32;
+    if scene.features.is_none() && cfg.feature_supervision {
+        eprintln!(
+            "note: {} has no feature codes; training without feature supervision",
+            args.archive.display()
+        );
+        cfg.feature_supervision = false;
+    }
+    cfg.validate()?;
+
+    let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
+    eprintln!("training on {}", ctx.describe());
+    scene.labels = None;
+    let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, args.seed))?;
+    let bar = progress::bar("training");
+    bar.set_length(u64::from(args.warmup + args.steps));
+    let chunk = 10;
+    let mut done = 0;
+    while done < args.warmup + args.steps {
+        if done == args.warmup {
+            trainer.set_labels(Some(&labels), scene.width, scene.height, scene.frames.len() as u32)?;
+        }
+        let until = if done < args.warmup {
+            args.warmup
+        } else {
+            args.warmup + args.steps
+        };
+        let n = chunk.min(until - done);
+        trainer.train(n);
+        done += n;
+        if done % 50 < chunk || done == args.warmup + args.steps {
+            let losses = trainer.losses_blocking()?;
+            bar.set_message(format!("loss {:.4}", losses.terms.total()));
+        }
+        bar.set_position(u64::from(done));
+    }
+    bar.finish_and_clear();
+
+    let render = progress::bar("rendering");
+    render.set_length(scene.frames.len() as u64);
+    let mut masks = Vec::with_capacity(scene.frames.len());
+    let mut confusion = Confusion::new(labels.classes.len());
+    for (i, frame) in scene.frames.iter().enumerate() {
+        let rendered = pollster::block_on(trainer.render_frame(i as u32, scene.width, scene.height))?;
+        let mask = image::GrayImage::from_raw(scene.width, scene.height, rendered.classes)
+            .ok_or("rendered class map has the wrong size")?;
+        if let Some(gt) = &frame.gt {
+            confusion.add(gt.as_raw(), mask.as_raw());
+        }
+        masks.push(mask);
+        render.inc(1);
+    }
+    render.finish_and_clear();
+    let set = MaskSet {
+        classes: labels.classes.clone(),
+        masks,
+    };
+    set.write_dir(&args.output, Some(&labels))?;
+    println!("wrote {} masks to {}", scene.frames.len(), args.output.display());
+    if scene.has_gt() {
+        let names: Vec<String> = labels.classes.iter().map(|c| c.name.clone()).collect();
+        print!(
+            "{}",
+            confusion
+                .report(&names, scene.frames.iter().filter(|f| f.gt.is_some()).count())
+                .table()
+        );
+    }
+    Ok(())
+}
