@@ -27,7 +27,7 @@ if [ "$HAVE" != "$WANT" ]; then
 fi
 
 echo "==> cargo build --release --lib --target $TARGET"
-cargo build --release --lib --target "$TARGET"
+CARGO_PROFILE_RELEASE_LTO=thin cargo build --release --lib --target "$TARGET"
 
 echo "==> wasm-bindgen --target web --out-dir $OUT"
 rm -rf "$OUT"
