@@ -1,4 +1,5 @@
 //! Subcommands of the `scribblefield` binary, one module each.
+mod bench;
 mod demo;
 mod eval;
 mod info;
@@ -39,6 +40,8 @@ enum Command {
     ScribbleFromGt(scribble::ScribbleArgs),
     /// Train the field on a scene's scribbles (headless, on the GPU) and write masks of every frame.
     Segment(segment::SegmentArgs),
+    /// Measure the training step (steps/s, rays/s, samples/s) against a plain matmul on the same adapter.
+    Bench(bench::BenchArgs),
     /// Score masks against the archive's ground truth: per-class IoU, mean IoU, pixel accuracy.
     Eval(eval::EvalArgs),
     /// Serve a directory (the web app) over HTTP on localhost.
@@ -61,6 +64,7 @@ pub fn run(cli: Cli) -> CliResult {
         Command::ScribbleFromGt(args) => scribble::run(args),
         Command::Segment(args) => segment::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Bench(args) => bench::run(args),
         Command::Serve { dir, port, bind } => {
             if !dir.is_dir() {
                 return Err(format!("{}: not a directory to serve", dir.display()).into());
