@@ -681,6 +681,11 @@ impl Trainer {
         read_buffer_async::<f32>(&self.ctx, &self.optimizer.params)
     }
 
+    /// Reads back the gradient of the latest step (tests: compare with the reference).
+    pub fn read_gradients(&self) -> PendingRead<f32> {
+        read_buffer_async::<f32>(&self.ctx, &self.optimizer.grads)
+    }
+
     /// Replaces the parameters (tests: start from the reference's values).
     pub fn write_params(&self, params: &[f32]) -> Result<(), GpuError> {
         if params.len() != self.layout.total {
