@@ -470,6 +470,11 @@ impl Trainer {
 
     fn record_forward(&self, pass: &mut wgpu::ComputePass<'_>) {
         self.ray_batch.record(pass);
+        self.record_field(pass);
+    }
+
+    /// Everything after the rays are chosen up to the heads' outputs (training and rendering).
+    fn record_field(&self, pass: &mut wgpu::ComputePass<'_>) {
         self.sample_points.record(pass);
         self.encode.record(pass);
         self.sh.record(pass);
@@ -593,14 +598,7 @@ impl Trainer {
             {
                 let mut pass = encoder.begin_compute_pass(&Default::default());
                 self.frame_tile.record(&mut pass);
-                self.sample_points.record(&mut pass);
-                self.encode.record(&mut pass);
-                self.sh.record(&mut pass);
-                self.density.record_forward(&mut pass);
-                self.feature.record_forward(&mut pass);
-                self.glue.record_assemble(&mut pass);
-                self.color.record_forward(&mut pass);
-                self.semantic.record_forward(&mut pass);
+                self.record_field(&mut pass);
                 self.composite.record(&mut pass);
             }
             self.ctx.queue.submit([encoder.finish()]);
