@@ -29,7 +29,8 @@ pub const SIDE_RANGE: std::ops::RangeInclusive<u32> = 16..=2048;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct DemoOptions {
     /// Jitters object placement, sizes, colours and the orbit; the same seed gives the same
-    /// scene, byte for byte.
+    /// scene, byte for byte, on a given platform (sines and cosines come from the platform's
+    /// maths library, so native and wasm builds may differ in a last bit here and there).
     pub seed: u64,
     pub width: u32,
     pub height: u32,
@@ -96,7 +97,7 @@ pub fn demo_classes() -> Vec<ClassInfo> {
         .collect()
 }
 
-/// Renders the demo scene.
+/// Renders the demo scene: `DemoWorld::generate(opts.seed)` seen from `opts.frames` cameras.
 pub fn demo_scene(opts: &DemoOptions) -> Result<Scene> {
     opts.check()?;
     let world = DemoWorld::generate(opts.seed);
