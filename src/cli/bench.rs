@@ -1,7 +1,6 @@
 //! `scribblefield bench`: throughput of the training step on whatever adapter is found, next to
 //! a plain tiled matmul on the same adapter in the same run, and where a step's time goes.
 use clap::Args;
-use scribblefield::field::FieldConfig;
 use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::gpu::matmul_bench::matmul_bench;
 use scribblefield::gpu::timing::Stopwatch;
@@ -10,7 +9,7 @@ use scribblefield::labels::LabelSet;
 use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frame};
 use scribblefield::scene::demo::{DemoOptions, demo_scene};
 
-use super::CliResult;
+use super::{CliResult, load_field_config};
 
 #[derive(Args)]
 pub struct BenchArgs {
@@ -42,14 +41,7 @@ fn mlp_macs_per_sample(trainer: &Trainer) -> f64 {
 }
 
 pub fn run(args: BenchArgs) -> CliResult {
-    let mut cfg = match &args.config {
-        Some(path) => {
-            let text = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
-            serde_json::from_slice(&text).map_err(|e| format!("{}: {e}", path.display()))?
-        }
-        None if args.small => FieldConfig::small(),
-        None => FieldConfig::default(),
-    };
+    let mut cfg = load_field_config(args.config.as_deref(), args.small)?;
     if let Some(r) = args.rays {
         cfg.batch_rays = r;
     }

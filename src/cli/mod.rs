@@ -90,3 +90,20 @@ fn check_output(out: &std::path::Path) -> CliResult {
     }
     Ok(())
 }
+
+/// The field config of `segment` and `bench`: a JSON file (fields not given keep their
+/// defaults), else the small or the default config.
+fn load_field_config(
+    path: Option<&std::path::Path>,
+    small: bool,
+) -> Result<scribblefield::field::FieldConfig, Box<dyn std::error::Error>> {
+    use scribblefield::field::FieldConfig;
+    match path {
+        Some(path) => {
+            let text = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+            Ok(serde_json::from_slice(&text).map_err(|e| format!("{}: {e}", path.display()))?)
+        }
+        None if small => Ok(FieldConfig::small()),
+        None => Ok(FieldConfig::default()),
+    }
+}

@@ -3,13 +3,12 @@ use std::path::PathBuf;
 use clap::Args;
 use scribblefield::eval::Confusion;
 use scribblefield::export::MaskSet;
-use scribblefield::field::FieldConfig;
 use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::gpu::{GpuContext, GpuOptions};
 use scribblefield::labels::LabelSet;
 use scribblefield::scene::read_archive_path;
 
-use super::{CliResult, progress};
+use super::{CliResult, load_field_config, progress};
 
 #[derive(Args)]
 pub struct SegmentArgs {
@@ -37,17 +36,6 @@ pub struct SegmentArgs {
     seed: u32,
 }
 
-fn load_config(args: &SegmentArgs) -> Result<FieldConfig, Box<dyn std::error::Error>> {
-    match &args.config {
-        Some(path) => {
-            let text = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
-            Ok(serde_json::from_slice(&text).map_err(|e| format!("{}: {e}", path.display()))?)
-        }
-        None if args.small => Ok(FieldConfig::small()),
-        None => Ok(FieldConfig::default()),
-    }
-}
-
 pub fn run(args: SegmentArgs) -> CliResult {
     let mut scene = read_archive_path(&args.archive)?;
     let labels = match &args.labels {
@@ -65,7 +53,7 @@ pub fn run(args: SegmentArgs) -> CliResult {
     if labels.classes.is_empty() {
         return Err("labels define no classes".into());
     }
-    let mut cfg = load_config(&args)?;
+    let mut cfg = load_field_config(args.config.as_deref(), args.small)?;
     cfg.num_classes = labels.classes.len() as u32;
     if scene.features.is_none() && cfg.feature_supervision {
         eprintln!(

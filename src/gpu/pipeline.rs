@@ -112,6 +112,28 @@ pub fn bind_buffers(
     })
 }
 
+/// A bind group with buffers at the given binding numbers, for pipelines whose derived layout
+/// uses only some of a shader's bindings (one entry point of several).
+pub fn bind_numbered(
+    ctx: &GpuContext,
+    label: &str,
+    layout: &wgpu::BindGroupLayout,
+    bindings: &[(u32, &wgpu::Buffer)],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry<'_>> = bindings
+        .iter()
+        .map(|&(binding, buffer)| wgpu::BindGroupEntry {
+            binding,
+            resource: buffer.as_entire_binding(),
+        })
+        .collect();
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &entries,
+    })
+}
+
 /// Workgroup counts for `items` independent items in workgroups of `workgroup_size`, spread over
 /// x and y when one dimension would exceed the device's limit (65535 by default). Kernels turn
 /// the 2D workgroup id back into an item index with `linear_item_index` from

@@ -4,7 +4,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::gpu::buffers::uniform_buffer_from;
-use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
+use crate::gpu::pipeline::{Dispatch1d, KernelSpec, bind_numbered, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
 const WORKGROUP_SIZE: u32 = 128;
@@ -58,18 +58,7 @@ pub struct HeadGluePass {
 
 async fn stage(ctx: &GpuContext, entry: &str, bindings: &[(u32, &wgpu::Buffer)]) -> Result<Stage, GpuError> {
     let pipeline = create_compute_pipeline(ctx, &KernelSpec::new(entry, shaders::HEAD_GLUE, entry)).await?;
-    let entries: Vec<wgpu::BindGroupEntry<'_>> = bindings
-        .iter()
-        .map(|&(binding, buffer)| wgpu::BindGroupEntry {
-            binding,
-            resource: buffer.as_entire_binding(),
-        })
-        .collect();
-    let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some(entry),
-        layout: &pipeline.get_bind_group_layout(0),
-        entries: &entries,
-    });
+    let bind_group = bind_numbered(ctx, entry, &pipeline.get_bind_group_layout(0), bindings);
     Ok(Stage { pipeline, bind_group })
 }
 

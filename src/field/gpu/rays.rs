@@ -19,7 +19,7 @@
 //! normalized position (xyz in [0,1]³, w = t) and (δ, z-depth).
 use crate::field::config::FieldConfig;
 use crate::gpu::buffers::{storage_buffer_zeroed, uniform_buffer_from};
-use crate::gpu::pipeline::{Dispatch1d, KernelSpec, bind_buffers, create_compute_pipeline};
+use crate::gpu::pipeline::{Dispatch1d, KernelSpec, bind_buffers, bind_numbered, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
 use crate::scene::Bounds;
 
@@ -310,18 +310,7 @@ impl FrameTilePass {
             (8, &batch.targets),
             (9, &tile),
         ];
-        let entries: Vec<wgpu::BindGroupEntry<'_>> = bindings
-            .iter()
-            .map(|&(binding, buffer)| wgpu::BindGroupEntry {
-                binding,
-                resource: buffer.as_entire_binding(),
-            })
-            .collect();
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("frame tile"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        });
+        let bind_group = bind_numbered(ctx, "frame tile", &pipeline.get_bind_group_layout(0), &bindings);
         Ok(FrameTilePass {
             pipeline,
             bind_group,
