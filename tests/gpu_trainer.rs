@@ -2,8 +2,7 @@
 use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::field::{AdamConfig, FieldConfig};
 use scribblefield::gpu::test_support::gpu_for_tests;
-use scribblefield::labels::LabelSet;
-use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frame};
+use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
 use scribblefield::scene::demo::{DemoOptions, demo_scene};
 
 #[test]
@@ -18,12 +17,7 @@ fn losses_fall_on_the_demo_scene() {
         ..Default::default()
     })
     .unwrap();
-    let mut labels = LabelSet::new(scene.classes.clone());
-    for f in [0u32, 12] {
-        let gt = scene.frames[f as usize].gt.clone().unwrap();
-        scribble_frame(&mut labels, f, &gt, &ScribbleOptions::default());
-    }
-    scene.labels = Some(labels);
+    scene.labels = Some(scribble_frames(&scene, &[0, 12], &ScribbleOptions::default()));
     let cfg = FieldConfig {
         num_classes: scene.classes.len() as u32,
         batch_rays: 128,
@@ -136,19 +130,14 @@ fn one_step_gradient_matches_the_reference() {
         ..Default::default()
     })
     .unwrap();
-    let mut labels = LabelSet::new(scene.classes.clone());
-    for f in [0u32, 12] {
-        let gt = scene.frames[f as usize].gt.clone().unwrap();
-        scribble_frame(
-            &mut labels,
-            f,
-            &gt,
-            &ScribbleOptions {
-                radius: Some(1.5),
-                ..Default::default()
-            },
-        );
-    }
+    let labels = scribble_frames(
+        &scene,
+        &[0, 12],
+        &ScribbleOptions {
+            radius: Some(1.5),
+            ..Default::default()
+        },
+    );
     scene.labels = Some(labels.clone());
     let cfg = FieldConfig {
         num_classes: scene.classes.len() as u32,

@@ -5,8 +5,7 @@ use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::gpu::matmul_bench::matmul_bench;
 use scribblefield::gpu::timing::Stopwatch;
 use scribblefield::gpu::{GpuContext, GpuOptions};
-use scribblefield::labels::LabelSet;
-use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frame};
+use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
 use scribblefield::scene::demo::{DemoOptions, demo_scene};
 
 use super::{CliResult, load_field_config};
@@ -47,15 +46,7 @@ pub fn run(args: BenchArgs) -> CliResult {
     }
     // The demo scene has labels (synthetic scribbles) but no feature codes.
     let mut scene = demo_scene(&DemoOptions::default())?;
-    let mut labels = LabelSet::new(scene.classes.clone());
-    for f in [0u32, 12] {
-        let gt = scene.frames[f as usize]
-            .gt
-            .clone()
-            .ok_or("demo scene has ground truth")?;
-        scribble_frame(&mut labels, f, &gt, &ScribbleOptions::default());
-    }
-    scene.labels = Some(labels);
+    scene.labels = Some(scribble_frames(&scene, &[0, 12], &ScribbleOptions::default()));
     cfg.num_classes = scene.classes.len() as u32;
     cfg.feature_supervision = false;
     cfg.validate()?;

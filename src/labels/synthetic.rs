@@ -138,6 +138,18 @@ pub fn scribble_frame(labels: &mut LabelSet, frame: u32, gt: &GrayImage, opts: &
     }
 }
 
+/// Synthetic scribbles on each of `frames` of `scene`, over the scene's classes. Frames
+/// without ground truth are skipped; an index past the scene is the caller's to check.
+pub fn scribble_frames(scene: &crate::scene::Scene, frames: &[u32], opts: &ScribbleOptions) -> LabelSet {
+    let mut labels = LabelSet::new(scene.classes.clone());
+    for &f in frames {
+        if let Some(gt) = scene.frames.get(f as usize).and_then(|frame| frame.gt.as_ref()) {
+            scribble_frame(&mut labels, f, gt, opts);
+        }
+    }
+    labels
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
