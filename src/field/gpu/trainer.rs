@@ -12,7 +12,7 @@ use crate::field::config::FieldConfig;
 use crate::field::params::ParamLayout;
 use crate::field::reference::LossTerms;
 use crate::gpu::buffers::{
-    PendingRead, read_buffer_async, read_elements_async, storage_buffer_from, storage_buffer_zeroed,
+    PendingRead, read_buffer_async, read_elements_async, storage_buffer_padded, storage_buffer_zeroed,
 };
 use crate::gpu::timing::{PassTime, PassTimer, total_by_name};
 use crate::gpu::{GpuContext, GpuError};
@@ -21,7 +21,7 @@ use crate::scene::{Bounds, Pca, Scene};
 
 use super::adam::{AdamBuffers, AdamPass};
 use super::composite::{CompositeInputs, CompositeLayout, CompositePass, HeadSource, LOSS_WORDS};
-use super::dense::{DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView};
+use super::dense::{DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView, UNIFORM_WEIGHT_FLOATS};
 use super::encoding::{
     DirectionLayout, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
     PositionEncodeBuffers, PositionEncodePass, ShOutputLayout,
@@ -135,7 +135,14 @@ impl Trainer {
             ctx.ensure_storage_binding_fits(what, (total * 4) as u64)?;
         }
         let optimizer = Optimizer {
-            params: storage_buffer_from(ctx, "field parameters", &initial)?,
+            // UNIFORM and padded: CPU devices read the MLP weights through uniform bindings.
+            params: storage_buffer_padded(
+                ctx,
+                "field parameters",
+                &initial,
+                UNIFORM_WEIGHT_FLOATS,
+                wgpu::BufferUsages::UNIFORM,
+            )?,
             grads: storage_buffer_zeroed::<f32>(ctx, "field gradients", total)?,
             _first_moment: storage_buffer_zeroed::<f32>(ctx, "Adam first moment", total)?,
             _second_moment: storage_buffer_zeroed::<f32>(ctx, "Adam second moment", total)?,
@@ -186,7 +193,7 @@ impl Trainer {
         // MLPs with their gradients.
         let composite_layout = CompositeLayout::new(cfg);
         let grad_stride = composite_layout.grad_stride() as u32;
-        let mut pipelines = DensePipelines::new();
+        let mut pipelines = DensePipelines::with_family(DenseFamily::for_device(ctx));
         let color_out = storage_buffer_zeroed::<f32>(ctx, "colour output", n as usize * 3)?;
         let logits = storage_buffer_zeroed::<f32>(ctx, "semantic logits", n as usize * c as usize)?;
         let composite = CompositePass::new(
@@ -733,7 +740,7 @@ impl Trainer {
 
     /// Reads the parameters back (tests, checkpoints).
     pub fn read_params(&self) -> PendingRead<f32> {
-        read_buffer_async::<f32>(&self.ctx, &self.optimizer.params)
+        read_elements_async::<f32>(&self.ctx, &self.optimizer.params, 0..self.layout.total as u64)
     }
 
     /// Reads back the gradient of the latest step (tests: compare with the reference).
