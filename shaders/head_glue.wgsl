@@ -17,7 +17,8 @@ struct GlueDims {
     grad_stride: u32,
     grad_h0: u32,
     grad_feature: u32,
-    _pad: u32,
+    // FieldConfig::semantic_trunk_gradient: share of the semantic gradient passed back into f, g.
+    semantic_trunk_scale: f32,
 }
 
 // Each entry point uses its own subset of these bindings (derived layouts).
@@ -86,7 +87,7 @@ fn gather_feature(
     for (var k = 0u; k < d; k++) {
         if feature_out[n * d + k] > 0.0 {
             let at = n * dims.grad_stride + dims.grad_feature + k;
-            grad_heads[at] += semantic_in_grad[semantic_row + k];
+            grad_heads[at] += dims.semantic_trunk_scale * semantic_in_grad[semantic_row + k];
         }
     }
 }
@@ -109,6 +110,6 @@ fn gather_geometry(
     density_out_grad[n * (1u + g)] = grad_heads[n * dims.grad_stride + dims.grad_h0];
     for (var j = 0u; j < g; j++) {
         density_out_grad[n * (1u + g) + 1u + j] = color_in_grad[n * (dims.sh + g) + dims.sh + j]
-            + semantic_in_grad[n * (d + g) + d + j] + feature_in_grad[n * g + j];
+            + dims.semantic_trunk_scale * semantic_in_grad[n * (d + g) + d + j] + feature_in_grad[n * g + j];
     }
 }

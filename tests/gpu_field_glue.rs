@@ -43,7 +43,7 @@ fn glue_matches_reference_arithmetic() {
         grad_stride: stride as u32,
         grad_h0: h0_at as u32,
         grad_feature: f_at as u32,
-        _pad: 0,
+        semantic_trunk_scale: 1.0,
     };
     let buffers = GlueBuffers {
         density_out: &density_out_b,

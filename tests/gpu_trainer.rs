@@ -152,6 +152,9 @@ fn one_step_gradient_matches_the_reference() {
         samples_fine: 8,
         batch_rays: 64,
         feature_supervision: false,
+        // Not 1: the GPU must scale the semantic gradient into the shared field as the
+        // reference does (1 is the same code with a factor of one).
+        semantic_trunk_gradient: 0.5,
         ..FieldConfig::small()
     };
     let seed = 3;

@@ -132,6 +132,10 @@ pub struct FieldConfig {
     pub loss: LossWeights,
     pub adam: AdamConfig,
     pub batch_rays: u32,
+    /// How much of the semantic loss's gradient flows from the semantic head into the shared
+    /// field (the feature MLP, the density MLP and the encoding): 1 is the paper's model, 0 trains
+    /// the head alone on features shaped by colour, depth and feature codes.
+    pub semantic_trunk_gradient: f32,
 }
 
 impl Default for FieldConfig {
@@ -160,6 +164,7 @@ impl Default for FieldConfig {
             loss: LossWeights::default(),
             adam: AdamConfig::default(),
             batch_rays: 4096,
+            semantic_trunk_gradient: 1.0,
         }
     }
 }
@@ -310,6 +315,13 @@ impl FieldConfig {
                 "surface_band_fraction",
                 c.surface_band_fraction,
                 "must be in (0, 1)",
+            ));
+        }
+        if !(c.semantic_trunk_gradient.is_finite() && (0.0..=1.0).contains(&c.semantic_trunk_gradient)) {
+            return Err(bad(
+                "semantic_trunk_gradient",
+                c.semantic_trunk_gradient,
+                "must be in [0, 1]",
             ));
         }
         let weights = [

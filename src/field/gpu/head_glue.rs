@@ -21,7 +21,9 @@ pub struct GlueDims {
     pub grad_stride: u32,
     pub grad_h0: u32,
     pub grad_feature: u32,
-    pub _pad: u32,
+    /// `FieldConfig::semantic_trunk_gradient`: scales the semantic input's gradient on its way
+    /// back into f and g.
+    pub semantic_trunk_scale: f32,
 }
 
 /// The per-sample buffers the glue reads and writes (row strides in `GlueDims` terms).

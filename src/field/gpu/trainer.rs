@@ -321,7 +321,7 @@ impl Trainer {
                 grad_stride,
                 grad_h0: CompositeLayout::GRAD_H0 as u32,
                 grad_feature: composite_layout.grad_feature_offset() as u32,
-                _pad: 0,
+                semantic_trunk_scale: cfg.semantic_trunk_gradient,
             },
             &GlueBuffers {
                 density_out: &samples.density_out,

@@ -257,6 +257,9 @@ impl FieldModel {
             grad_logits,
             &mut grad[l.semantic.range()],
         );
+        // Only a share of it reaches the shared field (FieldConfig::semantic_trunk_gradient).
+        let trunk = R::of_f32(self.config.semantic_trunk_gradient);
+        let grad_semantic_in: Vec<R> = grad_semantic_in.iter().map(|&v| v * trunk).collect();
         let mut grad_f: Vec<R> = grad_value[ch.feature()..ch.feature() + feature_dim].to_vec();
         for ((gf, gs), f) in grad_f
             .iter_mut()
