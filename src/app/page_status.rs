@@ -28,3 +28,11 @@ pub fn set(status: &str) {
         let _ = body.set_attribute("data-status", status);
     }
 }
+
+/// Puts the latest share link on `<body data-share-link="...">`, for scripts and tests (the
+/// clipboard is not readable from a headless browser).
+pub fn set_share_link(link: &str) {
+    if let Some(body) = web_sys::window().and_then(|w| w.document()).and_then(|d| d.body()) {
+        let _ = body.set_attribute("data-share-link", link);
+    }
+}
