@@ -7,7 +7,9 @@
 //! far less in practice). We accept |gpu − f64 reference| ≤ 1e-5 · magnitude + 1e-6, the
 //! magnitude coming from the same reference run on absolute values. dW sums over all N rows
 //! (K = N = 777 here, in chunks), so it gets 4e-5 · magnitude.
-use scribblefield::field::gpu::dense::{DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView};
+use scribblefield::field::gpu::dense::{
+    DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView, UNIFORM_WEIGHT_FLOATS,
+};
 use scribblefield::field::params::{MlpLayout, ParamLayout};
 use scribblefield::field::reference::mlp::{MlpTrace, backward, forward};
 use scribblefield::field::rng::SplitMix64;
@@ -15,6 +17,7 @@ use scribblefield::field::{Encoding, FieldConfig};
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{
     GARBAGE_WORDS, fill_with_garbage, read_buffer_blocking, storage_buffer_from, storage_buffer_garbage,
+    storage_buffer_padded, storage_buffer_zeroed,
 };
 use scribblefield::gpu::test_support::gpu_for_tests;
 
@@ -161,7 +164,15 @@ fn check_mlp(case: MlpCase<'_>) {
     grads[..layout.range().start].fill(-1.5);
     grads[layout.range().end..].fill(-1.5);
 
-    let params_buffer = storage_buffer_from(ctx, "params", params).unwrap();
+    // As the trainer makes it: readable through the uniform bindings of that kernel family.
+    let params_buffer = storage_buffer_padded(
+        ctx,
+        "params",
+        params,
+        UNIFORM_WEIGHT_FLOATS,
+        wgpu::BufferUsages::UNIFORM,
+    )
+    .unwrap();
     let grads_buffer = storage_buffer_from(ctx, "grads", &grads).unwrap();
     let input_buffer = storage_buffer_from(ctx, "input", &input).unwrap();
     let output_grad_buffer = storage_buffer_from(ctx, "output grad", &output_grad).unwrap();
@@ -182,6 +193,14 @@ fn check_mlp(case: MlpCase<'_>) {
         }),
     };
     let mlp = pollster::block_on(MlpPass::new(ctx, pipelines, desc)).unwrap();
+    let families: Vec<DenseFamily> = mlp.layer_families().collect();
+    let windows = mlp.weight_gradient_windows();
+    if pipelines.family() == DenseFamily::Tiled {
+        assert!(families.iter().all(|f| *f == DenseFamily::Tiled));
+        assert!(windows.iter().all(|w| !w));
+    } else {
+        assert!(windows.iter().all(|w| *w), "{name}: every dW here fits uniform windows");
+    }
     let layers = layout.layers.len();
     for k in 0..layers {
         fill_with_garbage(ctx, &mlp.layer_output(k).unwrap().buffer);
@@ -299,7 +318,7 @@ fn check_mlp(case: MlpCase<'_>) {
         WEIGHT_GRAD_TOLERANCE,
     );
     eprintln!(
-        "{name} {dims:?} × {rows} rows: worst error / magnitude: forward {worst_forward:.2e}, \
+        "{name} {dims:?} × {rows} rows, kernels {families:?}: worst error / magnitude: forward {worst_forward:.2e}, \
          input gradient {worst_input_grad:.2e}, weight gradient {worst_weight:.2e}"
     );
 }
@@ -309,7 +328,46 @@ fn every_mlp_matches_the_reference() {
     let Some(ctx) = gpu_for_tests("every_mlp_matches_the_reference") else {
         return;
     };
-    let mut pipelines = DensePipelines::new();
+    check_every_mlp(&ctx, DensePipelines::new());
+}
+
+/// The kernels CPU devices run: every layer that fits a uniform binding uses them (the default
+/// widths' 128 × 128 layers do not and run tiled, so the two families also meet in one MLP).
+#[test]
+fn every_mlp_matches_the_reference_with_uniform_weights() {
+    let Some(ctx) = gpu_for_tests("every_mlp_matches_the_reference_with_uniform_weights") else {
+        return;
+    };
+    check_every_mlp(&ctx, DensePipelines::with_family(DenseFamily::UniformWeights));
+    // And they are used: a small MLP runs every layer on them.
+    let cfg = FieldConfig::small();
+    let layout = ParamLayout::new(&cfg);
+    let params = storage_buffer_padded(
+        &ctx,
+        "params",
+        &layout.init(1),
+        UNIFORM_WEIGHT_FLOATS,
+        wgpu::BufferUsages::UNIFORM,
+    )
+    .unwrap();
+    let rows = 64u32;
+    let input = storage_buffer_zeroed::<f32>(&ctx, "input", rows as usize * layout.density.input_dim()).unwrap();
+    let desc = MlpPassDesc {
+        label: "density",
+        layout: &layout.density,
+        rows,
+        params: &params,
+        input: RowView::packed(&input, layout.density.input_dim() as u32),
+        output: None,
+        gradients: None,
+    };
+    let mut pipelines = DensePipelines::with_family(DenseFamily::UniformWeights);
+    let mlp = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc)).unwrap();
+    assert!(mlp.layer_families().all(|f| f == DenseFamily::UniformWeights));
+}
+
+fn check_every_mlp(ctx: &GpuContext, mut pipelines: DensePipelines) {
+    let ctx = ctx.clone();
     for (config_name, cfg) in configs() {
         cfg.validate().unwrap();
         let layout = ParamLayout::new(&cfg);
@@ -336,23 +394,25 @@ fn tiny_and_multi_chunk_row_counts_match_the_reference() {
     let Some(ctx) = gpu_for_tests("tiny_and_multi_chunk_row_counts_match_the_reference") else {
         return;
     };
-    let mut pipelines = DensePipelines::new();
     let cfg = FieldConfig::small();
     let layout = ParamLayout::new(&cfg);
     let params = layout.init(5);
-    // 1 row; fewer rows than a tile; many weight-gradient chunks with a ragged last one.
-    for (rows, seed) in [(1, 1), (61, 2), (5003, 3)] {
-        check_mlp(MlpCase {
-            ctx: &ctx,
-            pipelines: &mut pipelines,
-            name: format!("small density, {rows} rows"),
-            layout: &layout.density,
-            params: &params,
-            rows,
-            input_grad: true,
-            output_view: rows > 1,
-            seed,
-        });
+    for family in [DenseFamily::Tiled, DenseFamily::UniformWeights] {
+        let mut pipelines = DensePipelines::with_family(family);
+        // 1 row; fewer rows than a tile; many weight-gradient chunks with a ragged last one.
+        for (rows, seed) in [(1, 1), (61, 2), (5003, 3)] {
+            check_mlp(MlpCase {
+                ctx: &ctx,
+                pipelines: &mut pipelines,
+                name: format!("small density ({family:?}), {rows} rows"),
+                layout: &layout.density,
+                params: &params,
+                rows,
+                input_grad: true,
+                output_view: rows > 1,
+                seed,
+            });
+        }
     }
 }
 
@@ -418,13 +478,25 @@ fn density_mlp_throughput_report() {
     let layout = ParamLayout::new(&cfg);
     let mlp_layout = &layout.density;
     let mut rng = SplitMix64::new(9);
-    let params = storage_buffer_from(&ctx, "params", &layout.init(1)).unwrap();
+    let params = storage_buffer_padded(
+        &ctx,
+        "params",
+        &layout.init(1),
+        UNIFORM_WEIGHT_FLOATS,
+        wgpu::BufferUsages::UNIFORM,
+    )
+    .unwrap();
     let grads = storage_buffer_from(&ctx, "grads", &vec![0.0f32; layout.total]).unwrap();
     let (in_dim, out_dim) = (mlp_layout.input_dim(), mlp_layout.output_dim());
     let input = storage_buffer_from(&ctx, "input", &random_values(&mut rng, rows * in_dim, 1.0)).unwrap();
     let output_grad = storage_buffer_from(&ctx, "output grad", &random_values(&mut rng, rows * out_dim, 1.0)).unwrap();
     let input_grad = storage_buffer_garbage::<f32>(&ctx, "input grad", rows * in_dim).unwrap();
-    let mut pipelines = DensePipelines::new();
+    // DENSE_FAMILY=uniform measures the CPU-device kernels.
+    let family = match std::env::var("DENSE_FAMILY").as_deref() {
+        Ok("uniform") => DenseFamily::UniformWeights,
+        _ => DenseFamily::Tiled,
+    };
+    let mut pipelines = DensePipelines::with_family(family);
     let desc = MlpPassDesc {
         label: "density",
         layout: mlp_layout,
@@ -482,7 +554,11 @@ fn density_mlp_throughput_report() {
     let backward_seconds = run(true, iterations) / f64::from(iterations);
     let matmul = pollster::block_on(matmul_gflops(&ctx, 512, 5)).unwrap();
     println!("adapter: {} (timestamps: {})", ctx.describe(), ctx.has_timestamps);
-    println!("density MLP {:?}, N = {rows} rows", mlp_layout.dims);
+    println!(
+        "density MLP {:?}, N = {rows} rows, kernels {:?}",
+        mlp_layout.dims,
+        mlp.layer_families().collect::<Vec<_>>()
+    );
     println!(
         "forward:  {:.3} s, {:.2} GFLOP/s ({:.2} GFLOP)",
         forward_seconds,

@@ -24,6 +24,9 @@ pub struct BenchArgs {
     /// Timed training steps.
     #[arg(long, default_value_t = 5)]
     steps: u32,
+    /// Untimed steps first (pipeline compilation, first touches of the buffers).
+    #[arg(long, default_value_t = 2)]
+    warmup: u32,
     /// Size n of the n x n x n reference matmul.
     #[arg(long, default_value_t = 512)]
     matmul: u32,
@@ -54,7 +57,7 @@ pub fn run(args: BenchArgs) -> CliResult {
     let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
     println!("adapter:          {}", ctx.describe());
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, 0))?;
-    trainer.train(2);
+    trainer.train(args.warmup);
     ctx.wait_idle()?;
     let clock = Stopwatch::start();
     trainer.train(args.steps);

@@ -1,7 +1,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use scribblefield::eval::Confusion;
+use scribblefield::eval::headless::{render_and_score, train_schedule};
 use scribblefield::export::MaskSet;
 use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::gpu::{GpuContext, GpuOptions};
@@ -70,43 +70,42 @@ pub fn run(args: SegmentArgs) -> CliResult {
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, args.seed))?;
     let bar = progress::bar("training");
     bar.set_length(u64::from(args.warmup + args.steps));
-    let chunk = 10;
-    let mut done = 0;
-    while done < args.warmup + args.steps {
-        if done == args.warmup {
-            trainer.set_labels(Some(&labels), scene.width, scene.height, scene.frames.len() as u32)?;
-        }
-        let until = if done < args.warmup {
-            args.warmup
-        } else {
-            args.warmup + args.steps
-        };
-        let n = chunk.min(until - done);
-        trainer.train(n);
-        done += n;
-        if done % 50 < chunk || done == args.warmup + args.steps {
-            let losses = trainer.losses_blocking()?;
-            bar.set_message(format!("loss {:.4}", losses.terms.total()));
-        }
-        bar.set_position(u64::from(done));
-    }
+    let quiet = bar.is_hidden();
+    train_schedule(
+        &mut trainer,
+        &scene,
+        &labels,
+        args.warmup,
+        args.steps,
+        |done, total, loss| {
+            bar.set_position(u64::from(done));
+            if let Some(loss) = loss {
+                bar.set_message(format!("loss {loss:.4}"));
+                // Without a terminal the bar is hidden: leave a line in the log now and then.
+                if quiet && (done % 100 == 0 || done == total) {
+                    eprintln!("step {done}/{total}: loss {loss:.4}");
+                }
+            }
+        },
+    )?;
     bar.finish_and_clear();
 
     let render = progress::bar("rendering");
     render.set_length(scene.frames.len() as u64);
+    let names: Vec<String> = labels.classes.iter().map(|c| c.name.clone()).collect();
     let mut masks = Vec::with_capacity(scene.frames.len());
-    let mut confusion = Confusion::new(labels.classes.len());
-    for (i, frame) in scene.frames.iter().enumerate() {
-        let rendered = pollster::block_on(trainer.render_frame(i as u32, scene.width, scene.height))?;
-        let mask = image::GrayImage::from_raw(scene.width, scene.height, rendered.classes)
-            .ok_or("rendered class map has the wrong size")?;
-        if let Some(gt) = &frame.gt {
-            confusion.add(gt.as_raw(), mask.as_raw());
+    let mut bad_size = false;
+    let report = render_and_score(&mut trainer, &scene, &names, 0..scene.frames.len(), |_, rendered| {
+        match image::GrayImage::from_raw(scene.width, scene.height, rendered.classes) {
+            Some(mask) => masks.push(mask),
+            None => bad_size = true,
         }
-        masks.push(mask);
         render.inc(1);
-    }
+    })?;
     render.finish_and_clear();
+    if bad_size {
+        return Err("rendered class map has the wrong size".into());
+    }
     let set = MaskSet {
         classes: labels.classes.clone(),
         masks,
@@ -114,13 +113,7 @@ pub fn run(args: SegmentArgs) -> CliResult {
     set.write_dir(&args.output, Some(&labels))?;
     println!("wrote {} masks to {}", scene.frames.len(), args.output.display());
     if scene.has_gt() {
-        let names: Vec<String> = labels.classes.iter().map(|c| c.name.clone()).collect();
-        print!(
-            "{}",
-            confusion
-                .report(&names, scene.frames.iter().filter(|f| f.gt.is_some()).count())
-                .table()
-        );
+        print!("{}", report.table());
     }
     Ok(())
 }

@@ -63,6 +63,27 @@ pub fn storage_buffer_from<T: Pod>(ctx: &GpuContext, label: &str, data: &[T]) ->
     }))
 }
 
+/// A storage buffer holding `data` followed by `tail_zeros` zero elements, with `extra` usages
+/// (e.g. UNIFORM, for a buffer that some kernels read through uniform bindings of a fixed size
+/// that may reach past the data).
+pub fn storage_buffer_padded<T: Pod>(
+    ctx: &GpuContext,
+    label: &str,
+    data: &[T],
+    tail_zeros: usize,
+    extra: wgpu::BufferUsages,
+) -> Result<wgpu::Buffer, GpuError> {
+    let mut bytes: Vec<u8> = bytemuck::cast_slice(data).to_vec();
+    bytes.resize(checked_byte_size::<T>(label, data.len() + tail_zeros)? as usize, 0);
+    bytes.resize(padded_size(bytes.len() as u64).max(4) as usize, 0);
+    ctx.ensure_storage_binding_fits(label, bytes.len() as u64)?;
+    Ok(ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents: &bytes,
+        usage: STORAGE_USAGE | extra,
+    }))
+}
+
 /// A storage buffer of `count` elements of `T`, all zero bits.
 pub fn storage_buffer_zeroed<T: Pod>(ctx: &GpuContext, label: &str, count: usize) -> Result<wgpu::Buffer, GpuError> {
     let size = padded_size(checked_byte_size::<T>(label, count)?);

@@ -105,7 +105,10 @@ impl GpuContext {
 
     /// True for software rasterizers (lavapipe, SwiftShader): slow, but exact enough for tests.
     pub fn is_software(&self) -> bool {
+        let named = |s: &str| s.to_ascii_lowercase().contains("swiftshader");
         self.adapter_info.device_type == wgpu::DeviceType::Cpu
+            || named(&self.adapter_info.name)
+            || named(&self.adapter_info.driver)
     }
 
     /// Native only: blocks until all submitted work is done and its callbacks have run.

@@ -6,6 +6,7 @@ pub mod demo;
 pub mod error;
 pub mod import;
 pub mod manifest;
+pub mod pca;
 // `scene::scene` reads oddly, but it is where the decoded Scene lives; everything else
 // re-exports it as `scene::Scene`.
 #[allow(clippy::module_inception)]

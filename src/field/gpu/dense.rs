@@ -19,6 +19,14 @@
 //! tall thin ones. Pipelines are compiled once per (kernel, shape) in [`DensePipelines`] and
 //! shared by every layer of every MLP.
 //!
+//! On CPU devices (lavapipe, SwiftShader) the forward and the input gradient use a second
+//! family of kernels, [`DenseFamily::UniformWeights`] (`shaders/dense_*_uniform.wgsl`): one
+//! invocation per row, the layer's weights read through a uniform binding, which those devices
+//! load once per SIMD group instead of once per lane (see the shader for the measurement). It
+//! needs the parameter buffer made with UNIFORM usage and [`UNIFORM_WEIGHT_FLOATS`] of padding
+//! after the last layer, and a layer of at most that many weights; other layers, and every
+//! weight gradient, use the tiled kernels.
+//!
 //! X and Y (and dY and dX) of one layer must be different buffers: WebGPU forbids binding one
 //! buffer both read-only and writable in a dispatch.
 use std::collections::HashMap;
@@ -44,6 +52,32 @@ const REDUCE_SHAPE: TileShape = TileShape { tx: 16, ty: 16, kc: 16 };
 const WEIGHT_GRADIENT_TARGET_WORKGROUPS: u64 = 1024;
 /// Fewest rows a weight-gradient chunk sums, so small batches do not make many tiny partials.
 const MIN_CHUNK_ROWS: u32 = 256;
+
+/// f32 in the uniform binding of the uniform-weight kernels (64 KiB, WebGPU's default limit).
+pub const UNIFORM_WEIGHT_FLOATS: usize = 16384;
+/// Invocations per workgroup of the uniform-weight kernels (`WORKGROUP` in the shader).
+const UNIFORM_WORKGROUP: u32 = 64;
+
+/// Which kernels compute the forward and input gradient of a layer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum DenseFamily {
+    /// Workgroup-tiled products (GPUs).
+    Tiled,
+    /// Row-per-invocation loops over weights in a uniform binding (CPU devices), where a layer
+    /// and the parameter buffer allow it; tiled otherwise.
+    UniformWeights,
+}
+
+impl DenseFamily {
+    /// The family that is faster on `ctx`'s kind of device.
+    pub fn for_device(ctx: &GpuContext) -> DenseFamily {
+        if ctx.is_software() {
+            DenseFamily::UniformWeights
+        } else {
+            DenseFamily::Tiled
+        }
+    }
+}
 
 /// The layer's nonlinearity, applied to the product (there is no bias).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -174,6 +208,20 @@ enum DenseKernel {
     BackwardInput,
     PartialSums,
     ReduceChunks,
+    ForwardUniform,
+    BackwardInputUniform,
+    MaskOutputGradient,
+    ChunkPartialSums,
+}
+
+/// The override constants a pipeline is compiled with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum KernelVariant {
+    Tiled(TileShape),
+    /// Outputs (or inputs) per invocation of a uniform-weight kernel.
+    Block(u32),
+    /// Outputs per invocation and invocations per workgroup of the uniform-window dW kernel.
+    Columns(u32, u32),
 }
 
 impl DenseKernel {
@@ -187,19 +235,57 @@ impl DenseKernel {
                 "partial_sums",
             ),
             DenseKernel::ReduceChunks => ("dense weight reduce", shaders::DENSE_BACKWARD_WEIGHT, "reduce_chunks"),
+            DenseKernel::ForwardUniform => (
+                "dense forward (uniform weights)",
+                shaders::DENSE_FORWARD_UNIFORM,
+                "forward",
+            ),
+            DenseKernel::BackwardInputUniform => (
+                "dense backward input (uniform weights)",
+                shaders::DENSE_BACKWARD_INPUT_UNIFORM,
+                "backward_input",
+            ),
+            DenseKernel::MaskOutputGradient => (
+                "dense output gradient mask",
+                shaders::DENSE_BACKWARD_WEIGHT_UNIFORM,
+                "mask_output_gradient",
+            ),
+            DenseKernel::ChunkPartialSums => (
+                "dense weight partial sums (uniform windows)",
+                shaders::DENSE_BACKWARD_WEIGHT_UNIFORM,
+                "chunk_partial_sums",
+            ),
         }
     }
 }
 
-/// The compiled dense kernels, one per (kernel, tile shape) met so far; shared by all layers.
-#[derive(Default)]
+/// The compiled dense kernels, one per (kernel, variant) met so far; shared by all layers.
 pub struct DensePipelines {
-    compiled: HashMap<(DenseKernel, TileShape), wgpu::ComputePipeline>,
+    family: DenseFamily,
+    compiled: HashMap<(DenseKernel, KernelVariant), wgpu::ComputePipeline>,
+}
+
+impl Default for DensePipelines {
+    fn default() -> Self {
+        DensePipelines::with_family(DenseFamily::Tiled)
+    }
 }
 
 impl DensePipelines {
+    /// Tiled kernels everywhere.
     pub fn new() -> DensePipelines {
         DensePipelines::default()
+    }
+
+    pub fn with_family(family: DenseFamily) -> DensePipelines {
+        DensePipelines {
+            family,
+            compiled: HashMap::new(),
+        }
+    }
+
+    pub fn family(&self) -> DenseFamily {
+        self.family
     }
 
     async fn get(
@@ -208,27 +294,154 @@ impl DensePipelines {
         kernel: DenseKernel,
         shape: TileShape,
     ) -> Result<wgpu::ComputePipeline, GpuError> {
-        if let Some(pipeline) = self.compiled.get(&(kernel, shape)) {
-            return Ok(pipeline.clone());
-        }
-        let (label, source, entry_point) = kernel.source();
-        ctx.ensure_workgroup_storage_fits(label, shape.workgroup_storage_bytes())?;
+        ctx.ensure_workgroup_storage_fits(kernel.source().0, shape.workgroup_storage_bytes())?;
         let constants = [
             ("TX", f64::from(shape.tx)),
             ("TY", f64::from(shape.ty)),
             ("KC", f64::from(shape.kc)),
         ];
+        self.compile(ctx, kernel, KernelVariant::Tiled(shape), &constants).await
+    }
+
+    async fn get_uniform(
+        &mut self,
+        ctx: &GpuContext,
+        kernel: DenseKernel,
+        block: u32,
+    ) -> Result<wgpu::ComputePipeline, GpuError> {
+        self.compile(ctx, kernel, KernelVariant::Block(block), &[("BLOCK", f64::from(block))])
+            .await
+    }
+
+    async fn compile(
+        &mut self,
+        ctx: &GpuContext,
+        kernel: DenseKernel,
+        variant: KernelVariant,
+        constants: &[(&str, f64)],
+    ) -> Result<wgpu::ComputePipeline, GpuError> {
+        if let Some(pipeline) = self.compiled.get(&(kernel, variant)) {
+            return Ok(pipeline.clone());
+        }
+        let (label, source, entry_point) = kernel.source();
         let spec = KernelSpec {
             label,
             source,
             entry_point,
             layout: None,
-            constants: &constants,
+            constants,
         };
         let pipeline = create_compute_pipeline(ctx, &spec).await?;
-        self.compiled.insert((kernel, shape), pipeline.clone());
+        self.compiled.insert((kernel, variant), pipeline.clone());
         Ok(pipeline)
     }
+
+    /// The per-chunk weight-gradient kernel, whose dZ window and chunk slot are bound with
+    /// dynamic offsets (so an explicit layout), and its two bind group layouts.
+    async fn chunk_sums_pipeline(
+        &mut self,
+        ctx: &GpuContext,
+        block: u32,
+        columns: u32,
+    ) -> Result<(wgpu::ComputePipeline, [wgpu::BindGroupLayout; 2]), GpuError> {
+        let entry = |binding, ty, dynamic: bool, min: Option<u64>| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty,
+                has_dynamic_offset: dynamic,
+                min_binding_size: min.and_then(NonZeroU64::new),
+            },
+            count: None,
+        };
+        let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
+        let common = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("dense chunk sums common"),
+            entries: &[
+                entry(0, wgpu::BufferBindingType::Uniform, false, None),
+                entry(3, storage(true), false, None),
+                entry(4, storage(false), false, None),
+            ],
+        });
+        let windows = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("dense chunk sums windows"),
+            entries: &[
+                entry(
+                    0,
+                    wgpu::BufferBindingType::Uniform,
+                    true,
+                    Some(UNIFORM_WEIGHT_FLOATS as u64 * 4),
+                ),
+                entry(1, wgpu::BufferBindingType::Uniform, true, Some(16)),
+            ],
+        });
+        let layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("dense chunk sums"),
+            bind_group_layouts: &[Some(&common), Some(&windows)],
+            immediate_size: 0,
+        });
+        let key = (DenseKernel::ChunkPartialSums, KernelVariant::Columns(block, columns));
+        let pipeline = match self.compiled.get(&key) {
+            Some(p) => p.clone(),
+            None => {
+                let (label, source, entry_point) = DenseKernel::ChunkPartialSums.source();
+                let spec = KernelSpec {
+                    label,
+                    source,
+                    entry_point,
+                    layout: Some(&layout),
+                    constants: &[("BLOCK", f64::from(block)), ("COLUMNS", f64::from(columns))],
+                };
+                let pipeline = create_compute_pipeline(ctx, &spec).await?;
+                self.compiled.insert(key, pipeline.clone());
+                pipeline
+            }
+        };
+        // A pipeline with an explicit layout accepts bind groups of layouts equal to it.
+        Ok((pipeline, [common, windows]))
+    }
+
+    /// The uniform binding of `range` of `params` and where the range starts in it, when this
+    /// family wants uniform-weight kernels and the layer and buffer allow them.
+    fn uniform_weights<'a>(
+        &self,
+        ctx: &GpuContext,
+        params: &'a wgpu::Buffer,
+        range: &Range<usize>,
+    ) -> Option<(wgpu::BindingResource<'a>, u32)> {
+        if self.family != DenseFamily::UniformWeights
+            || !params.usage().contains(wgpu::BufferUsages::UNIFORM)
+            || (ctx.limits.max_uniform_buffer_binding_size as usize) < UNIFORM_WEIGHT_FLOATS * 4
+        {
+            return None;
+        }
+        let align = (ctx.limits.min_uniform_buffer_offset_alignment.max(4) / 4) as usize;
+        let start = range.start / align * align;
+        let local = range.start - start;
+        if local + range.len() > UNIFORM_WEIGHT_FLOATS || (start + UNIFORM_WEIGHT_FLOATS) as u64 * 4 > params.size() {
+            return None;
+        }
+        let binding = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer: params,
+            offset: start as u64 * 4,
+            size: NonZeroU64::new(UNIFORM_WEIGHT_FLOATS as u64 * 4),
+        });
+        Some((binding, local as u32))
+    }
+}
+
+/// Outputs per invocation of a uniform-weight kernel: the fewest of 4, 8, 16 covering `width`.
+fn uniform_block(width: u32) -> u32 {
+    match width {
+        0..=4 => 4,
+        5..=8 => 8,
+        _ => 16,
+    }
+}
+
+fn uniform_dispatch(ctx: &GpuContext, rows: u32, width: u32) -> Result<[u32; 3], GpuError> {
+    let groups = Dispatch1d::for_device(ctx, u64::from(rows), UNIFORM_WORKGROUP)?;
+    Ok([groups.x, groups.y, width.div_ceil(uniform_block(width))])
 }
 
 /// One layer's shape and weights.
@@ -361,6 +574,7 @@ fn row_tile_dispatch(ctx: &GpuContext, rows: u32, shape: TileShape, column_tiles
 pub struct DenseForward {
     spec: DenseLayerSpec,
     dispatch: BoundDispatch,
+    family: DenseFamily,
 }
 
 impl DenseForward {
@@ -380,9 +594,29 @@ impl DenseForward {
         output.check(&format!("{label} output"), spec.rows, spec.out_dim)?;
         check_binding(ctx, &label, &input.buffer)?;
         check_binding(ctx, &label, &output.buffer)?;
-        let shape = TileShape::for_product(spec.out_dim, None);
-        let pipeline = pipelines.get(ctx, DenseKernel::Forward, shape).await?;
-        let (weights, weight_offset) = range_binding(ctx, &label, params, &spec.weights)?;
+        let uniform = pipelines.uniform_weights(ctx, params, &spec.weights);
+        let family = if uniform.is_some() {
+            DenseFamily::UniformWeights
+        } else {
+            DenseFamily::Tiled
+        };
+        let (pipeline, (weights, weight_offset), workgroups) = match uniform {
+            Some(binding) => (
+                pipelines
+                    .get_uniform(ctx, DenseKernel::ForwardUniform, uniform_block(spec.out_dim))
+                    .await?,
+                binding,
+                uniform_dispatch(ctx, spec.rows, spec.out_dim)?,
+            ),
+            None => {
+                let shape = TileShape::for_product(spec.out_dim, None);
+                (
+                    pipelines.get(ctx, DenseKernel::Forward, shape).await?,
+                    range_binding(ctx, &label, params, &spec.weights)?,
+                    row_tile_dispatch(ctx, spec.rows, shape, spec.out_dim.div_ceil(shape.tile_columns()))?,
+                )
+            }
+        };
         let dims = DenseDims {
             x_stride: input.stride,
             x_offset: input.offset,
@@ -403,7 +637,6 @@ impl DenseForward {
                 (3, output.buffer.as_entire_binding()),
             ],
         );
-        let workgroups = row_tile_dispatch(ctx, spec.rows, shape, spec.out_dim.div_ceil(shape.tile_columns()))?;
         Ok(DenseForward {
             spec: spec.clone(),
             dispatch: BoundDispatch {
@@ -411,11 +644,17 @@ impl DenseForward {
                 bind_group,
                 workgroups,
             },
+            family,
         })
     }
 
     pub fn spec(&self) -> &DenseLayerSpec {
         &self.spec
+    }
+
+    /// The kernels this layer's forward runs (uniform weights only where the layer fits).
+    pub fn family(&self) -> DenseFamily {
+        self.family
     }
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
@@ -437,9 +676,206 @@ pub struct DenseGradients<'a> {
 /// The backward of one layer, bound to its buffers; owns the per-chunk partial sums of dW.
 pub struct DenseBackward {
     input_grad: Option<BoundDispatch>,
-    partial_sums: BoundDispatch,
+    partial_sums: WeightPartials,
     reduce: BoundDispatch,
     chunks: u32,
+}
+
+/// The first half of dW: every chunk of rows' partial matrix.
+enum WeightPartials {
+    /// One dispatch of the tiled kernel over all chunks.
+    Tiled(BoundDispatch),
+    /// dZ masked into a packed buffer, then one dispatch per chunk reading it as uniform.
+    Uniform(UniformWeightPartials),
+}
+
+/// Mirrors `ChunkInfo` in `shaders/dense_backward_weight_uniform.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ChunkInfo {
+    index: u32,
+    _pad: [u32; 3],
+}
+
+struct UniformWeightPartials {
+    mask: BoundDispatch,
+    pipeline: wgpu::ComputePipeline,
+    common: wgpu::BindGroup,
+    windows: wgpu::BindGroup,
+    /// Bytes between consecutive chunks' dZ windows, and between their `ChunkInfo` slots.
+    window_stride: u32,
+    info_stride: u32,
+    chunks: u32,
+    workgroups: [u32; 2],
+    /// Owned so the bind groups' buffers live as long as the pass.
+    _buffers: [wgpu::Buffer; 2],
+}
+
+impl UniformWeightPartials {
+    #[allow(clippy::too_many_arguments)]
+    async fn new(
+        ctx: &GpuContext,
+        pipelines: &mut DensePipelines,
+        label: &str,
+        spec: &DenseLayerSpec,
+        dims: &wgpu::Buffer,
+        (input, output, output_grad): (&RowView, &RowView, &RowView),
+        partials: &wgpu::Buffer,
+        (chunk_rows, chunks): (u32, u32),
+    ) -> Result<Self, GpuError> {
+        let window_floats = chunk_rows as usize * spec.out_dim as usize;
+        // Every chunk's window is UNIFORM_WEIGHT_FLOATS long from its start, the last included.
+        let dz_floats = (chunks as usize - 1) * window_floats + UNIFORM_WEIGHT_FLOATS;
+        ctx.ensure_storage_binding_fits(label, dz_floats as u64 * 4)?;
+        let dz = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(&format!("{label} dZ")),
+            size: dz_floats as u64 * 4,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::UNIFORM,
+            mapped_at_creation: false,
+        });
+        let info_stride = ctx.limits.min_uniform_buffer_offset_alignment.max(16);
+        let mut infos = vec![0u8; chunks as usize * info_stride as usize];
+        for c in 0..chunks {
+            let info = ChunkInfo { index: c, _pad: [0; 3] };
+            let at = (c * info_stride) as usize;
+            infos[at..at + size_of::<ChunkInfo>()].copy_from_slice(bytemuck::bytes_of(&info));
+        }
+        let info = wgpu::util::DeviceExt::create_buffer_init(
+            &ctx.device,
+            &wgpu::util::BufferInitDescriptor {
+                label: Some(&format!("{label} chunk slots")),
+                contents: &infos,
+                usage: wgpu::BufferUsages::UNIFORM,
+            },
+        );
+
+        let mask_pipeline = pipelines
+            .compile(ctx, DenseKernel::MaskOutputGradient, KernelVariant::Block(0), &[])
+            .await?;
+        let mask_bind = bind_group(
+            ctx,
+            label,
+            &mask_pipeline,
+            &[
+                (0, dims.as_entire_binding()),
+                (1, output_grad.buffer.as_entire_binding()),
+                (2, output.buffer.as_entire_binding()),
+                (6, dz.as_entire_binding()),
+            ],
+        );
+        let groups = Dispatch1d::for_device(ctx, u64::from(spec.rows) * u64::from(spec.out_dim), UNIFORM_WORKGROUP)?;
+        let mask = BoundDispatch {
+            pipeline: mask_pipeline,
+            bind_group: mask_bind,
+            workgroups: [groups.x, groups.y, 1],
+        };
+
+        let block = uniform_block(spec.out_dim);
+        let columns = spec.in_dim.next_power_of_two().clamp(8, UNIFORM_WORKGROUP);
+        let (pipeline, layouts) = pipelines.chunk_sums_pipeline(ctx, block, columns).await?;
+        let common = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout: &layouts[0],
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: dims.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: input.buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: partials.as_entire_binding(),
+                },
+            ],
+        });
+        let windows = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout: &layouts[1],
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &dz,
+                        offset: 0,
+                        size: NonZeroU64::new(UNIFORM_WEIGHT_FLOATS as u64 * 4),
+                    }),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &info,
+                        offset: 0,
+                        size: NonZeroU64::new(size_of::<ChunkInfo>() as u64),
+                    }),
+                },
+            ],
+        });
+        Ok(UniformWeightPartials {
+            mask,
+            pipeline,
+            common,
+            windows,
+            window_stride: (window_floats * 4) as u32,
+            info_stride,
+            chunks,
+            workgroups: [spec.in_dim.div_ceil(columns), spec.out_dim.div_ceil(block)],
+            _buffers: [dz, info],
+        })
+    }
+
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        self.mask.record(pass);
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.common, &[]);
+        for c in 0..self.chunks {
+            pass.set_bind_group(1, &self.windows, &[c * self.window_stride, c * self.info_stride]);
+            pass.dispatch_workgroups(self.workgroups[0], self.workgroups[1], 1);
+        }
+    }
+}
+
+impl WeightPartials {
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        match self {
+            WeightPartials::Tiled(dispatch) => dispatch.record(pass),
+            WeightPartials::Uniform(partials) => partials.record(pass),
+        }
+    }
+}
+
+/// Rows per chunk and chunk count for the uniform-window weight gradient: as many rows as fit
+/// a 64 KiB window, each window starting at an offset the device accepts for uniform bindings;
+/// `None` when the partial matrices would not fit one storage binding (then: tiled).
+fn uniform_weight_chunks(ctx: &GpuContext, spec: &DenseLayerSpec) -> Option<(u32, u32)> {
+    if (ctx.limits.max_uniform_buffer_binding_size as usize) < UNIFORM_WEIGHT_FLOATS * 4 {
+        return None;
+    }
+    let out = spec.out_dim as usize;
+    if out > UNIFORM_WEIGHT_FLOATS {
+        return None;
+    }
+    let align = (ctx.limits.min_uniform_buffer_offset_alignment.max(4) / 4) as usize;
+    // chunk_rows · out must be a multiple of `align` floats.
+    let step = align / gcd(out, align);
+    let chunk_rows = (UNIFORM_WEIGHT_FLOATS / out) / step * step;
+    if chunk_rows == 0 {
+        return None;
+    }
+    let chunks = (spec.rows as usize).div_ceil(chunk_rows);
+    let partial_bytes = chunks as u64 * out as u64 * u64::from(spec.in_dim) * 4;
+    let dz_bytes = ((chunks - 1) * chunk_rows * out + UNIFORM_WEIGHT_FLOATS) as u64 * 4;
+    let limit = ctx
+        .limits
+        .max_storage_buffer_binding_size
+        .min(ctx.limits.max_buffer_size);
+    (partial_bytes <= limit && dz_bytes <= limit).then_some((chunk_rows as u32, chunks as u32))
+}
+
+fn gcd(a: usize, b: usize) -> usize {
+    if b == 0 { a } else { gcd(b, a % b) }
 }
 
 impl DenseBackward {
@@ -478,9 +914,24 @@ impl DenseBackward {
                 let label = format!("{label} input gradient");
                 input_grad.check(&label, spec.rows, spec.in_dim)?;
                 check_binding(ctx, &label, &input_grad.buffer)?;
-                let shape = TileShape::for_product(spec.in_dim, None);
-                let pipeline = pipelines.get(ctx, DenseKernel::BackwardInput, shape).await?;
-                let (weights, weight_offset) = range_binding(ctx, &label, params, &spec.weights)?;
+                let (pipeline, (weights, weight_offset), workgroups) =
+                    match pipelines.uniform_weights(ctx, params, &spec.weights) {
+                        Some(binding) => (
+                            pipelines
+                                .get_uniform(ctx, DenseKernel::BackwardInputUniform, uniform_block(spec.in_dim))
+                                .await?,
+                            binding,
+                            uniform_dispatch(ctx, spec.rows, spec.in_dim)?,
+                        ),
+                        None => {
+                            let shape = TileShape::for_product(spec.in_dim, None);
+                            (
+                                pipelines.get(ctx, DenseKernel::BackwardInput, shape).await?,
+                                range_binding(ctx, &label, params, &spec.weights)?,
+                                row_tile_dispatch(ctx, spec.rows, shape, spec.in_dim.div_ceil(shape.tile_columns()))?,
+                            )
+                        }
+                    };
                 let dims = DenseDims {
                     dx_stride: input_grad.stride,
                     dx_offset: input_grad.offset,
@@ -500,7 +951,6 @@ impl DenseBackward {
                         (4, input_grad.buffer.as_entire_binding()),
                     ],
                 );
-                let workgroups = row_tile_dispatch(ctx, spec.rows, shape, spec.in_dim.div_ceil(shape.tile_columns()))?;
                 Some(BoundDispatch {
                     pipeline,
                     bind_group,
@@ -510,8 +960,15 @@ impl DenseBackward {
         };
 
         let label = format!("{label} weight gradient");
+        let uniform_plan = match pipelines.family {
+            DenseFamily::UniformWeights => uniform_weight_chunks(ctx, spec),
+            DenseFamily::Tiled => None,
+        };
         let shape = TileShape::for_product(spec.in_dim, Some(spec.out_dim));
-        let (chunk_rows, chunks) = weight_chunks(ctx, spec, shape)?;
+        let (chunk_rows, chunks) = match uniform_plan {
+            Some(plan) => plan,
+            None => weight_chunks(ctx, spec, shape)?,
+        };
         let matrix = spec.in_dim as usize * spec.out_dim as usize;
         let partials = storage_buffer_zeroed::<f32>(ctx, &format!("{label} partials"), chunks as usize * matrix)?;
         let (grads, grad_offset) = range_binding(ctx, &label, gradients.grads, &spec.weights)?;
@@ -523,28 +980,45 @@ impl DenseBackward {
         };
         let uniform = uniform_buffer_from(ctx, &label, &dims);
 
-        let pipeline = pipelines.get(ctx, DenseKernel::PartialSums, shape).await?;
-        let bind = bind_group(
-            ctx,
-            &label,
-            &pipeline,
-            &[
-                (0, uniform.as_entire_binding()),
-                (1, output_grad.buffer.as_entire_binding()),
-                (2, output.buffer.as_entire_binding()),
-                (3, input.buffer.as_entire_binding()),
-                (4, partials.as_entire_binding()),
-            ],
-        );
-        let workgroups = [
-            spec.in_dim.div_ceil(shape.tile_columns()),
-            spec.out_dim.div_ceil(shape.tile_rows()),
-            chunks,
-        ];
-        let partial_sums = BoundDispatch {
-            pipeline,
-            bind_group: bind,
-            workgroups,
+        let partial_sums = match uniform_plan {
+            Some(_) => WeightPartials::Uniform(
+                UniformWeightPartials::new(
+                    ctx,
+                    pipelines,
+                    &label,
+                    spec,
+                    &uniform,
+                    (input, output, output_grad),
+                    &partials,
+                    (chunk_rows, chunks),
+                )
+                .await?,
+            ),
+            None => {
+                let pipeline = pipelines.get(ctx, DenseKernel::PartialSums, shape).await?;
+                let bind = bind_group(
+                    ctx,
+                    &label,
+                    &pipeline,
+                    &[
+                        (0, uniform.as_entire_binding()),
+                        (1, output_grad.buffer.as_entire_binding()),
+                        (2, output.buffer.as_entire_binding()),
+                        (3, input.buffer.as_entire_binding()),
+                        (4, partials.as_entire_binding()),
+                    ],
+                );
+                let workgroups = [
+                    spec.in_dim.div_ceil(shape.tile_columns()),
+                    spec.out_dim.div_ceil(shape.tile_rows()),
+                    chunks,
+                ];
+                WeightPartials::Tiled(BoundDispatch {
+                    pipeline,
+                    bind_group: bind,
+                    workgroups,
+                })
+            }
         };
 
         let pipeline = pipelines.get(ctx, DenseKernel::ReduceChunks, REDUCE_SHAPE).await?;
@@ -584,6 +1058,11 @@ impl DenseBackward {
         }
         self.partial_sums.record(pass);
         self.reduce.record(pass);
+    }
+
+    /// Whether dW reads dZ through uniform windows (the CPU-device kernels).
+    pub fn uses_uniform_windows(&self) -> bool {
+        matches!(self.partial_sums, WeightPartials::Uniform(_))
     }
 }
 
@@ -801,6 +1280,20 @@ impl MlpPass {
 
     pub fn layers(&self) -> impl Iterator<Item = &DenseLayerSpec> {
         self.forward.iter().map(DenseForward::spec)
+    }
+
+    /// For each layer's backward: whether dW reads dZ through uniform windows (none: forward only).
+    pub fn weight_gradient_windows(&self) -> Vec<bool> {
+        self.backward
+            .iter()
+            .flatten()
+            .map(DenseBackward::uses_uniform_windows)
+            .collect()
+    }
+
+    /// The kernel family each layer's forward (and input gradient) runs.
+    pub fn layer_families(&self) -> impl Iterator<Item = DenseFamily> + '_ {
+        self.forward.iter().map(DenseForward::family)
     }
 }
 

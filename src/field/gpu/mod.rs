@@ -13,3 +13,4 @@ pub mod head_glue;
 pub mod rays;
 pub mod scene_buffers;
 pub mod trainer;
+pub mod view;

@@ -12,23 +12,26 @@ use crate::field::config::FieldConfig;
 use crate::field::params::ParamLayout;
 use crate::field::reference::LossTerms;
 use crate::gpu::buffers::{
-    PendingRead, read_buffer_async, read_elements_async, storage_buffer_from, storage_buffer_zeroed,
+    PendingRead, read_buffer_async, read_elements_async, storage_buffer_padded, storage_buffer_zeroed,
 };
 use crate::gpu::timing::{PassTime, PassTimer, total_by_name};
 use crate::gpu::{GpuContext, GpuError};
 use crate::labels::LabelSet;
-use crate::scene::Scene;
+use crate::scene::{Bounds, Pca, Scene};
 
 use super::adam::{AdamBuffers, AdamPass};
 use super::composite::{CompositeInputs, CompositeLayout, CompositePass, HeadSource, LOSS_WORDS};
-use super::dense::{DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView};
+use super::dense::{DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView, UNIFORM_WEIGHT_FLOATS};
 use super::encoding::{
     DirectionLayout, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
     PositionEncodeBuffers, PositionEncodePass, ShOutputLayout,
 };
 use super::head_glue::{GlueBuffers, GlueDims, HeadGluePass};
 use super::rays::{FrameTilePass, RayBatchPass, SamplePointsPass, StepUniforms};
+use super::rays::{NO_LABEL, RayGeometry, TARGET_HEADER_WORDS, TARGET_LABEL};
 use super::scene_buffers::{LabelIndex, SceneBuffers};
+use super::view::view_rays;
+pub use super::view::{DepthGuide, FrameAssembler, RenderedFrame, ViewCamera};
 
 const SH: u32 = 16;
 
@@ -37,20 +40,6 @@ const SH: u32 = 16;
 pub struct StepLosses {
     pub step: u32,
     pub terms: LossTerms,
-}
-
-/// What the field renders for one frame, per pixel in row-major order.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RenderedFrame {
-    pub width: u32,
-    pub height: u32,
-    /// Argmax of the rendered semantic logits.
-    pub classes: Vec<u8>,
-    /// The largest softmax probability of the rendered logits.
-    pub confidence: Vec<f32>,
-    pub rgb: Vec<[f32; 3]>,
-    /// Rendered z-depth in metres.
-    pub depth: Vec<f32>,
 }
 
 /// The per-sample buffers between passes, owned here so passes can share them.
@@ -112,6 +101,9 @@ pub struct Trainer {
     frame_tile: FrameTilePass,
     frame_count: u32,
     pixels_per_frame: u32,
+    bounds: Bounds,
+    /// The scene's PCA of its feature codes, to show rendered features in the same colours.
+    display_pca: Option<Pca>,
     sample_points: SamplePointsPass,
     encode: PositionEncodePass,
     sh: DirectionShPass,
@@ -143,7 +135,14 @@ impl Trainer {
             ctx.ensure_storage_binding_fits(what, (total * 4) as u64)?;
         }
         let optimizer = Optimizer {
-            params: storage_buffer_from(ctx, "field parameters", &initial)?,
+            // UNIFORM and padded: CPU devices read the MLP weights through uniform bindings.
+            params: storage_buffer_padded(
+                ctx,
+                "field parameters",
+                &initial,
+                UNIFORM_WEIGHT_FLOATS,
+                wgpu::BufferUsages::UNIFORM,
+            )?,
             grads: storage_buffer_zeroed::<f32>(ctx, "field gradients", total)?,
             _first_moment: storage_buffer_zeroed::<f32>(ctx, "Adam first moment", total)?,
             _second_moment: storage_buffer_zeroed::<f32>(ctx, "Adam second moment", total)?,
@@ -194,7 +193,7 @@ impl Trainer {
         // MLPs with their gradients.
         let composite_layout = CompositeLayout::new(cfg);
         let grad_stride = composite_layout.grad_stride() as u32;
-        let mut pipelines = DensePipelines::new();
+        let mut pipelines = DensePipelines::with_family(DenseFamily::for_device(ctx));
         let color_out = storage_buffer_zeroed::<f32>(ctx, "colour output", n as usize * 3)?;
         let logits = storage_buffer_zeroed::<f32>(ctx, "semantic logits", n as usize * c as usize)?;
         let composite = CompositePass::new(
@@ -375,6 +374,8 @@ impl Trainer {
             frame_tile,
             frame_count: scene.frames.len() as u32,
             pixels_per_frame: scene.width * scene.height,
+            bounds: scene.bounds,
+            display_pca: scene.features.as_ref().map(|f| f.pca.clone()),
             sample_points,
             encode,
             sh,
@@ -559,8 +560,8 @@ impl Trainer {
     }
 
     /// Renders frame `frame` at its own resolution, in tiles of one batch of rays each, with the
-    /// scene's depth guiding the samples as in training. Each tile is read back before the next
-    /// is recorded, so memory stays at one batch whatever the frame size.
+    /// scene's depth guiding the samples as in training (rays made on the GPU). Each tile is read
+    /// back before the next is recorded, so memory stays at one batch whatever the frame size.
     pub async fn render_frame(&mut self, frame: u32, width: u32, height: u32) -> Result<RenderedFrame, GpuError> {
         if frame >= self.frame_count || width * height != self.pixels_per_frame {
             return Err(GpuError::invalid_argument(
@@ -571,60 +572,123 @@ impl Trainer {
                 ),
             ));
         }
-        let pixels = self.pixels_per_frame as usize;
-        let mut out = RenderedFrame {
-            width,
-            height,
-            classes: Vec::with_capacity(pixels),
-            confidence: Vec::with_capacity(pixels),
-            rgb: Vec::with_capacity(pixels),
-            depth: Vec::with_capacity(pixels),
-        };
-        let batch = self.cfg.batch_rays;
-        let stride = self.composite.layout.ray_output_stride();
-        let rendered = self.composite.layout.rendered_offset();
-        let classes = self.cfg.num_classes as usize;
         let first = frame * self.pixels_per_frame;
-        // A fixed step keeps the sample jitter of a frame the same on every render.
-        let uniforms = StepUniforms::for_step(&self.cfg, 1, self.seed ^ 0x5eed, 0.0);
+        let mut out = self.assembler(width, height);
         let mut done = 0u32;
         while done < self.pixels_per_frame {
-            let count = (self.pixels_per_frame - done).min(batch);
+            let count = (self.pixels_per_frame - done).min(self.cfg.batch_rays);
+            self.frame_tile.set_tile(&self.ctx, first + done, count);
+            self.render_tile(count, &mut out, true).await?;
+            done += count;
+        }
+        Ok(out.finish(self.display_pca.as_ref()))
+    }
+
+    /// Renders any camera at any resolution (a new pose, or a scene frame at a lower resolution
+    /// for a quick preview). With [`DepthGuide::Estimate`] the view is rendered twice, the
+    /// second time with samples around the depth the first one found.
+    pub async fn render_view(&mut self, view: &ViewCamera, guide: DepthGuide<'_>) -> Result<RenderedFrame, GpuError> {
+        let pixels = view.pixels();
+        if pixels == 0 || view.width > 16384 || view.height > 16384 {
+            return Err(GpuError::invalid_argument(
+                "render",
+                format!("a view of {} x {} pixels cannot be rendered", view.width, view.height),
+            ));
+        }
+        let estimated;
+        let depth = match guide {
+            DepthGuide::Measured(depth) => {
+                if depth.len() != pixels {
+                    return Err(GpuError::invalid_argument(
+                        "render",
+                        format!("depth guide has {} values for a view of {pixels} pixels", depth.len()),
+                    ));
+                }
+                Some(depth)
+            }
+            DepthGuide::Estimate => {
+                estimated = self.render_rays(view, None).await?.depth().to_vec();
+                Some(estimated.as_slice())
+            }
+        };
+        Ok(self.render_rays(view, depth).await?.finish(self.display_pca.as_ref()))
+    }
+
+    async fn render_rays(&mut self, view: &ViewCamera, depth: Option<&[f32]>) -> Result<FrameAssembler, GpuError> {
+        let batch = self.cfg.batch_rays as usize;
+        let mut out = self.assembler(view.width, view.height);
+        // Rendering computes no loss: targets only need to be valid rows without a label.
+        let row_words = TARGET_HEADER_WORDS + self.cfg.feature_dim as usize;
+        let mut targets = vec![0u32; batch * row_words];
+        for row in targets.chunks_exact_mut(row_words) {
+            row[TARGET_LABEL] = NO_LABEL;
+        }
+        self.ctx
+            .queue
+            .write_buffer(&self.ray_batch.targets, 0, bytemuck::cast_slice(&targets));
+        let miss = RayGeometry {
+            origin: [0.0; 3],
+            z_per_t: 1.0,
+            dir: [0.0, 0.0, 1.0],
+            near: 0.0,
+            far: 0.0,
+            depth: 0.0,
+            pixel: 0,
+            flags: 0,
+        };
+        let mut done = 0;
+        while done < view.pixels() {
+            let count = (view.pixels() - done).min(batch);
+            let mut rays = view_rays(view, &self.bounds, depth, done, count);
+            rays.resize(batch, miss);
             self.ctx
                 .queue
-                .write_buffer(&self.step_uniforms, 0, bytemuck::bytes_of(&uniforms));
-            self.frame_tile.set_tile(&self.ctx, first + done, count);
-            let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
-            {
-                let mut pass = encoder.begin_compute_pass(&Default::default());
-                self.frame_tile.record(&mut pass);
-                self.record_field(&mut pass);
-                self.composite.record(&mut pass);
-            }
-            self.ctx.queue.submit([encoder.finish()]);
-            let rows = read_elements_async::<f32>(
-                &self.ctx,
-                &self.composite.ray_outputs,
-                0..(count as usize * stride) as u64,
-            )
-            .await?;
-            for row in rows.chunks_exact(stride) {
-                let v = &row[rendered..];
-                out.rgb.push([v[0], v[1], v[2]]);
-                out.depth.push(v[3]);
-                let logits = &v[4..4 + classes];
-                let (best, top) =
-                    logits.iter().enumerate().fold(
-                        (0usize, f32::NEG_INFINITY),
-                        |(bi, bv), (i, &x)| if x > bv { (i, x) } else { (bi, bv) },
-                    );
-                let sum: f32 = logits.iter().map(|&x| (x - top).exp()).sum();
-                out.classes.push(best as u8);
-                out.confidence.push(1.0 / sum);
-            }
+                .write_buffer(&self.ray_batch.rays, 0, bytemuck::cast_slice(&rays));
+            self.render_tile(count as u32, &mut out, false).await?;
             done += count;
         }
         Ok(out)
+    }
+
+    fn assembler(&self, width: u32, height: u32) -> FrameAssembler {
+        FrameAssembler::new(
+            width,
+            height,
+            self.cfg.num_classes as usize,
+            self.cfg.feature_dim as usize,
+        )
+    }
+
+    /// Renders the batch's rays (made by the frame-tile kernel when `frame_tile`, else already
+    /// written) and adds the first `count` to `out`.
+    async fn render_tile(&mut self, count: u32, out: &mut FrameAssembler, frame_tile: bool) -> Result<(), GpuError> {
+        // A fixed step keeps the sample jitter of a pixel the same on every render.
+        let uniforms = StepUniforms::for_step(&self.cfg, 1, self.seed ^ 0x5eed, 0.0);
+        self.ctx
+            .queue
+            .write_buffer(&self.step_uniforms, 0, bytemuck::bytes_of(&uniforms));
+        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            if frame_tile {
+                self.frame_tile.record(&mut pass);
+            }
+            self.record_field(&mut pass);
+            self.composite.record(&mut pass);
+        }
+        self.ctx.queue.submit([encoder.finish()]);
+        let stride = self.composite.layout.ray_output_stride();
+        let rendered = self.composite.layout.rendered_offset();
+        let rows = read_elements_async::<f32>(
+            &self.ctx,
+            &self.composite.ray_outputs,
+            0..(count as usize * stride) as u64,
+        )
+        .await?;
+        for row in rows.chunks_exact(stride) {
+            out.push(&row[rendered..]);
+        }
+        Ok(())
     }
 
     /// Starts reading the losses of the latest step, unless a read is already under way.
@@ -676,7 +740,7 @@ impl Trainer {
 
     /// Reads the parameters back (tests, checkpoints).
     pub fn read_params(&self) -> PendingRead<f32> {
-        read_buffer_async::<f32>(&self.ctx, &self.optimizer.params)
+        read_elements_async::<f32>(&self.ctx, &self.optimizer.params, 0..self.layout.total as u64)
     }
 
     /// Reads back the gradient of the latest step (tests: compare with the reference).

@@ -1,0 +1,37 @@
+// Input gradient of one dense layer, weights from a uniform binding (`_dense_uniform.wgsl`):
+// dX[n][i] = Σ_o dZ[n][o] · W[o][i], dZ = dY ⊙ act'(Y) (ReLU: Y > 0, 0 at 0 as the reference).
+// dX is overwritten. Invocation: row n, inputs i0 .. i0 + BLOCK with i0 = BLOCK · workgroup_id.z.
+//!include _dense_uniform.wgsl
+
+@group(0) @binding(0) var<uniform> dims: DenseDims;
+@group(0) @binding(1) var<storage, read> dy: array<f32>;
+@group(0) @binding(2) var<storage, read> y: array<f32>;
+@group(0) @binding(3) var<uniform> weights: array<vec4<f32>, UNIFORM_WEIGHT_VEC4S>;
+@group(0) @binding(4) var<storage, read_write> dx: array<f32>;
+
+@compute @workgroup_size(WORKGROUP)
+fn backward_input(
+    @builtin(workgroup_id) workgroup_id: vec3<u32>,
+    @builtin(num_workgroups) num_workgroups: vec3<u32>,
+    @builtin(local_invocation_index) local_index: u32,
+) {
+    let n = linear_item_index(vec3<u32>(workgroup_id.xy, 0u), num_workgroups, local_index, WORKGROUP);
+    if n >= dims.rows {
+        return;
+    }
+    let i0 = workgroup_id.z * BLOCK;
+    let dy_row = n * dims.dy_stride + dims.dy_offset;
+    let y_row = n * dims.y_stride + dims.y_offset;
+    var acc: Acc;
+    for (var o = 0u; o < dims.out_dim; o++) {
+        // W[o][i0 + j] is at weight_offset + o·in + i0 + j: consecutive.
+        accumulate(&acc, output_gradient(dy[dy_row + o], y_row + o), dims.weight_offset + o * dims.in_dim + i0, 1u);
+    }
+    let dx_row = n * dims.dx_stride + dims.dx_offset;
+    for (var j = 0u; j < BLOCK; j++) {
+        let i = i0 + j;
+        if i < dims.in_dim {
+            dx[dx_row + i] = acc_value(&acc, j);
+        }
+    }
+}

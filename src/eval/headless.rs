@@ -1,0 +1,65 @@
+//! Headless training and scoring (native only): the schedule `segment`, the quality tests and
+//! the ablations share, so they measure the same thing.
+//!
+//! Schedule: `warmup` steps without labels (colour, depth and features only), then the labels
+//! join and `steps` more steps train with them.
+use crate::field::gpu::trainer::{RenderedFrame, Trainer};
+use crate::gpu::GpuError;
+use crate::labels::LabelSet;
+use crate::scene::Scene;
+
+use super::metrics::{Confusion, EvalReport};
+
+/// Steps trained between loss read-backs (each read waits for the GPU).
+const CHUNK: u32 = 10;
+
+/// Runs the warm-up-then-labels schedule. `progress(done, total, loss)` is called after every
+/// chunk of steps (loss: the latest total loss read back, read every 50 steps).
+pub fn train_schedule(
+    trainer: &mut Trainer,
+    scene: &Scene,
+    labels: &LabelSet,
+    warmup: u32,
+    steps: u32,
+    mut progress: impl FnMut(u32, u32, Option<f64>),
+) -> Result<(), GpuError> {
+    let total = warmup + steps;
+    let mut done = 0;
+    let mut loss = None;
+    while done < total {
+        if done == warmup {
+            trainer.set_labels(Some(labels), scene.width, scene.height, scene.frames.len() as u32)?;
+        }
+        let until = if done < warmup { warmup } else { total };
+        let n = CHUNK.min(until - done);
+        trainer.train(n);
+        done += n;
+        if done % 50 < CHUNK || done == total {
+            loss = Some(trainer.losses_blocking()?.terms.total());
+        }
+        progress(done, total, loss);
+    }
+    Ok(())
+}
+
+/// Renders `frames` and scores their class maps against the scene's ground truth (frames
+/// without ground truth are rendered but not scored). `each(frame, rendered)` sees every render.
+pub fn render_and_score(
+    trainer: &mut Trainer,
+    scene: &Scene,
+    class_names: &[String],
+    frames: impl IntoIterator<Item = usize>,
+    mut each: impl FnMut(usize, RenderedFrame),
+) -> Result<EvalReport, GpuError> {
+    let mut confusion = Confusion::new(class_names.len());
+    let mut scored = 0;
+    for i in frames {
+        let rendered = pollster::block_on(trainer.render_frame(i as u32, scene.width, scene.height))?;
+        if let Some(gt) = scene.frames.get(i).and_then(|f| f.gt.as_ref()) {
+            confusion.add(gt.as_raw(), &rendered.classes);
+            scored += 1;
+        }
+        each(i, rendered);
+    }
+    Ok(confusion.report(class_names, scored))
+}
