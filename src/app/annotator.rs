@@ -15,6 +15,7 @@ use super::overlays::{self, RenderedTextures};
 use super::palette::{Palette, PaletteAction, color_of};
 use super::persistence::{self, Origin};
 use super::training::{Phase, Training};
+use super::training_scene::{auto_factor, downscale};
 use super::{page_status, scene_panel, side_panel};
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
@@ -91,6 +92,8 @@ pub struct Annotator {
     last_export_ms: Option<f64>,
     inbox: Inbox,
     restart_pending: bool,
+    /// The scene the field trains on and its downscale factor (kept for restarts).
+    train_scene: Option<(u32, Rc<Scene>)>,
     arrow_key_widgets: Vec<egui::Id>,
     image_rect: egui::Rect,
 }
@@ -139,6 +142,7 @@ impl Annotator {
             last_export_ms: None,
             inbox: Inbox::default(),
             restart_pending: false,
+            train_scene: None,
             arrow_key_widgets: Vec::new(),
             image_rect: egui::Rect::NOTHING,
             scene,
@@ -182,14 +186,34 @@ impl Annotator {
             self.notify("No GPU device: the field cannot be trained in this page.", true);
             return;
         };
-        let config = self.model.config(&self.scene, self.labels.classes.len());
+        let factor = crate::labels::share::fragment_value(&browser::page_fragment(), "res")
+            .and_then(|v| v.parse::<u32>().ok())
+            .filter(|f| (1..=16).contains(f))
+            .unwrap_or_else(|| auto_factor(self.scene.width, self.scene.height, self.model == ModelSize::Tiny));
+        let train_scene = match &self.train_scene {
+            Some((f, s)) if *f == factor => s.clone(),
+            _ => {
+                let s = Rc::new(downscale(&self.scene, factor));
+                self.train_scene = Some((factor, s.clone()));
+                s
+            }
+        };
+        let mut config = self.model.config(&train_scene, self.labels.classes.len());
+        // `#rays=N` in the address: rays per training batch (and per render tile).
+        if let Some(rays) =
+            crate::labels::share::fragment_value(&browser::page_fragment(), "rays").and_then(|v| v.parse::<u32>().ok())
+        {
+            config.batch_rays = rays;
+        }
         if let Err(e) = config.validate() {
             self.notify(&format!("cannot train: {e}"), true);
             return;
         }
         self.training = Some(Training::start(
             gpu,
-            self.scene.clone(),
+            train_scene,
+            factor,
+            (self.scene.width, self.scene.height),
             config,
             &self.labels,
             self.frame as u32,
@@ -311,6 +335,16 @@ impl Annotator {
             self.start_training(&ctx);
         }
         self.take_inbox();
+        // Any key, or the pointer pressed or moving with a button down: the user is at work.
+        let active = ctx.input(|i| {
+            i.events.iter().any(|e| {
+                matches!(e, egui::Event::Key { .. } | egui::Event::PointerButton { .. })
+                    || (matches!(e, egui::Event::PointerMoved(_)) && i.pointer.any_down())
+            })
+        });
+        if active && let Some(t) = &self.training {
+            t.user_active(400.0);
+        }
         self.take_training_reports(&ctx);
         self.refresh_summary();
         self.handle_keys(&ctx);
@@ -332,6 +366,7 @@ impl Annotator {
                     training.as_deref(),
                     self.training.as_ref().map(|t| &t.config),
                     self.summary.labelled_pixels,
+                    self.training.as_ref().map_or(1, |t| t.factor),
                 );
             })
         });
@@ -447,6 +482,11 @@ impl Annotator {
         );
         self.image_rect = out.image_rect;
         if let Some(stroke) = out.finished {
+            // People draw several strokes in a row: keep the GPU for the UI a little longer
+            // than after other input, so a slow training step does not land between strokes.
+            if let Some(t) = &self.training {
+                t.user_active(1500.0);
+            }
             let frame = self.frame as u32;
             self.edit(Edit::AddStroke { frame, stroke }, false);
         }
@@ -854,7 +894,7 @@ impl Annotator {
         page_status::set(&format!(
             "ready frames={} size={}x{} frame={} class={} tool={} classes={} strokes={} labelled={} \
              training={phase} steps={steps} sps={sps:.2} loss={loss} rendered={rendered_step} \
-             saved={} view={:.0},{:.0},{:.0},{:.0}",
+             saved={} res={} render_ms={:.0} view={:.0},{:.0},{:.0},{:.0}",
             self.scene.frames.len(),
             self.scene.width,
             self.scene.height,
@@ -868,6 +908,8 @@ impl Annotator {
             s.strokes,
             s.labelled_pixels,
             u8::from(self.autosaved_version == Some(self.version)),
+            self.training.as_ref().map_or(1, |t| t.factor),
+            self.training.as_ref().map_or(0.0, |t| t.shared().render_ms),
             r.min.x,
             r.min.y,
             r.width(),

@@ -16,6 +16,7 @@ pub mod persistence;
 pub mod scene_panel;
 pub mod side_panel;
 pub mod training;
+pub mod training_scene;
 
 use std::cell::RefCell;
 use std::rc::Rc;

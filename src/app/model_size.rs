@@ -7,7 +7,7 @@ use crate::scene::Scene;
 /// The choices, by name in the page's `#model=` fragment key.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ModelSize {
-    /// For software rasterizers: a few hundred rays, widths 16, 12 samples per ray.
+    /// For software rasterizers: 128 rays, widths 16, 12 samples per ray.
     Tiny,
     /// `FieldConfig::small()`: laptops and integrated GPUs.
     Small,
@@ -56,7 +56,7 @@ impl ModelSize {
                 semantic_width: 16,
                 samples_coarse: 4,
                 samples_fine: 8,
-                batch_rays: 256,
+                batch_rays: 128,
                 // Few steps happen on a CPU rasterizer: larger steps than the interactive
                 // default so scribbles show in the masks within a minute.
                 adam: AdamConfig {

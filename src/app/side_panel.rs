@@ -20,6 +20,7 @@ pub fn show(
     training: Option<&Shared>,
     config: Option<&FieldConfig>,
     labelled_pixels: u64,
+    factor: u32,
 ) -> SideActions {
     let mut actions = SideActions::default();
     ui.heading("Training");
@@ -75,6 +76,14 @@ pub fn show(
             row("labelled px", labelled_pixels.to_string());
             row("steps per batch", s.batch.to_string());
             row("render", format!("{:.0} ms", s.render_ms));
+            row(
+                "resolution",
+                if factor > 1 {
+                    format!("1/{factor} (#res=1 for full)")
+                } else {
+                    "full".into()
+                },
+            );
             if let Some(cfg) = config {
                 row(
                     "model",

@@ -16,11 +16,13 @@ use std::task::{Context, Poll, Waker};
 use image::GrayImage;
 
 use super::browser::{now_ms, sleep_ms};
+use super::training_scene::upscale_mask;
 use crate::export::MaskSet;
 use crate::field::FieldConfig;
 use crate::field::gpu::trainer::{RenderedFrame, StepLosses, Trainer};
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
+use crate::labels::scale::scale_labels;
 use crate::scene::Scene;
 
 /// GPU time one batch of steps should take.
@@ -28,7 +30,7 @@ const TARGET_BATCH_MS: f64 = 20.0;
 /// Most steps in one batch (a fast GPU would otherwise queue seconds of work on a slow frame).
 const MAX_BATCH: u32 = 64;
 /// The visible frame is re-rendered at most this often while training (a render costs as much
-/// as tens of steps), and never more than half the time.
+/// as tens of steps).
 const RENDER_INTERVAL_MS: f64 = 1500.0;
 
 /// Where the training stands.
@@ -59,6 +61,9 @@ pub struct Rendered {
 pub struct Shared {
     // Requests.
     pub paused: bool,
+    /// Until then (page clock, ms) the user is interacting: training waits so that the UI's
+    /// frames are not queued behind training work (on a slow GPU one step outlasts a frame).
+    pub busy_until_ms: f64,
     pub visible_frame: u32,
     /// New labels to train on (the UI bumps the version with every edit).
     pending_labels: Option<(u64, LabelSet)>,
@@ -85,13 +90,21 @@ pub struct Training {
     shared: Rc<RefCell<Shared>>,
     pub config: FieldConfig,
     pub device: String,
+    /// The field trains on frames this many times smaller than the scene's (see
+    /// `training_scene`); labels are scaled on the way in.
+    pub factor: u32,
 }
 
 impl Training {
-    /// Starts training on `ctx` (eframe's device) with `labels` (may be empty).
+    /// Starts training on `ctx` (eframe's device) with `labels` (may be empty, drawn on the
+    /// full-resolution frames). `scene` is what the field trains on: the loaded scene downscaled
+    /// by `factor`; `full_size` is the loaded scene's frame size, which the masks download has.
+    #[allow(clippy::too_many_arguments)]
     pub fn start(
         ctx: GpuContext,
         scene: Rc<Scene>,
+        factor: u32,
+        full_size: (u32, u32),
         config: FieldConfig,
         labels: &LabelSet,
         visible_frame: u32,
@@ -99,8 +112,9 @@ impl Training {
     ) -> Training {
         let shared = Rc::new(RefCell::new(Shared {
             paused: false,
+            busy_until_ms: 0.0,
             visible_frame,
-            pending_labels: Some((0, labels.clone())),
+            pending_labels: Some((0, scale_labels(labels, factor as f32))),
             render_soon: true,
             export: None,
             stop: false,
@@ -123,9 +137,15 @@ impl Training {
             shared: shared.clone(),
             egui_ctx,
             faults,
+            full_size,
         };
         wasm_bindgen_futures::spawn_local(task.run());
-        Training { shared, config, device }
+        Training {
+            shared,
+            config,
+            device,
+            factor,
+        }
     }
 
     pub fn shared(&self) -> std::cell::Ref<'_, Shared> {
@@ -138,9 +158,15 @@ impl Training {
 
     /// Hands the task labels to train on from now on.
     pub fn set_labels(&self, version: u64, labels: &LabelSet) {
+        // No render now: the field has not learnt anything from them yet; the periodic render
+        // while training shows their effect.
+        self.shared.borrow_mut().pending_labels = Some((version, scale_labels(labels, self.factor as f32)));
+    }
+
+    /// The user is drawing or pressing keys: hold the GPU for the UI a moment.
+    pub fn user_active(&self, for_ms: f64) {
         let mut s = self.shared.borrow_mut();
-        s.pending_labels = Some((version, labels.clone()));
-        s.render_soon = true;
+        s.busy_until_ms = s.busy_until_ms.max(now_ms() + for_ms);
     }
 
     pub fn show_frame(&self, frame: u32) {
@@ -153,6 +179,8 @@ impl Training {
 
     /// Asks for the masks of every frame; the zip arrives in `Shared::exported`.
     pub fn export(&self, labels: &LabelSet) {
+        // The download carries the labels as drawn (full resolution); the task only needs their
+        // classes.
         self.shared.borrow_mut().export = Some(labels.clone());
     }
 }
@@ -175,7 +203,11 @@ impl GpuFaults {
         let lost = faults.clone();
         let repaint = egui_ctx.clone();
         device.set_device_lost_callback(move |reason, message| {
-            lost.record(format!("the GPU device was lost ({reason:?}): {message}"));
+            let text = format!("the GPU device was lost ({reason:?}): {message}");
+            // Dropping a trainer destroys its buffers, not the device: anything arriving here
+            // means the page's (shared) device is gone.
+            super::page_status::set_gpu_lost(&text);
+            lost.record(text);
             repaint.request_repaint();
         });
         let errors = faults.clone();
@@ -211,16 +243,14 @@ struct TrainingTask {
     shared: Rc<RefCell<Shared>>,
     egui_ctx: egui::Context,
     faults: GpuFaults,
+    full_size: (u32, u32),
 }
 
 impl TrainingTask {
     async fn run(self) {
-        // The scene's own labels are the app's business (it restores or replaces them); the
-        // trainer starts from what the UI hands it.
-        let mut scene_only = Scene::clone(&self.scene);
-        scene_only.labels = None;
-        let trainer = Trainer::new(&self.ctx, &scene_only, &self.config, 0).await;
-        drop(scene_only);
+        // The scene carries no labels (see `training_scene::downscale`): the app decides which
+        // to start from and hands them over like any later edit.
+        let trainer = Trainer::new(&self.ctx, &self.scene, &self.config, 0).await;
         let mut trainer = match trainer {
             Ok(t) => t,
             Err(e) => return self.fail(format!("cannot start training: {e}")),
@@ -253,10 +283,11 @@ impl TrainingTask {
         let mut rate = RateMeter::default();
         loop {
             self.fault()?;
-            let (stop, labels, export, paused, render_due, frame) = {
+            let (stop, labels, export, paused, render_due, frame, busy) = {
                 let mut s = self.shared.borrow_mut();
                 let since = now_ms() - last_render_end;
-                let due = s.render_soon || since > RENDER_INTERVAL_MS.max(s.render_ms);
+                // At most a quarter of the time goes to renders the user did not ask for.
+                let due = s.render_soon || since > RENDER_INTERVAL_MS.max(3.0 * s.render_ms);
                 (
                     s.stop,
                     s.pending_labels.take(),
@@ -264,6 +295,7 @@ impl TrainingTask {
                     s.paused,
                     due,
                     s.visible_frame,
+                    now_ms() < s.busy_until_ms,
                 )
             };
             if stop {
@@ -275,6 +307,10 @@ impl TrainingTask {
                     .map_err(|e| format!("cannot upload the labels: {e}"))?;
                 trained_version = version;
                 self.shared.borrow_mut().labels_version = version;
+            }
+            if busy {
+                sleep_ms(30).await;
+                continue;
             }
             if let Some(labels) = export {
                 let zip = self.export(trainer, &labels).await;
@@ -359,7 +395,7 @@ impl TrainingTask {
                 .map_err(|e| format!("rendering frame {frame} failed: {e}"))?;
             let mask = GrayImage::from_raw(scene.width, scene.height, rendered.classes)
                 .ok_or_else(|| format!("frame {frame}: the rendered class map has the wrong size"))?;
-            masks.push(mask);
+            masks.push(upscale_mask(mask, self.full_size.0, self.full_size.1));
         }
         self.shared.borrow_mut().phase = Phase::Exporting { done: total, total };
         self.egui_ctx.request_repaint();

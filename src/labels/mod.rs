@@ -7,6 +7,7 @@ pub mod brush;
 mod format;
 pub mod history;
 mod raster;
+pub mod scale;
 pub mod share;
 pub mod summary;
 pub mod synthetic;
