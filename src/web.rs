@@ -7,7 +7,7 @@ use eframe::wgpu;
 use wasm_bindgen::JsCast;
 use wasm_bindgen::prelude::*;
 
-use crate::app::{App, loading, page_status};
+use crate::app::{App, browser, loading, page_status};
 
 /// Starts the app in the canvas `canvas_id`, loading the scene named by the page's
 /// `#scene=<url>` fragment, or `demo.scene.zip` next to the page.
@@ -20,7 +20,7 @@ pub async fn start(canvas_id: String) -> Result<(), JsValue> {
     report_panics_in_the_page();
     let result = run(&canvas_id).await;
     if let Err(e) = &result {
-        page_status::set(&format!("error: {}", loading::js_error_text(e)));
+        page_status::set(&format!("error: {}", browser::js_error_text(e)));
     }
     result
 }

@@ -1,5 +1,6 @@
 //! Getting a scene into the page: which URL (the page's `#scene=` fragment or the demo next to
-//! the page), a streamed fetch that reports progress, and decoding.
+//! the page), a streamed fetch that reports progress, or a file the user picked or dropped;
+//! then decoding.
 //!
 //! Decoding runs on the page's only thread in one go, after a repaint that shows "decoding".
 //! That is quick for the demo scene (a fraction of a second) but freezes the page for a few
@@ -11,6 +12,8 @@ use wasm_bindgen::JsCast;
 use wasm_bindgen::prelude::*;
 use wasm_bindgen_futures::JsFuture;
 
+use super::browser::{js_error_text, page_fragment, sleep_ms};
+use crate::labels::share::parse_fragment;
 use crate::scene::{Scene, SceneError, read_archive};
 
 /// Loaded when the page names no scene.
@@ -20,23 +23,12 @@ pub const DEFAULT_SCENE_URL: &str = "demo.scene.zip";
 /// takes several times the archive's size, so more than this cannot be opened anyway.
 pub const MAX_ARCHIVE_BYTES: u64 = 1 << 30;
 
-/// The scene to load: `scene=<url>` from the page's fragment (`#scene=...&other=...`,
-/// URI-encoded), else [`DEFAULT_SCENE_URL`]. A relative URL is relative to the page.
+/// The scene to load: `scene=<url>` from the page's fragment (`#scene=...&labels=...`,
+/// percent-encoded), else [`DEFAULT_SCENE_URL`]. A relative URL is relative to the page.
 pub fn scene_url_from_page() -> String {
-    let hash = web_sys::window()
-        .and_then(|w| w.location().hash().ok())
-        .unwrap_or_default();
-    scene_url_from_fragment(&hash).unwrap_or_else(|| DEFAULT_SCENE_URL.to_string())
-}
-
-fn scene_url_from_fragment(fragment: &str) -> Option<String> {
-    let fragment = fragment.strip_prefix('#').unwrap_or(fragment);
-    let value = fragment.split('&').find_map(|pair| pair.strip_prefix("scene="))?;
-    // An undecodable value is used as written: the fetch will then report what is wrong with it.
-    let url = js_sys::decode_uri_component(value)
-        .map(String::from)
-        .unwrap_or_else(|_| value.to_string());
-    (!url.trim().is_empty()).then_some(url)
+    parse_fragment(&page_fragment())
+        .scene
+        .unwrap_or_else(|| DEFAULT_SCENE_URL.to_string())
 }
 
 /// Why a scene could not be loaded; each message names the URL.
@@ -100,6 +92,32 @@ impl SceneLoad {
         SceneLoad { url, phase }
     }
 
+    /// Decodes a scene archive the user picked or dropped (`name` is the file name).
+    pub fn from_bytes(name: String, bytes: Vec<u8>, ctx: egui::Context) -> SceneLoad {
+        let phase = Rc::new(RefCell::new(LoadPhase::Decoding {
+            bytes: bytes.len() as u64,
+        }));
+        let task_phase = phase.clone();
+        let task_name = name.clone();
+        wasm_bindgen_futures::spawn_local(async move {
+            ctx.request_repaint();
+            // Let the page paint "decoding" before the thread is busy decoding.
+            sleep_ms(50).await;
+            let result = if bytes.len() as u64 > MAX_ARCHIVE_BYTES {
+                Err(LoadError::TooLarge {
+                    url: task_name,
+                    bytes: bytes.len() as u64,
+                })
+            } else {
+                read_archive(&bytes, &task_name).map(Box::new).map_err(LoadError::from)
+            };
+            *task_phase.borrow_mut() = LoadPhase::Finished(result);
+            ctx.request_repaint();
+        });
+        SceneLoad { url: name, phase }
+    }
+
+    /// The URL, or the file name of a local archive.
     pub fn url(&self) -> &str {
         &self.url
     }
@@ -199,24 +217,4 @@ async fn download(url: &str, phase: &RefCell<LoadPhase>, ctx: &egui::Context) ->
         ctx.request_repaint();
     }
     Ok(bytes)
-}
-
-/// Yields to the browser for `ms` milliseconds.
-async fn sleep_ms(ms: i32) {
-    let promise = js_sys::Promise::new(&mut |resolve, _reject| {
-        if let Some(window) = web_sys::window() {
-            let _ = window.set_timeout_with_callback_and_timeout_and_arguments_0(&resolve, ms);
-        } else {
-            let _ = resolve.call0(&JsValue::NULL);
-        }
-    });
-    let _ = JsFuture::from(promise).await;
-}
-
-/// The readable text of a JS exception or rejection value.
-pub fn js_error_text(value: &JsValue) -> String {
-    if let Some(error) = value.dyn_ref::<js_sys::Error>() {
-        return String::from(error.message());
-    }
-    value.as_string().unwrap_or_else(|| format!("{value:?}"))
 }

@@ -1,35 +1,63 @@
-//! The egui app (web). For now it loads a scene and lets the user look through its frames:
-//! colour, depth and ground truth. The annotator grows from here: `loading` gets the scene into
-//! the page, `frame_view` draws a frame, `scene_panel` describes the scene.
+//! The egui app (web): gets a scene into the page (`loading`, or a file picked or dropped),
+//! then annotates it (`annotator`), training the field live on the page's WebGPU device
+//! (`training`). The modules below each draw or do one thing; the plain logic they use (undo,
+//! share codec, autosave entries, brush and view maths) is in `crate::labels`, tested natively.
+pub mod annotator;
+pub mod browser;
+pub mod canvas;
+pub mod frame_strip;
 pub mod frame_view;
 pub mod loading;
+pub mod model_size;
+pub mod overlays;
 pub mod page_status;
+pub mod palette;
+pub mod persistence;
 pub mod scene_panel;
+pub mod side_panel;
+pub mod training;
+pub mod training_scene;
 
-use egui::{Key, RichText};
+use std::cell::RefCell;
+use std::rc::Rc;
 
-use self::frame_view::FrameTextures;
+use egui::RichText;
+
+use self::annotator::Annotator;
 use self::loading::{LoadPhase, SceneLoad};
-use crate::scene::Scene;
+use self::model_size::ModelSize;
+use crate::gpu::GpuContext;
+use crate::labels::autosave::SceneSource;
+use crate::labels::share::fragment_value;
 
 pub struct App {
     stage: Stage,
     /// Adapter and backend, for the scene panel (and for bug reports).
-    gpu: String,
+    gpu_name: String,
+    /// eframe's device, shared with the trainer; `None` without WebGPU.
+    gpu: Option<GpuContext>,
+    model: ModelSize,
+    /// Files read by async tasks (picker, drop), handled at the next frame.
+    inbox: Rc<RefCell<Vec<OpenedFile>>>,
+}
+
+struct OpenedFile {
+    name: String,
+    bytes: Result<Vec<u8>, String>,
 }
 
 enum Stage {
-    Loading(SceneLoad),
-    Viewing(Box<Viewer>),
+    Loading { load: SceneLoad, source: SceneSource },
+    Annotating(Box<Annotator>),
     Failed { url: String, message: String },
 }
 
 impl App {
     pub fn new(cc: &eframe::CreationContext<'_>, scene_url: String) -> App {
-        let gpu = match &cc.wgpu_render_state {
+        let (gpu_name, gpu, default_model) = match &cc.wgpu_render_state {
             Some(rs) => {
                 let info = rs.adapter.get_info();
-                format!(
+                let name = format!(
                     "{} ({:?})",
                     if info.name.is_empty() {
                         "unnamed adapter"
@@ -37,26 +65,113 @@ impl App {
                         &info.name
                     },
                     info.backend
-                )
+                );
+                let ctx = GpuContext::from_device(rs.device.clone(), rs.queue.clone());
+                (name, Some(ctx), ModelSize::for_adapter(&info))
             }
-            None => "none".into(),
+            None => ("none".into(), None, ModelSize::Small),
         };
+        let model = fragment_value(&browser::page_fragment(), "model")
+            .and_then(|m| ModelSize::parse(&m))
+            .unwrap_or(default_model);
+        let source = SceneSource::Url(browser::absolute_url(&scene_url));
         let load = SceneLoad::start(scene_url, cc.egui_ctx.clone());
         App {
-            stage: Stage::Loading(load),
+            stage: Stage::Loading { load, source },
+            gpu_name,
             gpu,
+            model,
+            inbox: Rc::default(),
+        }
+    }
+
+    /// Asks for a scene archive and opens it.
+    fn pick_scene(&self, ctx: &egui::Context) {
+        let inbox = self.inbox.clone();
+        let ctx = ctx.clone();
+        wasm_bindgen_futures::spawn_local(async move {
+            let opened = match browser::pick_file(".zip,application/zip").await {
+                Ok(Some((name, bytes))) => OpenedFile { name, bytes: Ok(bytes) },
+                Ok(None) => return,
+                Err(e) => OpenedFile {
+                    name: "the chosen file".into(),
+                    bytes: Err(e.to_string()),
+                },
+            };
+            inbox.borrow_mut().push(opened);
+            ctx.request_repaint();
+        });
+    }
+
+    /// Reads files dropped on the page (browsers only hand them over asynchronously).
+    fn take_dropped_files(&self, ctx: &egui::Context) {
+        let dropped = ctx.input(|i| i.raw.dropped_files.clone());
+        for file in dropped {
+            let inbox = self.inbox.clone();
+            let ctx = ctx.clone();
+            wasm_bindgen_futures::spawn_local(async move {
+                let name = file
+                    .path()
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| "dropped file".into());
+                let bytes = file.bytes_async().await;
+                inbox.borrow_mut().push(OpenedFile { name, bytes });
+                ctx.request_repaint();
+            });
+        }
+    }
+
+    /// A picked or dropped file: annotations go to the annotator, anything else is opened as a
+    /// scene archive (which says clearly when it is not one).
+    fn open_files(&mut self, ctx: &egui::Context) {
+        let files: Vec<OpenedFile> = self.inbox.borrow_mut().drain(..).collect();
+        for file in files {
+            let bytes = match file.bytes {
+                Ok(b) => b,
+                Err(e) => {
+                    self.stage = Stage::Failed {
+                        url: file.name,
+                        message: format!("cannot read the file: {e}"),
+                    };
+                    continue;
+                }
+            };
+            let is_labels = file.name.to_ascii_lowercase().ends_with(".json");
+            if let (true, Stage::Annotating(a)) = (is_labels, &mut self.stage) {
+                a.import_labels_bytes(&file.name, &bytes);
+                continue;
+            }
+            let source = SceneSource::File {
+                name: file.name.clone(),
+                bytes: bytes.len() as u64,
+            };
+            // The old scene's training stops when its annotator is dropped here.
+            self.stage = Stage::Loading {
+                load: SceneLoad::from_bytes(file.name, bytes, ctx.clone()),
+                source,
+            };
         }
     }
 }
 
 impl eframe::App for App {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
-        if let Stage::Loading(load) = &self.stage
+        let ctx = ui.ctx().clone();
+        self.take_dropped_files(&ctx);
+        self.open_files(&ctx);
+        if let Stage::Loading { load, source } = &self.stage
             && let Some(result) = load.take_result()
         {
             let url = load.url().to_string();
             self.stage = match result {
-                Ok(scene) => Stage::Viewing(Box::new(Viewer::new(scene, url))),
+                Ok(scene) => Stage::Annotating(Box::new(Annotator::new(
+                    &ctx,
+                    scene,
+                    source.clone(),
+                    self.gpu.clone(),
+                    self.model,
+                ))),
                 Err(e) => Stage::Failed {
                     url,
                     message: e.to_string(),
@@ -64,19 +179,55 @@ impl eframe::App for App {
             };
         }
 
+        let mut pick = false;
         egui::Panel::top("title").show(ui, |ui| {
             ui.horizontal(|ui| {
                 ui.strong("scribblefield");
                 ui.separator();
-                ui.label("scene viewer");
+                pick = ui
+                    .button("open scene…")
+                    .on_hover_text("a .scene.zip archive; or drop one (or a labels.json) on the page")
+                    .clicked();
+                if let Stage::Annotating(a) = &self.stage {
+                    ui.separator();
+                    ui.label(RichText::new(a.source().describe()).monospace().small());
+                }
+                ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
+                    ui.label(RichText::new(format!("model: {}", self.model.name())).small())
+                        .on_hover_text("#model=tiny|small|full in the address picks another");
+                });
             });
         });
+        if pick {
+            self.pick_scene(&ctx);
+        }
         match &mut self.stage {
-            Stage::Loading(load) => show_loading(ui, load),
-            Stage::Viewing(viewer) => viewer.show(ui, &self.gpu),
+            Stage::Loading { load, .. } => show_loading(ui, load),
+            Stage::Annotating(a) => a.show(ui, &self.gpu_name),
             Stage::Failed { url, message } => show_failure(ui, url, message),
         }
+        show_drop_hint(&ctx);
     }
+}
+
+/// While files are dragged over the page, say what dropping them does.
+fn show_drop_hint(ctx: &egui::Context) {
+    if ctx.input(|i| i.raw.hovered_files.is_empty()) {
+        return;
+    }
+    let screen = ctx.content_rect();
+    let painter = ctx.layer_painter(egui::LayerId::new(
+        egui::Order::Foreground,
+        egui::Id::unique("drop hint"),
+    ));
+    painter.rect_filled(screen, 0.0, egui::Color32::from_black_alpha(180));
+    painter.text(
+        screen.center(),
+        egui::Align2::CENTER_CENTER,
+        "Drop a scene archive (.zip) to open it, or annotations (.json) to import them",
+        egui::FontId::proportional(20.0),
+        egui::Color32::WHITE,
+    );
 }
 
 fn show_loading(ui: &mut egui::Ui, load: &SceneLoad) {
@@ -133,151 +284,13 @@ fn show_failure(ui: &mut egui::Ui, url: &str, message: &str) {
             ui.add_space(8.0);
             ui.label(RichText::new(message).color(ui.visuals().error_fg_color).monospace());
             ui.add_space(12.0);
-            ui.label("Open the page with #scene=<url of a .scene.zip> in the address to load another scene,");
-            ui.label("or without it for the demo scene. `scribblefield pack` makes an archive from a capture.");
+            ui.label("Open a scene file with the button above or drop one on the page, or open the page");
+            ui.label("with #scene=<url of a .scene.zip> in the address (without it: the demo scene).");
+            ui.label("`scribblefield pack` makes an archive from a capture.");
         });
     });
 }
 
-/// A clicked button or checkbox keeps keyboard focus, and egui then spends the arrow keys on
-/// moving focus between widgets; after a click the arrows should step through frames again.
-fn release_focus_after_click(responses: &[egui::Response]) {
-    for response in responses.iter().filter(|r| r.clicked()) {
-        response.surrender_focus();
-    }
-}
-
 fn megabytes(bytes: u64) -> String {
     format!("{:.1} MB", bytes as f64 / 1e6)
-}
-
-/// Looking through a loaded scene.
-struct Viewer {
-    scene: Box<Scene>,
-    url: String,
-    frame: usize,
-    textures: Option<FrameTextures>,
-    show_ground_truth: bool,
-    overlay_opacity: f32,
-    show_depth: bool,
-    /// Widgets that use the arrow keys themselves while focused (from the last frame drawn).
-    arrow_key_widgets: Vec<egui::Id>,
-}
-
-impl Viewer {
-    fn new(scene: Box<Scene>, url: String) -> Viewer {
-        Viewer {
-            scene,
-            url,
-            frame: 0,
-            textures: None,
-            show_ground_truth: false,
-            overlay_opacity: 0.5,
-            show_depth: true,
-            arrow_key_widgets: Vec::new(),
-        }
-    }
-
-    fn show(&mut self, ui: &mut egui::Ui, gpu: &str) {
-        let frame_count = self.scene.frames.len();
-        self.handle_keys(ui.ctx());
-        self.arrow_key_widgets.clear();
-
-        egui::Panel::left("scene").default_size(260.0).show(ui, |ui| {
-            egui::ScrollArea::vertical().show(ui, |ui| {
-                scene_panel::show(ui, &self.scene, &self.url, gpu);
-                ui.add_space(8.0);
-                ui.heading("View");
-                let depth = ui.checkbox(&mut self.show_depth, "depth");
-                let ground_truth = ui.add_enabled(
-                    self.scene.has_gt(),
-                    egui::Checkbox::new(&mut self.show_ground_truth, "ground truth"),
-                );
-                release_focus_after_click(&[depth, ground_truth]);
-                let opacity = ui.add_enabled(
-                    self.scene.has_gt() && self.show_ground_truth,
-                    egui::Slider::new(&mut self.overlay_opacity, 0.0..=1.0).text("opacity"),
-                );
-                self.arrow_key_widgets.push(opacity.id);
-            });
-        });
-        egui::Panel::bottom("frames").show(ui, |ui| {
-            ui.add_space(4.0);
-            ui.horizontal(|ui| {
-                let back = ui.button("◀").on_hover_text("previous frame (←)");
-                let forward = ui.button("▶").on_hover_text("next frame (→)");
-                if back.clicked() {
-                    self.step(-1);
-                }
-                if forward.clicked() {
-                    self.step(1);
-                }
-                release_focus_after_click(&[back, forward]);
-                let last = frame_count.saturating_sub(1);
-                ui.spacing_mut().slider_width = (ui.available_width() - 160.0).max(100.0);
-                let slider = ui.add(egui::Slider::new(&mut self.frame, 0..=last).text(format!("of {frame_count}")));
-                self.arrow_key_widgets.push(slider.id);
-            });
-            ui.add_space(4.0);
-        });
-        egui::CentralPanel::default().show(ui, |ui| self.show_frame(ui));
-        page_status::set(&format!(
-            "ready frames={frame_count} size={}x{} frame={}",
-            self.scene.width, self.scene.height, self.frame
-        ));
-    }
-
-    fn show_frame(&mut self, ui: &mut egui::Ui) {
-        if self.textures.as_ref().is_none_or(|t| t.frame != self.frame) {
-            self.textures = FrameTextures::new(ui.ctx(), &self.scene, self.frame);
-        }
-        let Some(textures) = &self.textures else {
-            ui.label("This scene has no frames.");
-            return;
-        };
-        let source = self.scene.frames[self.frame].source.as_deref().unwrap_or("");
-        ui.label(format!("frame {} of {}  {source}", self.frame, self.scene.frames.len()));
-        let overlay = textures
-            .ground_truth
-            .as_ref()
-            .filter(|_| self.show_ground_truth)
-            .map(|t| (t, self.overlay_opacity));
-        let depth = textures.depth.as_ref().filter(|_| self.show_depth);
-        let available = ui.available_size();
-        match depth {
-            // Side by side on a wide screen, stacked on a tall one.
-            Some(depth) if available.x >= available.y => {
-                let half = egui::vec2((available.x - ui.spacing().item_spacing.x) / 2.0, available.y);
-                ui.horizontal_top(|ui| {
-                    frame_view::show_image(ui, &textures.rgb, overlay, half);
-                    frame_view::show_image(ui, depth, None, half);
-                });
-            }
-            Some(depth) => {
-                let half = egui::vec2(available.x, (available.y - ui.spacing().item_spacing.y) / 2.0);
-                frame_view::show_image(ui, &textures.rgb, overlay, half);
-                frame_view::show_image(ui, depth, None, half);
-            }
-            None => {
-                frame_view::show_image(ui, &textures.rgb, overlay, available);
-            }
-        }
-    }
-
-    /// Arrow keys step through frames, unless a text field or a slider has keyboard focus:
-    /// those use the arrows themselves.
-    fn handle_keys(&mut self, ctx: &egui::Context) {
-        let focused = ctx.memory(|m| m.focused());
-        if ctx.egui_wants_keyboard_input() || focused.is_some_and(|id| self.arrow_key_widgets.contains(&id)) {
-            return;
-        }
-        // Count presses: on a slow device several can arrive between two frames.
-        let (back, forward) = ctx.input(|i| (i.num_presses(Key::ArrowLeft), i.num_presses(Key::ArrowRight)));
-        self.step(forward as isize - back as isize);
-    }
-
-    fn step(&mut self, delta: isize) {
-        let last = self.scene.frames.len().saturating_sub(1);
-        self.frame = self.frame.saturating_add_signed(delta).min(last);
-    }
 }

@@ -28,3 +28,19 @@ pub fn set(status: &str) {
         let _ = body.set_attribute("data-status", status);
     }
 }
+
+/// Puts the latest share link on `<body data-share-link="...">`, for scripts and tests (the
+/// clipboard is not readable from a headless browser).
+pub fn set_share_link(link: &str) {
+    if let Some(body) = web_sys::window().and_then(|w| w.document()).and_then(|d| d.body()) {
+        let _ = body.set_attribute("data-share-link", link);
+    }
+}
+
+/// Marks the page's GPU device as lost on `<body data-gpu-lost="...">`: the canvas cannot draw
+/// any more, so `index.html` says so over it (with the reason) instead of leaving it frozen.
+pub fn set_gpu_lost(message: &str) {
+    if let Some(body) = web_sys::window().and_then(|w| w.document()).and_then(|d| d.body()) {
+        let _ = body.set_attribute("data-gpu-lost", message);
+    }
+}

@@ -4,3 +4,6 @@
 mod masks;
 
 pub use masks::{MaskSet, MasksManifest, read_masks, read_masks_zip};
+
+#[cfg(test)]
+mod zip_contents_tests;

@@ -9,8 +9,8 @@
 import { mkdirSync, mkdtempSync, rmSync } from "node:fs";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
-import { inflateSync } from "node:zlib";
 import { chromium } from "playwright-core";
+import { CHROMIUM_ARGS, Checks, assert, openPage as open, saturatedColours, settledStatus as settled, statusField } from "./lib.mjs";
 
 const url = process.env.E2E_URL;
 if (!url) {
@@ -27,122 +27,13 @@ const STEP_TIMEOUT_MS = 15_000;
 // message (anti-aliased red text), 0 for an empty canvas.
 const MIN_FRAME_COLOURS = 2000;
 
-const CHROMIUM_ARGS = [
-  "--headless=new",
-  "--no-sandbox",
-  "--enable-unsafe-webgpu",
-  "--disable-background-networking",
-  "--disable-component-update",
-  "--disable-sync",
-  "--no-first-run",
-  "--disable-quic",
-  // Without these the WebGPU canvas is never composited in headless mode (chrome://gpu says
-  // "WebGPU interop: Disabled") and screenshots show an empty canvas: SwiftShader's Vulkan and
-  // GL give the compositor a GPU to share the canvas with.
-  "--use-angle=swiftshader",
-  "--enable-features=Vulkan",
-  "--use-vulkan=swiftshader",
-];
-
 mkdirSync(outDir, { recursive: true });
 const userDataDir = mkdtempSync(join(tmpdir(), "scribblefield-e2e-"));
 const consoleLog = [];
-let passed = 0;
-let failed = 0;
-
-async function check(name, body) {
-  try {
-    await body();
-    passed += 1;
-    console.log(`ok   ${name}`);
-  } catch (e) {
-    failed += 1;
-    console.log(`FAIL ${name}: ${e.message}`);
-  }
-}
-
-function assert(condition, message) {
-  if (!condition) throw new Error(message);
-}
-
-/// Decodes an 8-bit RGB or RGBA PNG (what Chromium's screenshots are) into {width, height, rgba}.
-function decodePng(png) {
-  let pos = 8;
-  let width = 0, height = 0, colourType = 0;
-  const idat = [];
-  while (pos < png.length) {
-    const length = png.readUInt32BE(pos);
-    const type = png.toString("latin1", pos + 4, pos + 8);
-    const data = png.subarray(pos + 8, pos + 8 + length);
-    if (type === "IHDR") {
-      width = data.readUInt32BE(0);
-      height = data.readUInt32BE(4);
-      assert(data[8] === 8 && (data[9] === 2 || data[9] === 6) && data[12] === 0, "unexpected PNG format");
-      colourType = data[9];
-    } else if (type === "IDAT") {
-      idat.push(data);
-    }
-    pos += 12 + length;
-  }
-  const bpp = colourType === 6 ? 4 : 3;
-  const raw = inflateSync(Buffer.concat(idat));
-  const stride = width * bpp;
-  const rgba = Buffer.alloc(width * height * 4, 255);
-  let prev = Buffer.alloc(stride);
-  for (let y = 0; y < height; y++) {
-    const filter = raw[y * (stride + 1)];
-    const line = Buffer.from(raw.subarray(y * (stride + 1) + 1, (y + 1) * (stride + 1)));
-    for (let i = 0; i < stride; i++) {
-      const a = i >= bpp ? line[i - bpp] : 0, b = prev[i], c = i >= bpp ? prev[i - bpp] : 0;
-      const p = a + b - c, pa = Math.abs(p - a), pb = Math.abs(p - b), pc = Math.abs(p - c);
-      const predictor = [0, a, b, (a + b) >> 1, pa <= pb && pa <= pc ? a : pb <= pc ? b : c][filter];
-      line[i] = (line[i] + predictor) & 255;
-    }
-    for (let x = 0; x < width; x++) line.copy(rgba, (y * width + x) * 4, x * bpp, x * bpp + 3);
-    prev = line;
-  }
-  return { width, height, rgba };
-}
-
-/// Distinct clearly coloured (not grey) pixel values: the UI around the frame is grey with a
-/// few accent colours, a rendered frame has hundreds.
-function saturatedColours(png) {
-  const { rgba } = decodePng(png);
-  const seen = new Set();
-  for (let i = 0; i < rgba.length; i += 4) {
-    const [r, g, b] = [rgba[i], rgba[i + 1], rgba[i + 2]];
-    if (Math.max(r, g, b) - Math.min(r, g, b) > 40) seen.add((r << 16) | (g << 8) | b);
-  }
-  return seen.size;
-}
-
-async function status(page) {
-  return page.evaluate(() => document.body.dataset.status || "");
-}
-
-/// Waits until data-status is no longer a loading state; returns it.
-async function settledStatus(page) {
-  await page.waitForFunction(
-    () => /^(ready|error|crashed)/.test(document.body.dataset.status || ""),
-    null,
-    { timeout: LOAD_TIMEOUT_MS, polling: 250 },
-  );
-  return status(page);
-}
-
-function statusField(statusText, name) {
-  const match = statusText.match(new RegExp(`\\b${name}=(\\S+)`));
-  return match ? match[1] : undefined;
-}
-
-async function openPage(context, pageUrl, label) {
-  const page = await context.newPage();
-  page.on("console", (m) => consoleLog.push(`[${label}] console.${m.type()}: ${m.text()}`));
-  page.on("pageerror", (e) => consoleLog.push(`[${label}] page error: ${e.message}`));
-  page.on("requestfailed", (r) => consoleLog.push(`[${label}] request failed: ${r.url()} ${r.failure()?.errorText}`));
-  await page.goto(pageUrl, { waitUntil: "load" });
-  return page;
-}
+const checks = new Checks();
+const check = (name, body) => checks.check(name, body);
+const settledStatus = (page) => settled(page, LOAD_TIMEOUT_MS);
+const openPage = (context, pageUrl, label) => open(context, pageUrl, label, consoleLog);
 
 let context;
 try {
@@ -196,7 +87,7 @@ try {
   });
   await errorPage.screenshot({ path: join(outDir, "smoke-missing-scene.png") });
 } catch (e) {
-  failed += 1;
+  checks.failed += 1;
   console.log(`FAIL the test could not run: ${e.message}`);
 } finally {
   await context?.close().catch(() => {});
@@ -204,9 +95,9 @@ try {
 }
 
 console.log(`screenshots in ${outDir}`);
-if (failed > 0) {
+if (checks.failed > 0) {
   console.log("--- browser console ---");
   for (const line of consoleLog) console.log(line);
 }
-console.log(`${passed} passed, ${failed} failed`);
-process.exit(failed > 0 ? 1 : 0);
+console.log(`${checks.passed} passed, ${checks.failed} failed`);
+process.exit(checks.failed > 0 ? 1 : 0);

@@ -1,0 +1,185 @@
+//! The few browser services the app uses, each wrapped once: clock and timers, local storage,
+//! file download and file picking, and the page's address.
+use wasm_bindgen::JsCast;
+use wasm_bindgen::prelude::*;
+use wasm_bindgen_futures::JsFuture;
+
+/// A failed browser call, with what was being done.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("{what}: {detail}")]
+pub struct BrowserError {
+    pub what: String,
+    pub detail: String,
+}
+
+impl BrowserError {
+    fn new(what: &str, detail: impl Into<String>) -> BrowserError {
+        BrowserError {
+            what: what.into(),
+            detail: detail.into(),
+        }
+    }
+
+    fn js(what: &str, value: &JsValue) -> BrowserError {
+        BrowserError::new(what, js_error_text(value))
+    }
+}
+
+/// The readable text of a JS exception or rejection value.
+pub fn js_error_text(value: &JsValue) -> String {
+    if let Some(error) = value.dyn_ref::<js_sys::Error>() {
+        return String::from(error.message());
+    }
+    value.as_string().unwrap_or_else(|| format!("{value:?}"))
+}
+
+/// Milliseconds on the page's monotonic clock.
+pub fn now_ms() -> f64 {
+    web_sys::window()
+        .and_then(|w| w.performance())
+        .map(|p| p.now())
+        .unwrap_or_else(js_sys::Date::now)
+}
+
+/// Milliseconds since the Unix epoch.
+pub fn wall_clock_ms() -> f64 {
+    js_sys::Date::now()
+}
+
+/// Yields to the browser for `ms` milliseconds (0: just let it run its event loop once).
+pub async fn sleep_ms(ms: i32) {
+    let promise = js_sys::Promise::new(&mut |resolve, _reject| {
+        if let Some(window) = web_sys::window() {
+            let _ = window.set_timeout_with_callback_and_timeout_and_arguments_0(&resolve, ms);
+        } else {
+            let _ = resolve.call0(&JsValue::NULL);
+        }
+    });
+    let _ = JsFuture::from(promise).await;
+}
+
+fn local_storage() -> Result<web_sys::Storage, BrowserError> {
+    let what = "browser storage";
+    web_sys::window()
+        .ok_or_else(|| BrowserError::new(what, "no window"))?
+        .local_storage()
+        .map_err(|e| BrowserError::js(what, &e))?
+        .ok_or_else(|| BrowserError::new(what, "this browser offers no local storage (private mode?)"))
+}
+
+/// The stored text under `key`, if any.
+pub fn storage_get(key: &str) -> Result<Option<String>, BrowserError> {
+    local_storage()?
+        .get_item(key)
+        .map_err(|e| BrowserError::js("reading browser storage", &e))
+}
+
+/// Stores `value` under `key`; fails when the storage is full (about 5 MB per site).
+pub fn storage_set(key: &str, value: &str) -> Result<(), BrowserError> {
+    local_storage()?
+        .set_item(key, value)
+        .map_err(|e| BrowserError::js("writing browser storage", &e))
+}
+
+pub fn storage_remove(key: &str) -> Result<(), BrowserError> {
+    local_storage()?
+        .remove_item(key)
+        .map_err(|e| BrowserError::js("clearing browser storage", &e))
+}
+
+/// Offers `bytes` as a download named `file_name`.
+pub fn download(bytes: &[u8], file_name: &str, mime: &str) -> Result<(), BrowserError> {
+    let what = "preparing the download";
+    let js = |e: JsValue| BrowserError::js(what, &e);
+    let array = js_sys::Uint8Array::from(bytes);
+    let parts = js_sys::Array::of1(&array);
+    let options = web_sys::BlobPropertyBag::new();
+    options.set_type(mime);
+    let blob = web_sys::Blob::new_with_u8_array_sequence_and_options(&parts, &options).map_err(js)?;
+    let url = web_sys::Url::create_object_url_with_blob(&blob).map_err(js)?;
+    let document = web_sys::window()
+        .and_then(|w| w.document())
+        .ok_or_else(|| BrowserError::new(what, "no document"))?;
+    let anchor: web_sys::HtmlAnchorElement = document.create_element("a").map_err(js)?.unchecked_into();
+    anchor.set_href(&url);
+    anchor.set_download(file_name);
+    anchor.click();
+    // The click has started the download; the browser keeps what it needs. Revoke later so a
+    // slow browser still finds the URL.
+    let revoke = Closure::once_into_js(move || {
+        let _ = web_sys::Url::revoke_object_url(&url);
+    });
+    if let Some(window) = web_sys::window() {
+        let _ = window.set_timeout_with_callback_and_timeout_and_arguments_0(revoke.unchecked_ref(), 60_000);
+    }
+    Ok(())
+}
+
+/// Asks the user for a file (`accept`: e.g. ".zip,application/zip") and reads it. `None` when
+/// the user cancels.
+pub async fn pick_file(accept: &str) -> Result<Option<(String, Vec<u8>)>, BrowserError> {
+    let what = "opening a file";
+    let js = |e: JsValue| BrowserError::js(what, &e);
+    let document = web_sys::window()
+        .and_then(|w| w.document())
+        .ok_or_else(|| BrowserError::new(what, "no document"))?;
+    let input: web_sys::HtmlInputElement = document.create_element("input").map_err(js)?.unchecked_into();
+    input.set_type("file");
+    input.set_accept(accept);
+    // Resolves with the file list on "change", or null on "cancel" (the dialog was closed).
+    let chosen = js_sys::Promise::new(&mut |resolve, _reject| {
+        let on_change = {
+            let resolve = resolve.clone();
+            let input = input.clone();
+            Closure::once_into_js(move || {
+                let _ = resolve.call1(
+                    &JsValue::NULL,
+                    &input.files().map(JsValue::from).unwrap_or(JsValue::NULL),
+                );
+            })
+        };
+        let on_cancel = Closure::once_into_js(move || {
+            let _ = resolve.call1(&JsValue::NULL, &JsValue::NULL);
+        });
+        let _ = input.add_event_listener_with_callback("change", on_change.unchecked_ref());
+        let _ = input.add_event_listener_with_callback("cancel", on_cancel.unchecked_ref());
+    });
+    input.click();
+    let files = JsFuture::from(chosen).await.map_err(js)?;
+    let Some(file) = files.dyn_into::<web_sys::FileList>().ok().and_then(|list| list.get(0)) else {
+        return Ok(None);
+    };
+    let buffer = JsFuture::from(file.array_buffer()).await.map_err(js)?;
+    Ok(Some((file.name(), js_sys::Uint8Array::new(&buffer).to_vec())))
+}
+
+/// The page's fragment (with its `#`), or "".
+pub fn page_fragment() -> String {
+    web_sys::window()
+        .and_then(|w| w.location().hash().ok())
+        .unwrap_or_default()
+}
+
+/// The page's address without the fragment.
+pub fn page_address() -> String {
+    let href = web_sys::window()
+        .and_then(|w| w.location().href().ok())
+        .unwrap_or_default();
+    href.split('#').next().unwrap_or_default().to_string()
+}
+
+/// `url` resolved against the page's address (a share link must work from anywhere).
+pub fn absolute_url(url: &str) -> String {
+    web_sys::Url::new_with_base(url, &page_address())
+        .map(|u| u.href())
+        .unwrap_or_else(|_| url.to_string())
+}
+
+/// Replaces the page's fragment without reloading or adding a history entry (a plain
+/// `location.hash = ...` would fire `hashchange`, which reloads the page).
+pub fn replace_fragment(fragment: &str) {
+    let Some(window) = web_sys::window() else { return };
+    let Ok(history) = window.history() else { return };
+    let url = format!("{}#{fragment}", page_address());
+    let _ = history.replace_state_with_url(&JsValue::NULL, "", Some(&url));
+}

@@ -1,0 +1,86 @@
+//! Which field the page trains: sized to the device, since the same page runs on a discrete GPU
+//! and on a CPU rasterizer (SwiftShader in headless browsers, where one dense layer of width 32
+//! over a thousand rays takes tens of milliseconds).
+use crate::field::{AdamConfig, FieldConfig};
+use crate::scene::Scene;
+
+/// The choices, by name in the page's `#model=` fragment key.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ModelSize {
+    /// For software rasterizers: 128 rays, widths 16, 12 samples per ray.
+    Tiny,
+    /// `FieldConfig::small()`: laptops and integrated GPUs.
+    Small,
+    /// DESIGN §5's model.
+    Full,
+}
+
+impl ModelSize {
+    pub fn parse(name: &str) -> Option<ModelSize> {
+        match name {
+            "tiny" => Some(ModelSize::Tiny),
+            "small" => Some(ModelSize::Small),
+            "full" => Some(ModelSize::Full),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelSize::Tiny => "tiny",
+            ModelSize::Small => "small",
+            ModelSize::Full => "full",
+        }
+    }
+
+    /// The default for an adapter: tiny on software rasterizers, small elsewhere (the full
+    /// model wants a desktop GPU; the user can ask for it).
+    pub fn for_adapter(info: &wgpu::AdapterInfo) -> ModelSize {
+        let name = info.name.to_ascii_lowercase();
+        let software = info.device_type == wgpu::DeviceType::Cpu
+            || ["swiftshader", "llvmpipe", "lavapipe", "software", "warp"]
+                .iter()
+                .any(|s| name.contains(s) || info.driver.to_ascii_lowercase().contains(s));
+        if software { ModelSize::Tiny } else { ModelSize::Small }
+    }
+
+    /// The field config for `scene` with `classes` classes.
+    pub fn config(self, scene: &Scene, classes: usize) -> FieldConfig {
+        let mut cfg = match self {
+            ModelSize::Tiny => FieldConfig {
+                hash_levels: 6,
+                log2_hash_table_size: 12,
+                density_width: 16,
+                color_width: 16,
+                feature_width: 16,
+                semantic_width: 16,
+                samples_coarse: 4,
+                samples_fine: 8,
+                batch_rays: 128,
+                // Few steps happen on a CPU rasterizer: larger steps than the interactive
+                // default so scribbles show in the masks within a minute.
+                adam: AdamConfig {
+                    lr_warmup: 1e-2,
+                    lr_annotating: 1e-2,
+                    ..AdamConfig::default()
+                },
+                ..FieldConfig::small()
+            },
+            ModelSize::Small => FieldConfig::small(),
+            ModelSize::Full => FieldConfig::default(),
+        };
+        cfg.num_classes = classes.max(2) as u32;
+        match &scene.features {
+            Some(f) => cfg.feature_dim = f.dim,
+            None => {
+                // Without codes to match, the feature branch only feeds the semantic head: a
+                // narrow one costs less.
+                cfg.feature_supervision = false;
+                if self == ModelSize::Tiny {
+                    cfg.feature_dim = 8;
+                }
+            }
+        }
+        cfg
+    }
+}

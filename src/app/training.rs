@@ -1,0 +1,484 @@
+//! Live training in the page. One task (a future on the page's thread) owns the [`Trainer`] and
+//! loops: take new labels, render the visible frame when due, submit a batch of steps, wait for
+//! the GPU without blocking, adapt the batch to the time it took. The UI talks to it only
+//! through [`Shared`]: it posts requests there and reads the reports, so the trainer is never
+//! borrowed across an `await` by two parties.
+//!
+//! The batch is sized so one batch takes about [`TARGET_BATCH_MS`] of GPU time: the UI shares the
+//! GPU, and a longer queue of training work would delay every repaint behind it.
+use std::cell::RefCell;
+use std::future::Future;
+use std::pin::Pin;
+use std::rc::Rc;
+use std::sync::{Arc, Mutex};
+use std::task::{Context, Poll, Waker};
+
+use image::GrayImage;
+
+use super::browser::{now_ms, sleep_ms};
+use super::training_scene::upscale_mask;
+use crate::export::MaskSet;
+use crate::field::FieldConfig;
+use crate::field::gpu::trainer::{RenderedFrame, StepLosses, Trainer};
+use crate::gpu::GpuContext;
+use crate::labels::LabelSet;
+use crate::labels::scale::scale_labels;
+use crate::scene::Scene;
+
+/// GPU time one batch of steps should take.
+const TARGET_BATCH_MS: f64 = 20.0;
+/// Most steps in one batch (a fast GPU would otherwise queue seconds of work on a slow frame).
+const MAX_BATCH: u32 = 64;
+/// The visible frame is re-rendered at most this often while training (a render costs as much
+/// as tens of steps).
+const RENDER_INTERVAL_MS: f64 = 1500.0;
+
+/// Where the training stands.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Phase {
+    /// Uploading the scene and building the kernels.
+    Starting,
+    Running,
+    /// Rendering every frame for the download: `done` of `total`.
+    Exporting {
+        done: u32,
+        total: u32,
+    },
+    /// Stopped for good; the message says why (lost device, out of memory, a bug).
+    Failed(String),
+}
+
+/// A finished render of one frame.
+pub struct Rendered {
+    pub frame: u32,
+    /// The labels version the field had been trained on when this was rendered.
+    pub labels_version: u64,
+    pub step: u32,
+    pub image: RenderedFrame,
+}
+
+/// Requests from the UI and reports from the task.
+pub struct Shared {
+    // Requests.
+    pub paused: bool,
+    /// Until then (page clock, ms) the user is interacting: training waits so that the UI's
+    /// frames are not queued behind training work (on a slow GPU one step outlasts a frame).
+    pub busy_until_ms: f64,
+    pub visible_frame: u32,
+    /// New labels to train on (the UI bumps the version with every edit).
+    pending_labels: Option<(u64, LabelSet)>,
+    /// Render the visible frame as soon as possible (it changed, or new labels arrived).
+    render_soon: bool,
+    export: Option<LabelSet>,
+    stop: bool,
+    // Reports.
+    pub phase: Phase,
+    pub steps: u32,
+    pub steps_per_second: f64,
+    pub losses: Option<StepLosses>,
+    pub rendered: Option<Rendered>,
+    /// The masks zip, once an export is done (taken by the UI).
+    pub exported: Option<Result<Vec<u8>, String>>,
+    /// Steps per batch as adapted.
+    pub batch: u32,
+    pub render_ms: f64,
+    pub labels_version: u64,
+}
+
+/// Handle to the training task of one scene.
+pub struct Training {
+    shared: Rc<RefCell<Shared>>,
+    pub config: FieldConfig,
+    pub device: String,
+    /// The field trains on frames this many times smaller than the scene's (see
+    /// `training_scene`); labels are scaled on the way in.
+    pub factor: u32,
+}
+
+impl Training {
+    /// Starts training on `ctx` (eframe's device) with `labels` (may be empty, drawn on the
+    /// full-resolution frames). `scene` is what the field trains on: the loaded scene downscaled
+    /// by `factor`; `full_size` is the loaded scene's frame size, which the masks download has.
+    #[allow(clippy::too_many_arguments)]
+    pub fn start(
+        ctx: GpuContext,
+        scene: Rc<Scene>,
+        factor: u32,
+        full_size: (u32, u32),
+        config: FieldConfig,
+        labels: &LabelSet,
+        visible_frame: u32,
+        egui_ctx: egui::Context,
+    ) -> Training {
+        let shared = Rc::new(RefCell::new(Shared {
+            paused: false,
+            busy_until_ms: 0.0,
+            visible_frame,
+            pending_labels: Some((0, scale_labels(labels, factor as f32))),
+            render_soon: true,
+            export: None,
+            stop: false,
+            phase: Phase::Starting,
+            steps: 0,
+            steps_per_second: 0.0,
+            losses: None,
+            rendered: None,
+            exported: None,
+            batch: 1,
+            render_ms: 0.0,
+            labels_version: 0,
+        }));
+        let device = ctx.describe();
+        let faults = GpuFaults::watch(&ctx.device, &egui_ctx);
+        let task = TrainingTask {
+            ctx,
+            scene,
+            config: config.clone(),
+            shared: shared.clone(),
+            egui_ctx,
+            faults,
+            full_size,
+        };
+        wasm_bindgen_futures::spawn_local(task.run());
+        Training {
+            shared,
+            config,
+            device,
+            factor,
+        }
+    }
+
+    pub fn shared(&self) -> std::cell::Ref<'_, Shared> {
+        self.shared.borrow()
+    }
+
+    pub fn shared_mut(&self) -> std::cell::RefMut<'_, Shared> {
+        self.shared.borrow_mut()
+    }
+
+    /// Hands the task labels to train on from now on.
+    pub fn set_labels(&self, version: u64, labels: &LabelSet) {
+        // No render now: the field has not learnt anything from them yet; the periodic render
+        // while training shows their effect.
+        self.shared.borrow_mut().pending_labels = Some((version, scale_labels(labels, self.factor as f32)));
+    }
+
+    /// The user is drawing or pressing keys: hold the GPU for the UI a moment.
+    pub fn user_active(&self, for_ms: f64) {
+        let mut s = self.shared.borrow_mut();
+        s.busy_until_ms = s.busy_until_ms.max(now_ms() + for_ms);
+    }
+
+    pub fn show_frame(&self, frame: u32) {
+        let mut s = self.shared.borrow_mut();
+        if s.visible_frame != frame {
+            s.visible_frame = frame;
+            s.render_soon = true;
+        }
+    }
+
+    /// Asks for the masks of every frame; the zip arrives in `Shared::exported`.
+    pub fn export(&self, labels: &LabelSet) {
+        // The download carries the labels as drawn (full resolution); the task only needs their
+        // classes.
+        self.shared.borrow_mut().export = Some(labels.clone());
+    }
+}
+
+impl Drop for Training {
+    fn drop(&mut self) {
+        // The task sees this at its next turn and ends, dropping the trainer's GPU buffers.
+        self.shared.borrow_mut().stop = true;
+    }
+}
+
+/// Device loss and uncaptured GPU errors, as the device reports them (from browser callbacks,
+/// hence the mutex: wgpu asks for `Send` handlers).
+#[derive(Clone)]
+struct GpuFaults(Arc<Mutex<Option<String>>>);
+
+impl GpuFaults {
+    fn watch(device: &wgpu::Device, egui_ctx: &egui::Context) -> GpuFaults {
+        let faults = GpuFaults(Arc::new(Mutex::new(None)));
+        let lost = faults.clone();
+        let repaint = egui_ctx.clone();
+        device.set_device_lost_callback(move |reason, message| {
+            let text = format!("the GPU device was lost ({reason:?}): {message}");
+            // Dropping a trainer destroys its buffers, not the device: anything arriving here
+            // means the page's (shared) device is gone.
+            super::page_status::set_gpu_lost(&text);
+            lost.record(text);
+            repaint.request_repaint();
+        });
+        let errors = faults.clone();
+        let repaint = egui_ctx.clone();
+        device.on_uncaptured_error(Arc::new(move |error| {
+            let text = match &error {
+                wgpu::Error::OutOfMemory { .. } => {
+                    "the GPU ran out of memory; a smaller scene or a GPU with more memory is needed".to_string()
+                }
+                other => format!("GPU error: {other}"),
+            };
+            errors.record(text);
+            repaint.request_repaint();
+        }));
+        faults
+    }
+
+    fn record(&self, message: String) {
+        if let Ok(mut slot) = self.0.lock() {
+            slot.get_or_insert(message);
+        }
+    }
+
+    fn take(&self) -> Option<String> {
+        self.0.lock().ok().and_then(|mut slot| slot.take())
+    }
+}
+
+struct TrainingTask {
+    ctx: GpuContext,
+    scene: Rc<Scene>,
+    config: FieldConfig,
+    shared: Rc<RefCell<Shared>>,
+    egui_ctx: egui::Context,
+    faults: GpuFaults,
+    full_size: (u32, u32),
+}
+
+impl TrainingTask {
+    async fn run(self) {
+        // The scene carries no labels (see `training_scene::downscale`): the app decides which
+        // to start from and hands them over like any later edit.
+        let trainer = Trainer::new(&self.ctx, &self.scene, &self.config, 0).await;
+        let mut trainer = match trainer {
+            Ok(t) => t,
+            Err(e) => return self.fail(format!("cannot start training: {e}")),
+        };
+        self.shared.borrow_mut().phase = Phase::Running;
+        self.egui_ctx.request_repaint();
+        if let Err(e) = self.train(&mut trainer).await {
+            self.fail(e);
+        }
+    }
+
+    fn fail(&self, message: String) {
+        self.shared.borrow_mut().phase = Phase::Failed(message);
+        self.egui_ctx.request_repaint();
+    }
+
+    fn fault(&self) -> Result<(), String> {
+        match self.faults.take() {
+            Some(message) => Err(message),
+            None => Ok(()),
+        }
+    }
+
+    async fn train(&self, trainer: &mut Trainer) -> Result<(), String> {
+        let scene = &self.scene;
+        let (w, h, frames) = (scene.width, scene.height, scene.frames.len() as u32);
+        let mut batch = 1u32;
+        let mut trained_version = 0u64;
+        let mut last_render_end = f64::NEG_INFINITY;
+        let mut rate = RateMeter::default();
+        loop {
+            self.fault()?;
+            let (stop, labels, export, paused, render_due, frame, busy) = {
+                let mut s = self.shared.borrow_mut();
+                let since = now_ms() - last_render_end;
+                // At most a quarter of the time goes to renders the user did not ask for.
+                let due = s.render_soon || since > RENDER_INTERVAL_MS.max(3.0 * s.render_ms);
+                (
+                    s.stop,
+                    s.pending_labels.take(),
+                    s.export.take(),
+                    s.paused,
+                    due,
+                    s.visible_frame,
+                    now_ms() < s.busy_until_ms,
+                )
+            };
+            if stop {
+                return Ok(());
+            }
+            if let Some((version, labels)) = labels {
+                trainer
+                    .set_labels(Some(&labels), w, h, frames)
+                    .map_err(|e| format!("cannot upload the labels: {e}"))?;
+                trained_version = version;
+                self.shared.borrow_mut().labels_version = version;
+            }
+            if busy {
+                sleep_ms(30).await;
+                continue;
+            }
+            if let Some(labels) = export {
+                let zip = self.export(trainer, &labels).await;
+                let mut s = self.shared.borrow_mut();
+                s.exported = Some(zip);
+                s.phase = Phase::Running;
+                drop(s);
+                self.egui_ctx.request_repaint();
+                continue;
+            }
+            // A paused field still renders a frame the user steps to.
+            if render_due && (!paused || self.shared.borrow().render_soon) {
+                let start = now_ms();
+                let image = trainer
+                    .render_frame(frame.min(frames.saturating_sub(1)), w, h)
+                    .await
+                    .map_err(|e| format!("rendering frame {frame} failed: {e}"))?;
+                last_render_end = now_ms();
+                let mut s = self.shared.borrow_mut();
+                s.render_ms = last_render_end - start;
+                s.render_soon = false;
+                s.rendered = Some(Rendered {
+                    frame,
+                    labels_version: trained_version,
+                    step: trainer.steps_done(),
+                    image,
+                });
+                drop(s);
+                self.egui_ctx.request_repaint();
+                continue;
+            }
+            if paused {
+                rate.reset();
+                sleep_ms(100).await;
+                continue;
+            }
+            let start = now_ms();
+            trainer.train(batch);
+            trainer.request_losses();
+            gpu_done(&self.ctx.queue).await;
+            let elapsed = (now_ms() - start).max(0.1);
+            rate.add(batch, elapsed);
+            // Aim the next batch at the target time, changing by at most 2x at a time so one
+            // slow frame (a tab switch, a render in between) does not swing it wildly.
+            let wanted = f64::from(batch) * TARGET_BATCH_MS / elapsed;
+            batch = (wanted.clamp(f64::from(batch) / 2.0, f64::from(batch) * 2.0).round() as u32).clamp(1, MAX_BATCH);
+            let losses = trainer
+                .poll_losses()
+                .map_err(|e| format!("reading the losses failed: {e}"))?;
+            {
+                let mut s = self.shared.borrow_mut();
+                s.steps = trainer.steps_done();
+                s.steps_per_second = rate.per_second();
+                s.losses = losses;
+                s.batch = batch;
+            }
+            self.egui_ctx
+                .request_repaint_after(std::time::Duration::from_millis(250));
+            // Let the browser run the UI's frame before the next batch.
+            sleep_ms(0).await;
+        }
+    }
+
+    /// Renders every frame into a masks zip (class ids, previews, labels, class manifest).
+    async fn export(&self, trainer: &mut Trainer, labels: &LabelSet) -> Result<Vec<u8>, String> {
+        let scene = &self.scene;
+        let total = scene.frames.len() as u32;
+        let mut masks = Vec::with_capacity(total as usize);
+        for frame in 0..total {
+            {
+                let mut s = self.shared.borrow_mut();
+                if s.stop {
+                    return Err("stopped".into());
+                }
+                s.phase = Phase::Exporting { done: frame, total };
+            }
+            self.egui_ctx.request_repaint();
+            self.fault()?;
+            let rendered = trainer
+                .render_frame(frame, scene.width, scene.height)
+                .await
+                .map_err(|e| format!("rendering frame {frame} failed: {e}"))?;
+            let mask = GrayImage::from_raw(scene.width, scene.height, rendered.classes)
+                .ok_or_else(|| format!("frame {frame}: the rendered class map has the wrong size"))?;
+            masks.push(upscale_mask(mask, self.full_size.0, self.full_size.1));
+        }
+        self.shared.borrow_mut().phase = Phase::Exporting { done: total, total };
+        self.egui_ctx.request_repaint();
+        // Let the page show "packing" before the zip takes the thread.
+        sleep_ms(20).await;
+        let set = MaskSet {
+            classes: labels.classes.clone(),
+            masks,
+        };
+        Ok(set.to_zip(Some(labels)))
+    }
+}
+
+/// Steps per second over the last few seconds of batches.
+#[derive(Default)]
+struct RateMeter {
+    samples: std::collections::VecDeque<(f64, u32, f64)>,
+}
+
+impl RateMeter {
+    fn add(&mut self, steps: u32, ms: f64) {
+        self.samples.push_back((now_ms(), steps, ms));
+        while self.samples.len() > 2 && self.samples.front().is_some_and(|s| now_ms() - s.0 > 3000.0) {
+            self.samples.pop_front();
+        }
+    }
+
+    /// Steps per second of wall time, counting the gaps between batches too.
+    fn per_second(&self) -> f64 {
+        let (Some(first), Some(last)) = (self.samples.front(), self.samples.back()) else {
+            return 0.0;
+        };
+        let steps: u32 = self.samples.iter().map(|s| s.1).sum();
+        let span = last.0 - (first.0 - first.2);
+        if span <= 0.0 {
+            0.0
+        } else {
+            f64::from(steps) * 1000.0 / span
+        }
+    }
+
+    fn reset(&mut self) {
+        self.samples.clear();
+    }
+}
+
+/// Resolves once the GPU has finished everything submitted so far. The browser calls back
+/// from its event loop; nothing blocks.
+fn gpu_done(queue: &wgpu::Queue) -> impl Future<Output = ()> {
+    let state = Arc::new(Mutex::new(WorkDone::default()));
+    let callback_state = state.clone();
+    queue.on_submitted_work_done(move || {
+        if let Ok(mut s) = callback_state.lock() {
+            s.done = true;
+            if let Some(w) = s.waker.take() {
+                w.wake();
+            }
+        }
+    });
+    WaitWorkDone(state)
+}
+
+#[derive(Default)]
+struct WorkDone {
+    done: bool,
+    waker: Option<Waker>,
+}
+
+struct WaitWorkDone(Arc<Mutex<WorkDone>>);
+
+impl Future for WaitWorkDone {
+    type Output = ();
+
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
+        let Ok(mut s) = self.0.lock() else {
+            // A poisoned lock means the callback panicked: do not wait forever.
+            return Poll::Ready(());
+        };
+        if s.done {
+            Poll::Ready(())
+        } else {
+            s.waker = Some(cx.waker().clone());
+            Poll::Pending
+        }
+    }
+}

@@ -1,0 +1,561 @@
+//! The share-link codec: annotations packed small enough to ride in a URL fragment.
+//!
+//! A link is `<page>#scene=<scene url>&labels=<code>`. The code is base64url (no padding) of
+//! raw DEFLATE of a compact binary form of the [`LabelSet`]:
+//!
+//! ```text
+//! u8 version (1)
+//! varint class count, per class: varint name length, UTF-8 name, r, g, b
+//! varint frame count, per frame: varint frame index minus the previous one, varint strokes,
+//!   per stroke: varint class + 1 (0 = eraser), varint radius in 1/8 px, varint points,
+//!   per point: zigzag varint x and y in 1/8 px, the first absolute, the rest as deltas
+//! ```
+//!
+//! Coordinates and radii are kept in eighths of a pixel: the annotator snaps what it records to
+//! that grid ([`snap`]), so its labels round-trip exactly; other coordinates are rounded to it.
+//! Decoding bounds the inflated size and every count, so a hostile link cannot exhaust memory.
+use std::io::{Read, Write};
+
+use flate2::Compression;
+use flate2::read::DeflateDecoder;
+use flate2::write::DeflateEncoder;
+
+use super::format::{ClassInfo, FrameLabels, LabelSet, Stroke};
+
+const CODE_VERSION: u8 = 1;
+/// Steps per pixel of coordinates and radii in the code.
+pub const SUBPIXEL: f32 = 8.0;
+/// Largest inflated code accepted (a few hundred thousand points); more is surely not a link
+/// anyone made by hand.
+const MAX_INFLATED: u64 = 8 << 20;
+/// Longest fragment we hand out as a link. Browsers take far longer URLs, but chat programs,
+/// mail clients and URL shorteners cut or refuse them well before; past this, share a file.
+pub const MAX_LINK_FRAGMENT: usize = 8000;
+
+/// `v` on the code's grid of eighths of a pixel.
+pub fn snap(v: f32) -> f32 {
+    (v * SUBPIXEL).round() / SUBPIXEL
+}
+
+/// Why a share code or fragment could not be read or made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ShareError {
+    #[error("the annotations in the link are damaged: {0}")]
+    Corrupt(String),
+    #[error("the link was made by a newer version (annotation code version {0})")]
+    Version(u8),
+    #[error(
+        "the annotations make a link of {length} characters, more than the {MAX_LINK_FRAGMENT} that \
+         survive being pasted around; share the annotations file instead"
+    )]
+    TooLong { length: usize },
+    #[error(
+        "the scene was opened from a local file, which a link cannot point to; share the scene file and the annotations file"
+    )]
+    LocalScene,
+}
+
+fn corrupt(what: impl Into<String>) -> ShareError {
+    ShareError::Corrupt(what.into())
+}
+
+/// Packs `labels` into a share code (base64url text).
+pub fn encode_labels(labels: &LabelSet) -> String {
+    let mut raw = vec![CODE_VERSION];
+    put_varint(&mut raw, labels.classes.len() as u64);
+    for c in &labels.classes {
+        put_varint(&mut raw, c.name.len() as u64);
+        raw.extend_from_slice(c.name.as_bytes());
+        raw.extend_from_slice(&c.color);
+    }
+    let frames: Vec<&FrameLabels> = labels.frames.iter().filter(|f| !f.strokes.is_empty()).collect();
+    put_varint(&mut raw, frames.len() as u64);
+    let mut previous = 0u64;
+    for f in frames {
+        // Frames are sorted in a LabelSet; a wrapping difference keeps any order decodable.
+        put_varint(&mut raw, u64::from(f.frame).wrapping_sub(previous) & 0xffff_ffff);
+        previous = u64::from(f.frame);
+        put_varint(&mut raw, f.strokes.len() as u64);
+        for s in &f.strokes {
+            put_varint(&mut raw, s.class.map_or(0, |c| u64::from(c) + 1));
+            put_varint(&mut raw, (s.radius * SUBPIXEL).round().max(1.0) as u64);
+            put_varint(&mut raw, s.points.len() as u64);
+            let mut last = [0i64; 2];
+            for p in &s.points {
+                for axis in 0..2 {
+                    let q = (p[axis] * SUBPIXEL).round() as i64;
+                    put_varint(&mut raw, zigzag(q - last[axis]));
+                    last[axis] = q;
+                }
+            }
+        }
+    }
+    let mut deflate = DeflateEncoder::new(Vec::new(), Compression::best());
+    deflate.write_all(&raw).expect("compressing into memory cannot fail");
+    base64url_encode(&deflate.finish().expect("compressing into memory cannot fail"))
+}
+
+/// Unpacks a share code. The result still has to be checked against the scene
+/// ([`LabelSet::check`]): the code does not know how many frames the scene has.
+pub fn decode_labels(code: &str) -> Result<LabelSet, ShareError> {
+    let packed = base64url_decode(code.trim())?;
+    let mut raw = Vec::new();
+    DeflateDecoder::new(packed.as_slice())
+        .take(MAX_INFLATED + 1)
+        .read_to_end(&mut raw)
+        .map_err(|e| corrupt(format!("cannot inflate: {e}")))?;
+    if raw.len() as u64 > MAX_INFLATED {
+        return Err(corrupt("it inflates to more than 8 MiB"));
+    }
+    let mut r = Reader { data: &raw, at: 0 };
+    let version = r.byte()?;
+    if version != CODE_VERSION {
+        return Err(ShareError::Version(version));
+    }
+    let mut labels = LabelSet::default();
+    let classes = r.count("classes")?;
+    for _ in 0..classes {
+        let len = r.count("name length")?;
+        let name = std::str::from_utf8(r.bytes(len)?)
+            .map_err(|_| corrupt("a class name is not UTF-8"))?
+            .to_string();
+        let rgb = r.bytes(3)?;
+        labels.classes.push(ClassInfo {
+            name,
+            color: [rgb[0], rgb[1], rgb[2]],
+        });
+    }
+    let frames = r.count("frames")?;
+    let mut frame = 0u64;
+    for _ in 0..frames {
+        frame = (frame + r.varint()?) & 0xffff_ffff;
+        let strokes = r.count("strokes")?;
+        let mut fl = FrameLabels {
+            frame: frame as u32,
+            strokes: Vec::with_capacity(strokes),
+        };
+        for _ in 0..strokes {
+            let class = match r.varint()? {
+                0 => None,
+                c => Some(u16::try_from(c - 1).map_err(|_| corrupt(format!("class id {} is too large", c - 1)))?),
+            };
+            let radius = r.varint()? as f32 / SUBPIXEL;
+            let points = r.count("points")?;
+            let mut last = [0i64; 2];
+            let mut pts = Vec::with_capacity(points);
+            for _ in 0..points {
+                let mut p = [0f32; 2];
+                for (axis, v) in p.iter_mut().enumerate() {
+                    last[axis] = last[axis]
+                        .checked_add(unzigzag(r.varint()?))
+                        .ok_or_else(|| corrupt("a coordinate overflows"))?;
+                    *v = last[axis] as f32 / SUBPIXEL;
+                }
+                pts.push(p);
+            }
+            fl.strokes.push(Stroke {
+                class,
+                radius,
+                points: pts,
+            });
+        }
+        labels.frames.push(fl);
+    }
+    if r.at != raw.len() {
+        return Err(corrupt(format!("{} bytes left over", raw.len() - r.at)));
+    }
+    labels.frames.sort_by_key(|f| f.frame);
+    Ok(labels)
+}
+
+/// The parts of a page fragment the annotator reads.
+#[derive(Debug, Default, Clone, PartialEq)]
+pub struct Fragment {
+    /// `scene=`, percent-decoded.
+    pub scene: Option<String>,
+    /// `labels=`, the raw share code.
+    pub labels: Option<String>,
+}
+
+/// Reads `#scene=...&labels=...` (the leading `#` optional; unknown keys ignored).
+pub fn parse_fragment(fragment: &str) -> Fragment {
+    let fragment = fragment.strip_prefix('#').unwrap_or(fragment);
+    let mut out = Fragment::default();
+    for pair in fragment.split('&') {
+        if let Some(v) = pair.strip_prefix("scene=") {
+            let url = percent_decode(v);
+            out.scene = (!url.trim().is_empty()).then_some(url);
+        } else if let Some(v) = pair.strip_prefix("labels=") {
+            out.labels = (!v.is_empty()).then(|| v.to_string());
+        }
+    }
+    out
+}
+
+/// The percent-decoded value of `key` in a fragment (`#a=1&b=2`), for the page's other options.
+pub fn fragment_value(fragment: &str, key: &str) -> Option<String> {
+    let fragment = fragment.strip_prefix('#').unwrap_or(fragment);
+    fragment
+        .split('&')
+        .find_map(|pair| pair.strip_prefix(key)?.strip_prefix('='))
+        .map(percent_decode)
+}
+
+/// The fragment (without `#`) of a link to `scene_url` with `labels`, or why there is none.
+pub fn share_fragment(scene_url: &str, labels: &LabelSet) -> Result<String, ShareError> {
+    let mut fragment = format!("scene={}", percent_encode(scene_url));
+    if labels.frames.iter().any(|f| !f.strokes.is_empty()) || !labels.classes.is_empty() {
+        fragment.push_str("&labels=");
+        fragment.push_str(&encode_labels(labels));
+    }
+    if fragment.len() > MAX_LINK_FRAGMENT {
+        return Err(ShareError::TooLong { length: fragment.len() });
+    }
+    Ok(fragment)
+}
+
+/// Percent-encodes everything but unreserved characters and `/ : ? @ ! $ ' ( ) * + , ;`, which
+/// keeps URLs readable while `&`, `=`, `#` and `%` cannot break the fragment apart.
+pub fn percent_encode(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for b in s.bytes() {
+        if b.is_ascii_alphanumeric() || b"-._~/:?@!$'()*+,;".contains(&b) {
+            out.push(b as char);
+        } else {
+            out.push_str(&format!("%{b:02X}"));
+        }
+    }
+    out
+}
+
+/// Decodes `%XX` escapes; malformed escapes and invalid UTF-8 are kept as written, so a bad URL
+/// reaches the loader (which says what is wrong with it) rather than vanishing.
+pub fn percent_decode(s: &str) -> String {
+    let bytes = s.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        let hex = |b: u8| (b as char).to_digit(16);
+        if bytes[i] == b'%'
+            && i + 2 < bytes.len()
+            && let (Some(h), Some(l)) = (hex(bytes[i + 1]), hex(bytes[i + 2]))
+        {
+            out.push((h * 16 + l) as u8);
+            i += 3;
+        } else {
+            out.push(bytes[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8(out).unwrap_or_else(|_| s.to_string())
+}
+
+fn zigzag(v: i64) -> u64 {
+    ((v << 1) ^ (v >> 63)) as u64
+}
+
+fn unzigzag(v: u64) -> i64 {
+    ((v >> 1) as i64) ^ -((v & 1) as i64)
+}
+
+fn put_varint(out: &mut Vec<u8>, mut v: u64) {
+    while v >= 0x80 {
+        out.push((v as u8) | 0x80);
+        v >>= 7;
+    }
+    out.push(v as u8);
+}
+
+struct Reader<'a> {
+    data: &'a [u8],
+    at: usize,
+}
+
+impl Reader<'_> {
+    fn byte(&mut self) -> Result<u8, ShareError> {
+        let b = *self.data.get(self.at).ok_or_else(|| corrupt("it ends early"))?;
+        self.at += 1;
+        Ok(b)
+    }
+
+    fn bytes(&mut self, n: usize) -> Result<&[u8], ShareError> {
+        let end = self.at.checked_add(n).filter(|&e| e <= self.data.len());
+        let end = end.ok_or_else(|| corrupt("it ends early"))?;
+        let out = &self.data[self.at..end];
+        self.at = end;
+        Ok(out)
+    }
+
+    fn varint(&mut self) -> Result<u64, ShareError> {
+        let mut v = 0u64;
+        for shift in (0..64).step_by(7) {
+            let b = self.byte()?;
+            v |= u64::from(b & 0x7f) << shift;
+            if b & 0x80 == 0 {
+                return Ok(v);
+            }
+        }
+        Err(corrupt("a number is too long"))
+    }
+
+    /// A count of things that follow, each at least one byte: more than the bytes left is
+    /// corrupt, which also bounds every allocation by the inflated size.
+    fn count(&mut self, what: &str) -> Result<usize, ShareError> {
+        let n = self.varint()?;
+        if n > (self.data.len() - self.at) as u64 {
+            return Err(corrupt(format!("{what}: count {n} is more than the data holds")));
+        }
+        Ok(n as usize)
+    }
+}
+
+const BASE64URL: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_";
+
+fn base64url_encode(data: &[u8]) -> String {
+    let mut out = String::with_capacity(data.len().div_ceil(3) * 4);
+    for chunk in data.chunks(3) {
+        let n = chunk
+            .iter()
+            .enumerate()
+            .fold(0u32, |n, (i, &b)| n | u32::from(b) << (16 - 8 * i));
+        for i in 0..=chunk.len() {
+            out.push(BASE64URL[(n >> (18 - 6 * i) & 63) as usize] as char);
+        }
+    }
+    out
+}
+
+fn base64url_decode(text: &str) -> Result<Vec<u8>, ShareError> {
+    // Standard base64 too: a link that went through a tool that rewrote it still opens.
+    let value = |c: u8| match c {
+        b'A'..=b'Z' => Some(c - b'A'),
+        b'a'..=b'z' => Some(c - b'a' + 26),
+        b'0'..=b'9' => Some(c - b'0' + 52),
+        b'-' | b'+' => Some(62),
+        b'_' | b'/' => Some(63),
+        _ => None,
+    };
+    let text = text.trim_end_matches('=');
+    let mut out = Vec::with_capacity(text.len() * 3 / 4);
+    for chunk in text.as_bytes().chunks(4) {
+        if chunk.len() == 1 {
+            return Err(corrupt("its base64 has a stray character at the end"));
+        }
+        let mut n = 0u32;
+        for (i, &c) in chunk.iter().enumerate() {
+            let v = value(c).ok_or_else(|| corrupt(format!("{:?} is not a base64url character", c as char)))?;
+            n |= u32::from(v) << (18 - 6 * i);
+        }
+        for i in 0..chunk.len() - 1 {
+            out.push((n >> (16 - 8 * i)) as u8);
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn labels() -> LabelSet {
+        let mut l = LabelSet::new(vec![
+            ClassInfo {
+                name: "background".into(),
+                color: [90, 90, 100],
+            },
+            ClassInfo {
+                name: "tasse à café ☕".into(),
+                color: [50, 110, 240],
+            },
+        ]);
+        l.push_stroke(
+            7,
+            Stroke {
+                class: Some(1),
+                radius: 3.5,
+                points: vec![[10.125, 20.5], [11.0, 19.875], [140.25, 0.5]],
+            },
+        );
+        l.push_stroke(
+            2,
+            Stroke {
+                class: None,
+                radius: 12.0,
+                points: vec![[0.0, 0.0]],
+            },
+        );
+        l.push_stroke(
+            7,
+            Stroke {
+                class: Some(0),
+                radius: 0.5,
+                points: vec![[5.5, 5.5], [4.5, 6.5]],
+            },
+        );
+        l
+    }
+
+    #[test]
+    fn labels_round_trip_exactly_on_the_grid() {
+        let l = labels();
+        let code = encode_labels(&l);
+        assert!(code.bytes().all(|b| BASE64URL.contains(&b)), "{code}");
+        assert_eq!(decode_labels(&code).unwrap(), l);
+        let empty = LabelSet::default();
+        assert_eq!(decode_labels(&encode_labels(&empty)).unwrap(), empty);
+    }
+
+    #[test]
+    fn off_grid_values_round_to_eighths() {
+        let mut l = LabelSet::new(vec![]);
+        l.push_stroke(
+            0,
+            Stroke {
+                class: None,
+                radius: 1.01,
+                points: vec![[1.06, 2.3]],
+            },
+        );
+        let back = decode_labels(&encode_labels(&l)).unwrap();
+        let s = &back.frames[0].strokes[0];
+        assert_eq!((s.radius, s.points[0]), (1.0, [snap(1.06), snap(2.3)]));
+        assert_eq!(snap(2.3), 2.25);
+    }
+
+    #[test]
+    fn a_long_scribble_compresses() {
+        // A wobbly stroke of 2000 points as a hand draws it: deltas of a few eighths.
+        let mut l = LabelSet::new(vec![ClassInfo {
+            name: "a".into(),
+            color: [0, 0, 0],
+        }]);
+        let points: Vec<[f32; 2]> = (0..2000)
+            .map(|i| {
+                let t = i as f32 * 0.01;
+                [snap(80.0 + 60.0 * t.cos()), snap(60.0 + 40.0 * (1.3 * t).sin())]
+            })
+            .collect();
+        l.push_stroke(
+            3,
+            Stroke {
+                class: Some(0),
+                radius: 4.0,
+                points,
+            },
+        );
+        let code = encode_labels(&l);
+        assert!(code.len() < 2000 * 3, "{} characters for 2000 points", code.len());
+        assert_eq!(decode_labels(&code).unwrap(), l);
+    }
+
+    #[test]
+    fn damaged_codes_are_errors_not_panics() {
+        let code = encode_labels(&labels());
+        for cut in [0, 1, 5, code.len() / 2, code.len() - 1] {
+            assert!(decode_labels(&code[..cut]).is_err(), "cut at {cut}");
+        }
+        assert!(matches!(decode_labels("a*b"), Err(ShareError::Corrupt(_))));
+        // Valid deflate of a wrong version byte.
+        let mut d = DeflateEncoder::new(Vec::new(), Compression::fast());
+        d.write_all(&[9]).unwrap();
+        let code = base64url_encode(&d.finish().unwrap());
+        assert_eq!(decode_labels(&code), Err(ShareError::Version(9)));
+        // A count far beyond the data: rejected before allocating.
+        let mut d = DeflateEncoder::new(Vec::new(), Compression::fast());
+        let mut raw = vec![CODE_VERSION];
+        put_varint(&mut raw, u64::MAX >> 1);
+        d.write_all(&raw).unwrap();
+        let err = decode_labels(&base64url_encode(&d.finish().unwrap())).unwrap_err();
+        assert!(err.to_string().contains("count"), "{err}");
+    }
+
+    #[test]
+    fn zip_bombs_are_refused() {
+        let mut d = DeflateEncoder::new(Vec::new(), Compression::best());
+        d.write_all(&vec![0u8; (MAX_INFLATED + 10) as usize]).unwrap();
+        let code = base64url_encode(&d.finish().unwrap());
+        let err = decode_labels(&code).unwrap_err();
+        assert!(err.to_string().contains("8 MiB"), "{err}");
+    }
+
+    #[test]
+    fn base64_matches_the_standard_alphabet() {
+        for data in [
+            &b""[..],
+            b"f",
+            b"fo",
+            b"foo",
+            b"foob",
+            b"fooba",
+            b"foobar",
+            &[0xfb, 0xff, 0xfe],
+        ] {
+            let e = base64url_encode(data);
+            assert_eq!(base64url_decode(&e).unwrap(), data);
+        }
+        assert_eq!(base64url_encode(b"foobar"), "Zm9vYmFy");
+        assert_eq!(base64url_encode(&[0xfb, 0xff]), "-_8");
+        assert_eq!(base64url_decode("+/8=").unwrap(), [0xfb, 0xff]);
+    }
+
+    #[test]
+    fn fragments_carry_scene_and_labels() {
+        let l = labels();
+        let url = "https://example.org/scans/room 1.scene.zip?v=2&x=%41";
+        let fragment = share_fragment(url, &l).unwrap();
+        assert!(
+            !fragment[6..].split("&labels=").next().unwrap().contains('&'),
+            "{fragment}"
+        );
+        let parsed = parse_fragment(&format!("#{fragment}"));
+        assert_eq!(parsed.scene.as_deref(), Some(url));
+        assert_eq!(decode_labels(parsed.labels.as_deref().unwrap()).unwrap(), l);
+        assert_eq!(
+            parse_fragment("scene=demo.scene.zip&zoom=2"),
+            Fragment {
+                scene: Some("demo.scene.zip".into()),
+                labels: None
+            }
+        );
+        assert_eq!(parse_fragment("").scene, None);
+        assert_eq!(fragment_value("#scene=a&model=tiny", "model").as_deref(), Some("tiny"));
+        assert_eq!(fragment_value("#models=x", "model"), None);
+        assert_eq!(percent_decode("a%2"), "a%2");
+        assert_eq!(percent_decode("%E2%98%95%zz"), "☕%zz");
+        assert_eq!(
+            share_fragment("demo.scene.zip", &LabelSet::default()).unwrap(),
+            "scene=demo.scene.zip"
+        );
+    }
+
+    #[test]
+    fn too_long_links_are_refused() {
+        let mut l = LabelSet::new(vec![ClassInfo {
+            name: "a".into(),
+            color: [0, 0, 0],
+        }]);
+        // Random-looking points do not compress.
+        let mut state = 12345u64;
+        let points = (0..5000)
+            .map(|_| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                [(state >> 40) as f32 / 1024.0, (state >> 20 & 0xfffff) as f32 / 1024.0]
+            })
+            .map(|p| [snap(p[0]), snap(p[1])])
+            .collect();
+        l.push_stroke(
+            0,
+            Stroke {
+                class: Some(0),
+                radius: 1.0,
+                points,
+            },
+        );
+        assert!(matches!(
+            share_fragment("demo.scene.zip", &l),
+            Err(ShareError::TooLong { .. })
+        ));
+    }
+}

@@ -1,0 +1,297 @@
+// End-to-end test of annotating in headless Chromium (WebGPU on SwiftShader): load the demo
+// scene, draw scribbles of every class with real mouse events, let the field train, download
+// the masks zip and score it against the scene's ground truth; then reload and find the
+// scribbles restored from the autosave, and open a share link (with the storage cleared) and
+// find the same scribbles. Starts no server: run.sh does, or point E2E_URL at one.
+//
+//   E2E_URL        page to open, e.g. http://127.0.0.1:8080/ (required)
+//   E2E_DEMO       the demo archive the page serves, for its ground truth (default www/demo.scene.zip)
+//   E2E_OUT        folder for screenshots and the downloaded zip (default /tmp/e2e)
+//   E2E_STEPS      training steps to wait for after the last scribble (default below)
+//   E2E_MIN_IOU    mean IoU the masks must reach (default below)
+//   CHROMIUM       browser binary (default /usr/bin/chromium)
+import { mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from "node:fs";
+import { tmpdir } from "node:os";
+import { join } from "node:path";
+import { chromium } from "playwright-core";
+import {
+  CHROMIUM_ARGS, Checks, assert, decodePng, openPage, readZip, saturatedColours, settledStatus,
+  status, statusField, waitForStatus,
+} from "./lib.mjs";
+
+const url = process.env.E2E_URL;
+if (!url) {
+  console.error("E2E_URL is not set: give the URL of the served page, e.g. E2E_URL=http://127.0.0.1:8080/");
+  process.exit(2);
+}
+const outDir = process.env.E2E_OUT || "/tmp/e2e";
+const demoPath = process.env.E2E_DEMO || "www/demo.scene.zip";
+const chromiumPath = process.env.CHROMIUM || "/usr/bin/chromium";
+// Training steps after the last scribble before the masks are downloaded, and the mean IoU
+// they must reach. See the README's browser section for the measurements behind both.
+const STEPS = Number(process.env.E2E_STEPS || 30);
+const MIN_IOU = Number(process.env.E2E_MIN_IOU || 0.2);
+// The page's options for a CPU rasterizer: the tiny model, frames at a quarter of their size
+// (40 x 30), and batches of 1200 rays, one render tile per frame (SwiftShader spends about 2.5 s
+// on every submission whatever its size, so fewer, larger batches get more done).
+const PAGE_OPTIONS = process.env.E2E_PAGE_OPTIONS || "model=tiny&res=4&rays=1200";
+// Frames scribbled on: spread around the demo's orbit so every object is seen from several
+// sides. Brush radius is the app's default for 160 x 120 frames.
+const SCRIBBLE_FRAMES = [0, 9, 18, 27];
+const BRUSH_RADIUS = 4;
+const LOAD_TIMEOUT_MS = 180_000;
+const TRAIN_TIMEOUT_MS = 600_000;
+const EXPORT_TIMEOUT_MS = 600_000;
+const VOID = 255;
+
+mkdirSync(outDir, { recursive: true });
+const userDataDir = mkdtempSync(join(tmpdir(), "scribblefield-e2e-"));
+const consoleLog = [];
+const checks = new Checks();
+const t0 = Date.now();
+const elapsed = () => `${((Date.now() - t0) / 1000).toFixed(0)} s`;
+
+// The demo's ground truth, straight from the archive the page loads.
+const demo = readZip(readFileSync(demoPath));
+const sceneJson = JSON.parse(demo.get("scene.json").toString("utf8"));
+const classes = sceneJson.classes;
+const gt = sceneJson.frames.map((f) => decodePng(demo.get(f.gt)));
+const [W, H] = [sceneJson.width, sceneJson.height];
+
+/// Chessboard-free distance (in pixels, 4-neighbour) from each pixel to the nearest pixel of
+/// another class, void or the image edge: where a careful annotator can put the brush.
+function distanceToBoundary(ids) {
+  const d = new Int32Array(W * H).fill(1 << 20);
+  const queue = [];
+  for (let y = 0; y < H; y++) {
+    for (let x = 0; x < W; x++) {
+      const i = y * W + x, c = ids[i];
+      const edge = x === 0 || y === 0 || x === W - 1 || y === H - 1;
+      const differs = edge || ids[i - 1] !== c || ids[i + 1] !== c || ids[i - W] !== c || ids[i + W] !== c;
+      if (c === VOID || differs) { d[i] = 0; queue.push(i); }
+    }
+  }
+  for (let q = 0; q < queue.length; q++) {
+    const i = queue[q], x = i % W;
+    for (const j of [x > 0 ? i - 1 : -1, x < W - 1 ? i + 1 : -1, i - W, i + W]) {
+      if (j >= 0 && j < W * H && d[j] > d[i] + 1) { d[j] = d[i] + 1; queue.push(j); }
+    }
+  }
+  return d;
+}
+
+/// One horizontal stroke per class visible on `frame`, through the class's most interior pixel
+/// and staying a brush radius inside it: [{class, points: [[x, y], ...]}] in frame pixels.
+function planStrokes(frame) {
+  const ids = gt[frame].data;
+  const d = distanceToBoundary(ids);
+  const best = new Map();
+  for (let i = 0; i < W * H; i++) {
+    const c = ids[i];
+    if (c !== VOID && (!best.has(c) || d[i] > d[best.get(c)])) best.set(c, i);
+  }
+  const strokes = [];
+  for (const [c, i] of [...best.entries()].sort((a, b) => a[0] - b[0])) {
+    const room = d[i] - BRUSH_RADIUS - 1;
+    if (room < 1) continue;
+    const [x, y] = [i % W + 0.5, Math.floor(i / W) + 0.5];
+    const half = Math.min(room, 14);
+    // Only as far as the class continues along the row.
+    let left = 0, right = 0;
+    while (left < half && d[i - left - 1] > BRUSH_RADIUS && ids[i - left - 1] === c) left++;
+    while (right < half && d[i + right + 1] > BRUSH_RADIUS && ids[i + right + 1] === c) right++;
+    strokes.push({ class: c, points: [[x - left, y], [x, y], [x + right, y]] });
+  }
+  return strokes;
+}
+
+function viewRect(statusText) {
+  const [x, y, w, h] = statusField(statusText, "view").split(",").map(Number);
+  return { x, y, w, h };
+}
+
+async function goToFrame(page, frame) {
+  let s = await status(page);
+  const current = Number(statusField(s, "frame"));
+  const key = frame > current ? "ArrowRight" : "ArrowLeft";
+  for (let i = 0; i < Math.abs(frame - current); i++) await page.keyboard.press(key);
+  await waitForStatus(page, (t) => statusField(t, "frame") === String(frame), `frame ${frame}`, 60_000);
+}
+
+/// Draws `stroke` with the mouse: select the class by its number key, press, move, release.
+async function drawStroke(page, stroke) {
+  await page.keyboard.press(String(stroke.class + 1));
+  await waitForStatus(page, (t) => statusField(t, "class") === String(stroke.class), `class ${stroke.class}`, 30_000);
+  const v = viewRect(await status(page));
+  const toScreen = ([x, y]) => [v.x + (x / W) * v.w, v.y + (y / H) * v.h];
+  const [first, ...rest] = stroke.points.map(toScreen);
+  await page.mouse.move(...first);
+  await page.mouse.down();
+  for (const p of rest) await page.mouse.move(...p, { steps: 6 });
+  await page.mouse.up();
+}
+
+function labelledOf(s) {
+  return [statusField(s, "strokes"), statusField(s, "labelled")];
+}
+
+/// Per-class IoU over every frame (void pixels ignored) and their mean over the classes the
+/// ground truth has.
+function meanIou(masks) {
+  const n = classes.length;
+  const inter = new Float64Array(n), union = new Float64Array(n), present = new Array(n).fill(false);
+  for (let f = 0; f < gt.length; f++) {
+    const g = gt[f].data, m = masks[f].data;
+    for (let i = 0; i < g.length; i++) {
+      if (g[i] === VOID) continue;
+      present[g[i]] = true;
+      if (g[i] === m[i]) { inter[g[i]] += 1; union[g[i]] += 1; } else {
+        union[g[i]] += 1;
+        if (m[i] < n) union[m[i]] += 1;
+      }
+    }
+  }
+  const per = [...inter].map((v, c) => (present[c] ? v / Math.max(1, union[c]) : null));
+  const valid = per.filter((v) => v !== null);
+  return { mean: valid.reduce((a, b) => a + b, 0) / valid.length, per };
+}
+
+let context;
+try {
+  context = await chromium.launchPersistentContext(userDataDir, {
+    executablePath: chromiumPath,
+    headless: false,
+    args: CHROMIUM_ARGS,
+    viewport: { width: 1280, height: 800 },
+    acceptDownloads: true,
+  });
+  const sceneUrl = new URL("demo.scene.zip", url).href;
+  const pageUrl = new URL(url);
+  pageUrl.hash = `scene=demo.scene.zip&${PAGE_OPTIONS}`;
+  const page = await openPage(context, pageUrl.href, "annotate", consoleLog);
+  const loadStart = Date.now();
+  let s = await settledStatus(page, LOAD_TIMEOUT_MS);
+  const loadSeconds = (Date.now() - loadStart) / 1000;
+  console.log(`demo scene loaded in ${loadSeconds.toFixed(1)} s: ${s}`);
+  await checks.check("the demo scene loads and starts training", async () => {
+    assert(s.startsWith("ready"), `status is "${s}"`);
+    s = await waitForStatus(page, (t) => statusField(t, "training") === "running", "training to start", LOAD_TIMEOUT_MS);
+    console.log(`     training started at ${elapsed()}`);
+  });
+
+  // Scribble: every class visible on each chosen frame, until every class has some.
+  let expectedStrokes = 0;
+  const drawn = new Set();
+  await checks.check("scribbles of every class, drawn with the mouse, are recorded", async () => {
+    await page.focus("#scribblefield");
+    // Paused while drawing, as one would on a slow device: on SwiftShader a training step takes
+    // seconds and every repaint of the page waits for it.
+    await page.keyboard.press("Space");
+    await waitForStatus(page, (t) => statusField(t, "training") === "paused", "the pause", 120_000);
+    for (const frame of SCRIBBLE_FRAMES) {
+      await goToFrame(page, frame);
+      for (const stroke of planStrokes(frame)) {
+        await drawStroke(page, stroke);
+        expectedStrokes += 1;
+        drawn.add(stroke.class);
+        await waitForStatus(page, (t) => statusField(t, "strokes") === String(expectedStrokes),
+          `stroke ${expectedStrokes}`, 60_000);
+      }
+    }
+    await page.keyboard.press("Space");
+    await waitForStatus(page, (t) => statusField(t, "training") === "running", "the resume", 120_000);
+    const missing = classes.map((_, c) => c).filter((c) => !drawn.has(c));
+    assert(missing.length === 0, `classes never scribbled: ${missing}`);
+    s = await waitForStatus(page, (t) => statusField(t, "saved") === "1", "the autosave", 30_000);
+    console.log(`     ${expectedStrokes} strokes, ${statusField(s, "labelled")} labelled pixels (${elapsed()})`);
+  });
+  const labelledAfterDrawing = labelledOf(s);
+  await page.screenshot({ path: join(outDir, "annotate-scribbles.png") });
+
+  // Train, then look at a frame nobody scribbled on.
+  const stepsAtLastStroke = Number(statusField(s, "steps"));
+  const trainStart = Date.now();
+  await checks.check(`the field trains ${STEPS} more steps with the labels`, async () => {
+    s = await waitForStatus(page, (t) => Number(statusField(t, "steps")) >= stepsAtLastStroke + STEPS,
+      `${STEPS} steps`, TRAIN_TIMEOUT_MS);
+    const seconds = (Date.now() - trainStart) / 1000;
+    console.log(`     ${STEPS} steps in ${seconds.toFixed(0)} s (${(STEPS / seconds).toFixed(2)} steps/s; page says ` +
+      `sps=${statusField(s, "sps")}, loss=${statusField(s, "loss")})`);
+  });
+  await goToFrame(page, 5);
+  await waitForStatus(page, (t) => Number(statusField(t, "rendered")) >= 0, "a render of frame 5", 120_000).catch(() => {});
+  const shot = await page.screenshot({ path: join(outDir, "annotate-mask-frame5.png") });
+  console.log(`     (screenshot of frame 5 with the mask: ${saturatedColours(shot)} saturated colours)`);
+
+  // Download the masks and score them.
+  await checks.check(`the downloaded masks reach a mean IoU of ${MIN_IOU}`, async () => {
+    const exportStart = Date.now();
+    const downloadPromise = page.waitForEvent("download", { timeout: EXPORT_TIMEOUT_MS });
+    await page.keyboard.press("d");
+    const download = await downloadPromise;
+    const zipPath = join(outDir, download.suggestedFilename());
+    await download.saveAs(zipPath);
+    console.log(`     ${download.suggestedFilename()} after ${((Date.now() - exportStart) / 1000).toFixed(0)} s`);
+    const files = readZip(readFileSync(zipPath));
+    const manifest = JSON.parse(files.get("classes.json").toString("utf8"));
+    assert(manifest.frames === gt.length, `the manifest lists ${manifest.frames} frames`);
+    assert(JSON.stringify(manifest.classes.map((c) => c.name)) === JSON.stringify(classes.map((c) => c.name)),
+      "the manifest's classes are not the scene's");
+    const labels = JSON.parse(files.get("labels.json").toString("utf8"));
+    const strokes = labels.frames.reduce((n, f) => n + f.strokes.length, 0);
+    assert(strokes === expectedStrokes, `labels.json has ${strokes} strokes, ${expectedStrokes} were drawn`);
+    assert(files.has("preview/00000.png"), "no colour previews");
+    const masks = manifest.files.map((name) => decodePng(files.get(name)));
+    assert(masks.every((m) => m.width === W && m.height === H && m.channels === 1), "masks have the wrong format");
+    const iou = meanIou(masks);
+    console.log(`     mean IoU ${iou.mean.toFixed(3)}; per class ` +
+      iou.per.map((v, c) => `${classes[c].name} ${v === null ? "-" : v.toFixed(3)}`).join(", "));
+    assert(iou.mean >= MIN_IOU, `mean IoU ${iou.mean.toFixed(3)} is below ${MIN_IOU}`);
+  });
+
+  // Reload: the autosave brings the scribbles back.
+  await checks.check("after a reload the scribbles are restored", async () => {
+    await page.reload({ waitUntil: "load" });
+    const r = await settledStatus(page, LOAD_TIMEOUT_MS);
+    assert(r.startsWith("ready"), `status is "${r}"`);
+    assert(JSON.stringify(labelledOf(r)) === JSON.stringify(labelledAfterDrawing),
+      `strokes/labelled pixels are ${labelledOf(r)}, were ${labelledAfterDrawing}`);
+    await page.screenshot({ path: join(outDir, "annotate-reloaded.png") });
+  });
+
+  // A share link carries the scribbles without the autosave.
+  await checks.check("a share link opens the scene with the same scribbles", async () => {
+    await page.focus("#scribblefield");
+    await page.keyboard.press("l");
+    await page.waitForFunction(() => !!document.body.dataset.shareLink, null, { timeout: 30_000 });
+    const link = await page.evaluate(() => document.body.dataset.shareLink);
+    console.log(`     share link of ${link.length} characters`);
+    assert(link.includes("scene=") && link.includes("labels="), `odd link: ${link.slice(0, 200)}`);
+    assert(decodeURIComponent(new URL(link).hash).includes(sceneUrl), `the link does not name ${sceneUrl}`);
+    await page.evaluate(() => localStorage.clear());
+    await page.close();
+    const shared = await openPage(context, link, "share link", consoleLog);
+    const r = await settledStatus(shared, LOAD_TIMEOUT_MS);
+    assert(r.startsWith("ready"), `status is "${r}"`);
+    assert(JSON.stringify(labelledOf(r)) === JSON.stringify(labelledAfterDrawing),
+      `strokes/labelled pixels are ${labelledOf(r)}, were ${labelledAfterDrawing}`);
+    const hash = await shared.evaluate(() => location.hash);
+    assert(!hash.includes("labels="), `the address still carries the labels: ${hash.slice(0, 80)}`);
+    await shared.screenshot({ path: join(outDir, "annotate-share-link.png") });
+  });
+  writeFileSync(join(outDir, "annotate-load-seconds.txt"), `${loadSeconds}\n`);
+} catch (e) {
+  checks.failed += 1;
+  console.log(`FAIL the test could not run: ${e.message}`);
+} finally {
+  await context?.close().catch(() => {});
+  rmSync(userDataDir, { recursive: true, force: true });
+}
+
+console.log(`screenshots in ${outDir} (${elapsed()} in all)`);
+if (checks.failed > 0) {
+  console.log("--- browser console ---");
+  for (const line of consoleLog.slice(-200)) console.log(line);
+}
+console.log(`${checks.passed} passed, ${checks.failed} failed`);
+process.exit(checks.failed > 0 ? 1 : 0);

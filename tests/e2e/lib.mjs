@@ -1,0 +1,171 @@
+// Shared pieces of the browser tests: Chromium's flags, a tiny check runner, PNG and zip
+// decoding (node has zlib but no image or archive reader), and reading the page's status line.
+import { inflateRawSync, inflateSync } from "node:zlib";
+
+export const CHROMIUM_ARGS = [
+  "--headless=new",
+  "--no-sandbox",
+  "--enable-unsafe-webgpu",
+  "--disable-background-networking",
+  "--disable-component-update",
+  "--disable-sync",
+  "--no-first-run",
+  "--disable-quic",
+  // Without these the WebGPU canvas is never composited in headless mode (chrome://gpu says
+  // "WebGPU interop: Disabled") and screenshots show an empty canvas: SwiftShader's Vulkan and
+  // GL give the compositor a GPU to share the canvas with.
+  "--use-angle=swiftshader",
+  "--enable-features=Vulkan",
+  "--use-vulkan=swiftshader",
+  // A page in a background or headless tab must not have its timers throttled: training runs
+  // on them.
+  "--disable-background-timer-throttling",
+  "--disable-renderer-backgrounding",
+  "--disable-backgrounding-occluded-windows",
+];
+
+export function assert(condition, message) {
+  if (!condition) throw new Error(message);
+}
+
+/// Runs named checks, counting passes and failures; a failed check does not stop the others.
+export class Checks {
+  constructor() {
+    this.passed = 0;
+    this.failed = 0;
+  }
+
+  async check(name, body) {
+    try {
+      await body();
+      this.passed += 1;
+      console.log(`ok   ${name}`);
+    } catch (e) {
+      this.failed += 1;
+      console.log(`FAIL ${name}: ${e.message}`);
+    }
+  }
+}
+
+/// Decodes an 8-bit grey, RGB or RGBA PNG into {width, height, channels, data} (data holds
+/// `channels` bytes per pixel, rows top to bottom).
+export function decodePng(png) {
+  let pos = 8;
+  let width = 0, height = 0, colourType = 0;
+  const idat = [];
+  while (pos < png.length) {
+    const length = png.readUInt32BE(pos);
+    const type = png.toString("latin1", pos + 4, pos + 8);
+    const data = png.subarray(pos + 8, pos + 8 + length);
+    if (type === "IHDR") {
+      width = data.readUInt32BE(0);
+      height = data.readUInt32BE(4);
+      colourType = data[9];
+      assert(data[8] === 8 && [0, 2, 6].includes(colourType) && data[12] === 0,
+        `unsupported PNG (bit depth ${data[8]}, colour type ${colourType}, interlace ${data[12]})`);
+    } else if (type === "IDAT") {
+      idat.push(data);
+    }
+    pos += 12 + length;
+  }
+  const bpp = { 0: 1, 2: 3, 6: 4 }[colourType];
+  const raw = inflateSync(Buffer.concat(idat));
+  const stride = width * bpp;
+  const out = Buffer.alloc(width * height * bpp);
+  let prev = Buffer.alloc(stride);
+  for (let y = 0; y < height; y++) {
+    const filter = raw[y * (stride + 1)];
+    const line = Buffer.from(raw.subarray(y * (stride + 1) + 1, (y + 1) * (stride + 1)));
+    for (let i = 0; i < stride; i++) {
+      const a = i >= bpp ? line[i - bpp] : 0, b = prev[i], c = i >= bpp ? prev[i - bpp] : 0;
+      const p = a + b - c, pa = Math.abs(p - a), pb = Math.abs(p - b), pc = Math.abs(p - c);
+      const predictor = [0, a, b, (a + b) >> 1, pa <= pb && pa <= pc ? a : pb <= pc ? b : c][filter];
+      line[i] = (line[i] + predictor) & 255;
+    }
+    line.copy(out, y * stride);
+    prev = line;
+  }
+  return { width, height, channels: bpp, data: out };
+}
+
+/// Distinct clearly coloured (not grey) pixel values of a screenshot: the UI around the frame
+/// is grey with a few accent colours, a rendered frame has hundreds.
+export function saturatedColours(png) {
+  const { data, channels } = decodePng(png);
+  const seen = new Set();
+  for (let i = 0; i < data.length; i += channels) {
+    const [r, g, b] = [data[i], data[i + 1], data[i + 2]];
+    if (Math.max(r, g, b) - Math.min(r, g, b) > 40) seen.add((r << 16) | (g << 8) | b);
+  }
+  return seen.size;
+}
+
+/// The entries of a zip archive (stored or deflated) as a Map from name to bytes.
+export function readZip(zip) {
+  // The end-of-central-directory record is in the last 64 KiB + 22 bytes.
+  let eocd = -1;
+  for (let i = zip.length - 22; i >= Math.max(0, zip.length - 65558); i--) {
+    if (zip.readUInt32LE(i) === 0x06054b50) { eocd = i; break; }
+  }
+  assert(eocd >= 0, "not a zip archive (no end of central directory)");
+  const count = zip.readUInt16LE(eocd + 10);
+  let pos = zip.readUInt32LE(eocd + 16);
+  const entries = new Map();
+  for (let n = 0; n < count; n++) {
+    assert(zip.readUInt32LE(pos) === 0x02014b50, "damaged zip central directory");
+    const method = zip.readUInt16LE(pos + 10);
+    const compressed = zip.readUInt32LE(pos + 20);
+    const nameLength = zip.readUInt16LE(pos + 28);
+    const extraLength = zip.readUInt16LE(pos + 30);
+    const commentLength = zip.readUInt16LE(pos + 32);
+    const local = zip.readUInt32LE(pos + 42);
+    const name = zip.toString("utf8", pos + 46, pos + 46 + nameLength);
+    const dataStart = local + 30 + zip.readUInt16LE(local + 26) + zip.readUInt16LE(local + 28);
+    const data = zip.subarray(dataStart, dataStart + compressed);
+    assert(method === 0 || method === 8, `${name}: unsupported zip compression ${method}`);
+    entries.set(name, method === 0 ? Buffer.from(data) : inflateRawSync(data));
+    pos += 46 + nameLength + extraLength + commentLength;
+  }
+  return entries;
+}
+
+export async function status(page) {
+  return page.evaluate(() => document.body.dataset.status || "");
+}
+
+export function statusField(statusText, name) {
+  const match = statusText.match(new RegExp(`\\b${name}=(\\S+)`));
+  return match ? match[1] : undefined;
+}
+
+/// Waits until `predicate(status)` holds (polling the page); returns the status.
+export async function waitForStatus(page, predicate, what, timeoutMs) {
+  const start = Date.now();
+  let last = "";
+  while (Date.now() - start < timeoutMs) {
+    last = await status(page);
+    if (predicate(last)) return last;
+    if (/^(error|crashed)/.test(last)) throw new Error(`waiting for ${what}: the page says "${last}"`);
+    await new Promise((r) => setTimeout(r, 250));
+  }
+  throw new Error(`waiting for ${what}: timed out after ${timeoutMs / 1000} s; status "${last}"`);
+}
+
+/// Waits until data-status is no longer a loading state; returns it.
+export async function settledStatus(page, timeoutMs) {
+  await page.waitForFunction(
+    () => /^(ready|error|crashed)/.test(document.body.dataset.status || ""),
+    null,
+    { timeout: timeoutMs, polling: 250 },
+  );
+  return status(page);
+}
+
+export async function openPage(context, pageUrl, label, consoleLog) {
+  const page = await context.newPage();
+  page.on("console", (m) => consoleLog.push(`[${label}] console.${m.type()}: ${m.text()}`));
+  page.on("pageerror", (e) => consoleLog.push(`[${label}] page error: ${e.message}`));
+  page.on("requestfailed", (r) => consoleLog.push(`[${label}] request failed: ${r.url()} ${r.failure()?.errorText}`));
+  await page.goto(pageUrl, { waitUntil: "load" });
+  return page;
+}
