@@ -1,0 +1,159 @@
+//! Quality of the propagated masks, trained headless on the GPU (lavapipe in CI) with fixed
+//! seeds: synthetic scribbles from ground truth, the warm-up-then-labels schedule of `segment`,
+//! every frame rendered and scored. The thresholds sit a little under what these runs measured
+//! (the figures are in the comments); they guard against regressions, they are not the goals.
+//!
+//! `cargo test --release --test quality -- --ignored --nocapture` also runs the encoding
+//! ablation (hash grid + frequency vs frequency only vs hash grid only at the same budget).
+use scribblefield::eval::EvalReport;
+use scribblefield::eval::headless::{render_and_score, train_schedule};
+use scribblefield::field::gpu::trainer::Trainer;
+use scribblefield::field::{AdamConfig, Encoding, FieldConfig};
+use scribblefield::gpu::GpuContext;
+use scribblefield::gpu::test_support::gpu_for_tests;
+use scribblefield::labels::LabelSet;
+use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
+use scribblefield::scene::Scene;
+use scribblefield::scene::demo::{DemoOptions, demo_scene};
+
+/// The budget of these tests: small widths, 256 rays of 4 + 12 samples, 100 warm-up steps and
+/// `DEMO_STEPS` with labels. About 6 minutes on lavapipe on 2 cores.
+fn budget_config(classes: usize) -> FieldConfig {
+    FieldConfig {
+        num_classes: classes as u32,
+        batch_rays: 256,
+        samples_coarse: 4,
+        samples_fine: 12,
+        feature_supervision: false,
+        adam: AdamConfig {
+            // At this short budget the interactive default (1e-3) learns the labels too slowly;
+            // 1e-2 was worse than 5e-3 (0.44 vs 0.58 mean IoU on the demo scene).
+            lr_annotating: 5e-3,
+            ..AdamConfig::default()
+        },
+        ..FieldConfig::small()
+    }
+}
+
+const WARMUP: u32 = 100;
+const DEMO_STEPS: u32 = 800;
+
+fn demo() -> Scene {
+    demo_scene(&DemoOptions {
+        width: 80,
+        height: 60,
+        frames: 36,
+        ..Default::default()
+    })
+    .unwrap()
+}
+
+fn train_and_score(
+    ctx: &GpuContext,
+    scene: &Scene,
+    labels: &LabelSet,
+    cfg: &FieldConfig,
+    steps: u32,
+    frames: impl IntoIterator<Item = usize>,
+) -> EvalReport {
+    let mut trainer = pollster::block_on(Trainer::new(ctx, scene, cfg, 0)).unwrap();
+    let clock = std::time::Instant::now();
+    train_schedule(&mut trainer, scene, labels, WARMUP, steps, |_, _, _| {}).unwrap();
+    let trained = clock.elapsed().as_secs_f64();
+    let names: Vec<String> = labels.classes.iter().map(|c| c.name.clone()).collect();
+    let report = render_and_score(&mut trainer, scene, &names, frames, |_, _| {}).unwrap();
+    eprintln!(
+        "{:?}: {} + {steps} steps in {trained:.0} s; mean IoU {:.3}, pixel accuracy {:.3}\n{}",
+        cfg.encoding,
+        WARMUP,
+        report.mean_iou,
+        report.pixel_accuracy,
+        report.table()
+    );
+    report
+}
+
+#[test]
+fn demo_scribbles_on_two_frames_propagate_to_every_frame() {
+    let Some(ctx) = gpu_for_tests("demo_scribbles_on_two_frames_propagate_to_every_frame") else {
+        return;
+    };
+    let scene = demo();
+    let labels = scribble_frames(&scene, &[0, 12], &ScribbleOptions::default());
+    let report = train_and_score(
+        &ctx,
+        &scene,
+        &labels,
+        &budget_config(scene.classes.len()),
+        DEMO_STEPS,
+        0..scene.frames.len(),
+    );
+    assert!(
+        report.mean_iou > MEASURED_DEMO_FLOOR,
+        "mean IoU {:.3} over all frames",
+        report.mean_iou
+    );
+}
+
+/// Measured: see the note of issue 3 (the target there is 0.85, not reached at this budget).
+const MEASURED_DEMO_FLOOR: f64 = 0.5;
+
+#[test]
+#[ignore = "measurement (about 20 minutes on lavapipe): the encodings at the same budget"]
+fn encoding_ablation_on_the_demo_scene() {
+    let Some(ctx) = gpu_for_tests("encoding_ablation_on_the_demo_scene") else {
+        return;
+    };
+    let scene = demo();
+    let labels = scribble_frames(&scene, &[0, 12], &ScribbleOptions::default());
+    let mut rows = Vec::new();
+    for encoding in [Encoding::default(), Encoding::freq_only_baseline(), Encoding::HashOnly] {
+        let cfg = FieldConfig {
+            encoding,
+            ..budget_config(scene.classes.len())
+        };
+        let report = train_and_score(&ctx, &scene, &labels, &cfg, DEMO_STEPS, 0..scene.frames.len());
+        rows.push((encoding, report.mean_iou, report.pixel_accuracy));
+    }
+    println!("| encoding | mean IoU | pixel accuracy |\n|---|---|---|");
+    for (encoding, miou, acc) in rows {
+        println!("| {encoding:?} | {miou:.3} | {acc:.3} |");
+    }
+}
+
+/// The real YCB-Video clip (../shared/data), packed at 160 x 120: scribbles on frame 0 only,
+/// scored on frames 1-9. The camera barely moves over the clip, so this measures propagation
+/// from sparse scribbles to whole objects on real colour and depth within nearly one view.
+#[test]
+fn ycb_scribbles_on_frame_0_propagate_to_frames_1_to_9() {
+    use scribblefield::scene::import::{ImportOptions, import};
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/ycb-video-0000");
+    if !dir.is_dir() {
+        eprintln!(
+            "\n!!! SKIPPING: real data {} is absent; this test checks nothing here !!!\n",
+            dir.display()
+        );
+        return;
+    }
+    let Some(ctx) = gpu_for_tests("ycb_scribbles_on_frame_0_propagate_to_frames_1_to_9") else {
+        return;
+    };
+    let options = ImportOptions {
+        max_size: Some(160),
+        ..Default::default()
+    };
+    let scene = import(&dir, &options, &mut |_, _| {}).unwrap().scene;
+    let labels = scribble_frames(&scene, &[0], &ScribbleOptions::default());
+    let report = train_and_score(
+        &ctx,
+        &scene,
+        &labels,
+        &budget_config(scene.classes.len()),
+        YCB_STEPS,
+        1..scene.frames.len(),
+    );
+    // Measured with `segment` at this budget: mean IoU 0.385, pixel accuracy 0.65 (frames 1-9).
+    assert!(report.mean_iou > 0.3, "mean IoU {:.3} on frames 1-9", report.mean_iou);
+}
+
+const YCB_STEPS: u32 = 500;
