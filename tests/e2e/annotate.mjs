@@ -37,7 +37,9 @@ const MIN_IOU = Number(process.env.E2E_MIN_IOU || 0.2);
 const PAGE_OPTIONS = process.env.E2E_PAGE_OPTIONS || "model=tiny&res=4&rays=1200";
 // Frames scribbled on: spread around the demo's orbit so every object is seen from several
 // sides. Brush radius is the app's default for 160 x 120 frames.
-const SCRIBBLE_FRAMES = [0, 9, 18, 27];
+// Two frames from opposite sides of the orbit; more are added only when a class is missing.
+const SCRIBBLE_FRAMES = [0, 18];
+const SPARE_FRAMES = [9, 27, 5, 14, 23, 32];
 const BRUSH_RADIUS = 4;
 const LOAD_TIMEOUT_MS = 180_000;
 const TRAIN_TIMEOUT_MS = 600_000;
@@ -127,7 +129,7 @@ async function drawStroke(page, stroke) {
   const [first, ...rest] = stroke.points.map(toScreen);
   await page.mouse.move(...first);
   await page.mouse.down();
-  for (const p of rest) await page.mouse.move(...p, { steps: 6 });
+  for (const p of rest) await page.mouse.move(...p, { steps: 3 });
   await page.mouse.up();
 }
 
@@ -175,7 +177,10 @@ try {
   console.log(`demo scene loaded in ${loadSeconds.toFixed(1)} s: ${s}`);
   await checks.check("the demo scene loads and starts training", async () => {
     assert(s.startsWith("ready"), `status is "${s}"`);
-    s = await waitForStatus(page, (t) => statusField(t, "training") === "running", "training to start", LOAD_TIMEOUT_MS);
+    s = await waitForStatus(page, (t) => {
+      if (statusField(t, "training") === "failed") throw new Error(`training failed: ${t.split(" failure: ")[1]}`);
+      return statusField(t, "training") === "running";
+    }, "training to start", LOAD_TIMEOUT_MS);
     console.log(`     training started at ${elapsed()}`);
   });
 
@@ -188,7 +193,13 @@ try {
     // seconds and every repaint of the page waits for it.
     await page.keyboard.press("Space");
     await waitForStatus(page, (t) => statusField(t, "training") === "paused", "the pause", 120_000);
-    for (const frame of SCRIBBLE_FRAMES) {
+    const frames = [...SCRIBBLE_FRAMES];
+    for (const spare of SPARE_FRAMES) {
+      const seen = new Set(frames.flatMap((f) => planStrokes(f).map((st) => st.class)));
+      if (classes.every((_, c) => seen.has(c))) break;
+      if (planStrokes(spare).some((st) => !seen.has(st.class))) frames.push(spare);
+    }
+    for (const frame of frames) {
       await goToFrame(page, frame);
       for (const stroke of planStrokes(frame)) {
         await drawStroke(page, stroke);
@@ -196,6 +207,7 @@ try {
         drawn.add(stroke.class);
         await waitForStatus(page, (t) => statusField(t, "strokes") === String(expectedStrokes),
           `stroke ${expectedStrokes}`, 60_000);
+        console.log(`     stroke ${expectedStrokes}: class ${stroke.class} on frame ${frame} (${elapsed()})`);
       }
     }
     await page.keyboard.press("Space");
