@@ -129,7 +129,7 @@ async function drawStroke(page, stroke) {
   const [first, ...rest] = stroke.points.map(toScreen);
   await page.mouse.move(...first);
   await page.mouse.down();
-  for (const p of rest) await page.mouse.move(...p, { steps: 3 });
+  for (const p of rest) await page.mouse.move(...p);
   await page.mouse.up();
 }
 
@@ -164,7 +164,9 @@ try {
     executablePath: chromiumPath,
     headless: false,
     args: CHROMIUM_ARGS,
-    viewport: { width: 1280, height: 800 },
+    // Smaller than the smoke test's: on SwiftShader every repaint of the page takes about a
+    // second at 1280 x 800, and each mouse event is one repaint.
+    viewport: { width: 1024, height: 720 },
     acceptDownloads: true,
   });
   const sceneUrl = new URL("demo.scene.zip", url).href;
