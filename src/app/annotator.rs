@@ -641,7 +641,7 @@ impl Annotator {
             }
         });
         if ui
-            .button("🔗 share link (L)")
+            .button("share link (L)")
             .on_hover_text("a link with the scene and the annotations; copied to the clipboard")
             .clicked()
         {
@@ -891,10 +891,19 @@ impl Annotator {
             }
             None => ("none".to_string(), 0, 0.0, "-".to_string(), -1),
         };
+        // Last, since it has spaces: why training stopped.
+        let failure = self
+            .training
+            .as_ref()
+            .and_then(|t| match &t.shared().phase {
+                Phase::Failed(m) => Some(format!(" failure: {m}")),
+                _ => None,
+            })
+            .unwrap_or_default();
         page_status::set(&format!(
             "ready frames={} size={}x{} frame={} class={} tool={} classes={} strokes={} labelled={} \
              training={phase} steps={steps} sps={sps:.2} loss={loss} rendered={rendered_step} \
-             saved={} res={} render_ms={:.0} view={:.0},{:.0},{:.0},{:.0}",
+             saved={} res={} render_ms={:.0} view={:.0},{:.0},{:.0},{:.0}{failure}",
             self.scene.frames.len(),
             self.scene.width,
             self.scene.height,

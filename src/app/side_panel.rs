@@ -36,11 +36,7 @@ pub fn show(
             });
         }
         Phase::Running | Phase::Exporting { .. } => {
-            let label = if s.paused {
-                "▶ resume (space)"
-            } else {
-                "⏸ pause (space)"
-            };
+            let label = if s.paused { "resume (space)" } else { "pause (space)" };
             if ui.button(label).clicked() {
                 actions.toggle_pause = true;
             }

@@ -28,7 +28,9 @@ const outDir = process.env.E2E_OUT || "/tmp/e2e";
 const demoPath = process.env.E2E_DEMO || "www/demo.scene.zip";
 const chromiumPath = process.env.CHROMIUM || "/usr/bin/chromium";
 // Training steps after the last scribble before the masks are downloaded, and the mean IoU
-// they must reach. See the README's browser section for the measurements behind both.
+// they must reach. Measured on a loaded 2-core machine: 0.353 (4 frames scribbled) and 0.317
+// (these 2 frames); answering "background" everywhere scores 0.089. The bar sits well above
+// that and below the measurements. docs/web-app.md has the rest of the measurements.
 const STEPS = Number(process.env.E2E_STEPS || 30);
 const MIN_IOU = Number(process.env.E2E_MIN_IOU || 0.2);
 // The page's options for a CPU rasterizer: the tiny model, frames at a quarter of their size
@@ -37,7 +39,9 @@ const MIN_IOU = Number(process.env.E2E_MIN_IOU || 0.2);
 const PAGE_OPTIONS = process.env.E2E_PAGE_OPTIONS || "model=tiny&res=4&rays=1200";
 // Frames scribbled on: spread around the demo's orbit so every object is seen from several
 // sides. Brush radius is the app's default for 160 x 120 frames.
-const SCRIBBLE_FRAMES = [0, 9, 18, 27];
+// Two frames from opposite sides of the orbit; more are added only when a class is missing.
+const SCRIBBLE_FRAMES = [0, 18];
+const SPARE_FRAMES = [9, 27, 5, 14, 23, 32];
 const BRUSH_RADIUS = 4;
 const LOAD_TIMEOUT_MS = 180_000;
 const TRAIN_TIMEOUT_MS = 600_000;
@@ -127,7 +131,7 @@ async function drawStroke(page, stroke) {
   const [first, ...rest] = stroke.points.map(toScreen);
   await page.mouse.move(...first);
   await page.mouse.down();
-  for (const p of rest) await page.mouse.move(...p, { steps: 6 });
+  for (const p of rest) await page.mouse.move(...p);
   await page.mouse.up();
 }
 
@@ -162,7 +166,9 @@ try {
     executablePath: chromiumPath,
     headless: false,
     args: CHROMIUM_ARGS,
-    viewport: { width: 1280, height: 800 },
+    // Smaller than the smoke test's: on SwiftShader every repaint of the page takes about a
+    // second at 1280 x 800, and each mouse event is one repaint.
+    viewport: { width: 1024, height: 720 },
     acceptDownloads: true,
   });
   const sceneUrl = new URL("demo.scene.zip", url).href;
@@ -175,7 +181,10 @@ try {
   console.log(`demo scene loaded in ${loadSeconds.toFixed(1)} s: ${s}`);
   await checks.check("the demo scene loads and starts training", async () => {
     assert(s.startsWith("ready"), `status is "${s}"`);
-    s = await waitForStatus(page, (t) => statusField(t, "training") === "running", "training to start", LOAD_TIMEOUT_MS);
+    s = await waitForStatus(page, (t) => {
+      if (statusField(t, "training") === "failed") throw new Error(`training failed: ${t.split(" failure: ")[1]}`);
+      return statusField(t, "training") === "running";
+    }, "training to start", LOAD_TIMEOUT_MS);
     console.log(`     training started at ${elapsed()}`);
   });
 
@@ -188,7 +197,13 @@ try {
     // seconds and every repaint of the page waits for it.
     await page.keyboard.press("Space");
     await waitForStatus(page, (t) => statusField(t, "training") === "paused", "the pause", 120_000);
-    for (const frame of SCRIBBLE_FRAMES) {
+    const frames = [...SCRIBBLE_FRAMES];
+    for (const spare of SPARE_FRAMES) {
+      const seen = new Set(frames.flatMap((f) => planStrokes(f).map((st) => st.class)));
+      if (classes.every((_, c) => seen.has(c))) break;
+      if (planStrokes(spare).some((st) => !seen.has(st.class))) frames.push(spare);
+    }
+    for (const frame of frames) {
       await goToFrame(page, frame);
       for (const stroke of planStrokes(frame)) {
         await drawStroke(page, stroke);
@@ -196,6 +211,7 @@ try {
         drawn.add(stroke.class);
         await waitForStatus(page, (t) => statusField(t, "strokes") === String(expectedStrokes),
           `stroke ${expectedStrokes}`, 60_000);
+        console.log(`     stroke ${expectedStrokes}: class ${stroke.class} on frame ${frame} (${elapsed()})`);
       }
     }
     await page.keyboard.press("Space");
