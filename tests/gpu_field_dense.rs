@@ -77,6 +77,19 @@ impl ViewLayout {
     }
 }
 
+/// A parameter buffer as the trainer makes it: readable through the uniform bindings of the
+/// CPU-device kernels too.
+fn trainer_params(ctx: &GpuContext, params: &[f32]) -> wgpu::Buffer {
+    storage_buffer_padded(
+        ctx,
+        "params",
+        params,
+        UNIFORM_WEIGHT_FLOATS,
+        wgpu::BufferUsages::UNIFORM,
+    )
+    .unwrap()
+}
+
 fn random_values(rng: &mut SplitMix64, count: usize, scale: f64) -> Vec<f32> {
     (0..count).map(|_| rng.uniform(-scale, scale) as f32).collect()
 }
@@ -164,15 +177,7 @@ fn check_mlp(case: MlpCase<'_>) {
     grads[..layout.range().start].fill(-1.5);
     grads[layout.range().end..].fill(-1.5);
 
-    // As the trainer makes it: readable through the uniform bindings of that kernel family.
-    let params_buffer = storage_buffer_padded(
-        ctx,
-        "params",
-        params,
-        UNIFORM_WEIGHT_FLOATS,
-        wgpu::BufferUsages::UNIFORM,
-    )
-    .unwrap();
+    let params_buffer = trainer_params(ctx, params);
     let grads_buffer = storage_buffer_from(ctx, "grads", &grads).unwrap();
     let input_buffer = storage_buffer_from(ctx, "input", &input).unwrap();
     let output_grad_buffer = storage_buffer_from(ctx, "output grad", &output_grad).unwrap();
@@ -342,14 +347,7 @@ fn every_mlp_matches_the_reference_with_uniform_weights() {
     // And they are used: a small MLP runs every layer on them.
     let cfg = FieldConfig::small();
     let layout = ParamLayout::new(&cfg);
-    let params = storage_buffer_padded(
-        &ctx,
-        "params",
-        &layout.init(1),
-        UNIFORM_WEIGHT_FLOATS,
-        wgpu::BufferUsages::UNIFORM,
-    )
-    .unwrap();
+    let params = trainer_params(&ctx, &layout.init(1));
     let rows = 64u32;
     let input = storage_buffer_zeroed::<f32>(&ctx, "input", rows as usize * layout.density.input_dim()).unwrap();
     let desc = MlpPassDesc {
@@ -478,14 +476,7 @@ fn density_mlp_throughput_report() {
     let layout = ParamLayout::new(&cfg);
     let mlp_layout = &layout.density;
     let mut rng = SplitMix64::new(9);
-    let params = storage_buffer_padded(
-        &ctx,
-        "params",
-        &layout.init(1),
-        UNIFORM_WEIGHT_FLOATS,
-        wgpu::BufferUsages::UNIFORM,
-    )
-    .unwrap();
+    let params = trainer_params(&ctx, &layout.init(1));
     let grads = storage_buffer_from(&ctx, "grads", &vec![0.0f32; layout.total]).unwrap();
     let (in_dim, out_dim) = (mlp_layout.input_dim(), mlp_layout.output_dim());
     let input = storage_buffer_from(&ctx, "input", &random_values(&mut rng, rows * in_dim, 1.0)).unwrap();

@@ -430,6 +430,56 @@ impl DensePipelines {
     }
 }
 
+/// The two products that multiply by a layer's weights.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ProductKind {
+    /// Y = act(X Wᵀ): `out_dim` columns.
+    Forward,
+    /// dX = dZ W: `in_dim` columns.
+    BackwardInput,
+}
+
+/// A pipeline, the weights' binding (and where the layer starts in it), the workgroup counts and
+/// the family actually used.
+type ProductKernel<'a> = (
+    wgpu::ComputePipeline,
+    (wgpu::BindingResource<'a>, u32),
+    [u32; 3],
+    DenseFamily,
+);
+
+impl DensePipelines {
+    /// The kernel for one of a layer's weight products: uniform weights where the family wants
+    /// them and the layer fits, tiled otherwise.
+    async fn product_kernel<'a>(
+        &mut self,
+        ctx: &GpuContext,
+        label: &str,
+        params: &'a wgpu::Buffer,
+        spec: &DenseLayerSpec,
+        kind: ProductKind,
+    ) -> Result<ProductKernel<'a>, GpuError> {
+        let (columns, uniform_kernel, tiled_kernel) = match kind {
+            ProductKind::Forward => (spec.out_dim, DenseKernel::ForwardUniform, DenseKernel::Forward),
+            ProductKind::BackwardInput => (
+                spec.in_dim,
+                DenseKernel::BackwardInputUniform,
+                DenseKernel::BackwardInput,
+            ),
+        };
+        if let Some(binding) = self.uniform_weights(ctx, params, &spec.weights) {
+            let pipeline = self.get_uniform(ctx, uniform_kernel, uniform_block(columns)).await?;
+            let workgroups = uniform_dispatch(ctx, spec.rows, columns)?;
+            return Ok((pipeline, binding, workgroups, DenseFamily::UniformWeights));
+        }
+        let shape = TileShape::for_product(columns, None);
+        let pipeline = self.get(ctx, tiled_kernel, shape).await?;
+        let binding = range_binding(ctx, label, params, &spec.weights)?;
+        let workgroups = row_tile_dispatch(ctx, spec.rows, shape, columns.div_ceil(shape.tile_columns()))?;
+        Ok((pipeline, binding, workgroups, DenseFamily::Tiled))
+    }
+}
+
 /// Outputs per invocation of a uniform-weight kernel: the fewest of 4, 8, 16 covering `width`.
 fn uniform_block(width: u32) -> u32 {
     match width {
@@ -594,29 +644,9 @@ impl DenseForward {
         output.check(&format!("{label} output"), spec.rows, spec.out_dim)?;
         check_binding(ctx, &label, &input.buffer)?;
         check_binding(ctx, &label, &output.buffer)?;
-        let uniform = pipelines.uniform_weights(ctx, params, &spec.weights);
-        let family = if uniform.is_some() {
-            DenseFamily::UniformWeights
-        } else {
-            DenseFamily::Tiled
-        };
-        let (pipeline, (weights, weight_offset), workgroups) = match uniform {
-            Some(binding) => (
-                pipelines
-                    .get_uniform(ctx, DenseKernel::ForwardUniform, uniform_block(spec.out_dim))
-                    .await?,
-                binding,
-                uniform_dispatch(ctx, spec.rows, spec.out_dim)?,
-            ),
-            None => {
-                let shape = TileShape::for_product(spec.out_dim, None);
-                (
-                    pipelines.get(ctx, DenseKernel::Forward, shape).await?,
-                    range_binding(ctx, &label, params, &spec.weights)?,
-                    row_tile_dispatch(ctx, spec.rows, shape, spec.out_dim.div_ceil(shape.tile_columns()))?,
-                )
-            }
-        };
+        let (pipeline, (weights, weight_offset), workgroups, family) = pipelines
+            .product_kernel(ctx, &label, params, spec, ProductKind::Forward)
+            .await?;
         let dims = DenseDims {
             x_stride: input.stride,
             x_offset: input.offset,
@@ -914,24 +944,9 @@ impl DenseBackward {
                 let label = format!("{label} input gradient");
                 input_grad.check(&label, spec.rows, spec.in_dim)?;
                 check_binding(ctx, &label, &input_grad.buffer)?;
-                let (pipeline, (weights, weight_offset), workgroups) =
-                    match pipelines.uniform_weights(ctx, params, &spec.weights) {
-                        Some(binding) => (
-                            pipelines
-                                .get_uniform(ctx, DenseKernel::BackwardInputUniform, uniform_block(spec.in_dim))
-                                .await?,
-                            binding,
-                            uniform_dispatch(ctx, spec.rows, spec.in_dim)?,
-                        ),
-                        None => {
-                            let shape = TileShape::for_product(spec.in_dim, None);
-                            (
-                                pipelines.get(ctx, DenseKernel::BackwardInput, shape).await?,
-                                range_binding(ctx, &label, params, &spec.weights)?,
-                                row_tile_dispatch(ctx, spec.rows, shape, spec.in_dim.div_ceil(shape.tile_columns()))?,
-                            )
-                        }
-                    };
+                let (pipeline, (weights, weight_offset), workgroups, _) = pipelines
+                    .product_kernel(ctx, &label, params, spec, ProductKind::BackwardInput)
+                    .await?;
                 let dims = DenseDims {
                     dx_stride: input_grad.stride,
                     dx_offset: input_grad.offset,
