@@ -99,7 +99,8 @@ fn write_ray(ray: u32, pixel: u32, label: u32) {
 
     // Slab clipping (reference::sampling::clip_to_bounds), nothing behind the camera.
     var near = 0.0;
-    var far = 3.4028235e38;
+    // f32::MAX spelled so that every WGSL compiler accepts it (Chrome rejects 3.4028235e38).
+    var far = 3.4028234e38;
     var inside = true;
     for (var a = 0u; a < 3u; a++) {
         let o = origin[a];

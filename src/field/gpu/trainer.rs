@@ -28,7 +28,7 @@ use super::encoding::{
 };
 use super::head_glue::{GlueBuffers, GlueDims, HeadGluePass};
 use super::rays::{FrameTilePass, RayBatchPass, SamplePointsPass, StepUniforms};
-use super::rays::{NO_LABEL, RayGeometry, TARGET_HEADER_WORDS, TARGET_LABEL};
+use super::rays::{NO_LABEL, RayGeometry, TARGET_FLAGS, TARGET_HEADER_WORDS, TARGET_LABEL, TARGET_PIXEL};
 use super::scene_buffers::{LabelIndex, SceneBuffers};
 use super::view::view_rays;
 pub use super::view::{DepthGuide, FrameAssembler, RenderedFrame, ViewCamera};
@@ -617,15 +617,10 @@ impl Trainer {
     async fn render_rays(&mut self, view: &ViewCamera, depth: Option<&[f32]>) -> Result<FrameAssembler, GpuError> {
         let batch = self.cfg.batch_rays as usize;
         let mut out = self.assembler(view.width, view.height);
-        // Rendering computes no loss: targets only need to be valid rows without a label.
+        // Rendering computes no loss: target rows only carry the flags (the composite skips rays
+        // that miss the box by them) and no label.
         let row_words = TARGET_HEADER_WORDS + self.cfg.feature_dim as usize;
         let mut targets = vec![0u32; batch * row_words];
-        for row in targets.chunks_exact_mut(row_words) {
-            row[TARGET_LABEL] = NO_LABEL;
-        }
-        self.ctx
-            .queue
-            .write_buffer(&self.ray_batch.targets, 0, bytemuck::cast_slice(&targets));
         let miss = RayGeometry {
             origin: [0.0; 3],
             z_per_t: 1.0,
@@ -641,9 +636,17 @@ impl Trainer {
             let count = (view.pixels() - done).min(batch);
             let mut rays = view_rays(view, &self.bounds, depth, done, count);
             rays.resize(batch, miss);
+            for (row, ray) in targets.chunks_exact_mut(row_words).zip(&rays) {
+                row[TARGET_LABEL] = NO_LABEL;
+                row[TARGET_FLAGS] = ray.flags;
+                row[TARGET_PIXEL] = ray.pixel;
+            }
             self.ctx
                 .queue
                 .write_buffer(&self.ray_batch.rays, 0, bytemuck::cast_slice(&rays));
+            self.ctx
+                .queue
+                .write_buffer(&self.ray_batch.targets, 0, bytemuck::cast_slice(&targets));
             self.render_tile(count as u32, &mut out, false).await?;
             done += count;
         }
