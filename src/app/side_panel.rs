@@ -62,12 +62,12 @@ pub fn show(
             row("steps/s", format!("{:.1}", s.steps_per_second));
             if let (Some(l), Some(cfg)) = (s.losses, config) {
                 let per_ray = |v: f64| v / f64::from(cfg.batch_rays);
-                row("loss", format!("{:.4}", per_ray(l.terms.total())));
+                row("loss", format!("{:.3e}", per_ray(l.terms.total())));
                 row(
                     "  colour / depth",
-                    format!("{:.4} / {:.4}", per_ray(l.terms.rgb), per_ray(l.terms.depth)),
+                    format!("{:.2e} / {:.2e}", per_ray(l.terms.rgb), per_ray(l.terms.depth)),
                 );
-                row("  semantic", format!("{:.4}", per_ray(l.terms.semantic)));
+                row("  semantic", format!("{:.3e}", per_ray(l.terms.semantic)));
             }
             row("labelled px", labelled_pixels.to_string());
             row("steps per batch", s.batch.to_string());
