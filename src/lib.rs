@@ -3,6 +3,8 @@
 pub mod app;
 pub mod eval;
 pub mod export;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod features;
 pub mod field;
 pub mod gpu;
 pub mod labels;

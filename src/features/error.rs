@@ -1,0 +1,36 @@
+//! Errors of feature extraction. Each names the file (weights, .npy) or the frame it is about.
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum FeatureError {
+    /// A file exists but its content is wrong (a weights file, an imported `.npy`).
+    #[error("{file}: {problem}")]
+    Invalid { file: String, problem: String },
+    /// Something that must exist does not; `hint` says where to get it.
+    #[error("{what} not found at {path}: {hint}")]
+    Missing { what: String, path: PathBuf, hint: String },
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A frame the extractor cannot handle (e.g. too small), by index.
+    #[error("frame {frame}: {problem}")]
+    Frame { frame: usize, problem: String },
+}
+
+impl FeatureError {
+    pub fn invalid(file: impl Into<String>, problem: impl Into<String>) -> Self {
+        FeatureError::Invalid {
+            file: file.into(),
+            problem: problem.into(),
+        }
+    }
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        FeatureError::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}
