@@ -448,7 +448,8 @@ mod tests {
     }
 
     /// A naive depthwise convolution with explicit zero padding, channels first.
-    fn naive_depthwise(x: &[f32], h: usize, w: usize, c: usize, k: usize, s: usize, wt: &[f32], b: &[f32]) -> Vec<f64> {
+    fn naive_depthwise(x: &[f32], shape: (usize, usize, usize, usize, usize), wt: &[f32], b: &[f32]) -> Vec<f64> {
+        let (h, w, c, k, s) = shape;
         let (oh, py) = same_padding(h, k, s);
         let (ow, px) = same_padding(w, k, s);
         let mut out = vec![0f64; oh * ow * c];
@@ -486,7 +487,7 @@ mod tests {
             let wt = noise(c * k * k, 6);
             let b = noise(c, 7);
             let layer = Depthwise::new(c, k, s, &wt, &b);
-            let want = naive_depthwise(&x, h, w, c, k, s, &wt, &b);
+            let want = naive_depthwise(&x, (h, w, c, k, s), &wt, &b);
             for threads in [1, 2, 4] {
                 assert_close(&layer.forward(&x, h, w, Activation::None, threads), &want, 1e-5);
             }

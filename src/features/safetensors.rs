@@ -176,7 +176,7 @@ pub fn to_bytes(tensors: &[(&str, &[usize], &[f32])]) -> Vec<u8> {
         );
     }
     let mut json = serde_json::to_vec(&serde_json::Value::Object(header)).unwrap();
-    while json.len() % 8 != 0 {
+    while !json.len().is_multiple_of(8) {
         json.push(b' ');
     }
     let mut out = (json.len() as u64).to_le_bytes().to_vec();
