@@ -1,6 +1,7 @@
 //! Dense image features for the archive (DESIGN §4): an extractor turns each frame into a
 //! feature map, the autoencoder compresses all frames' maps to 64-d codes, and a PCA of the
 //! codes is kept for display. Everything here runs on the CPU in the native packer.
+pub mod dino;
 pub mod efficientnet;
 mod error;
 mod map;

@@ -10,6 +10,8 @@ pub enum Activation {
     None,
     /// `clamp(x, 0, 6)`.
     Relu6,
+    /// The exact GELU, `x * (1 + erf(x / sqrt 2)) / 2`.
+    Gelu,
 }
 
 impl Activation {
@@ -18,8 +20,31 @@ impl Activation {
         match self {
             Activation::None => v,
             Activation::Relu6 => v.clamp(0.0, 6.0),
+            Activation::Gelu => gelu(v),
         }
     }
+}
+
+/// The exact (erf) GELU.
+pub fn gelu(x: f32) -> f32 {
+    let x = x as f64;
+    (0.5 * x * (1.0 + erf(x * std::f64::consts::FRAC_1_SQRT_2))) as f32
+}
+
+/// `erf` to about 1.5e-7 absolute (Abramowitz & Stegun 7.1.26), enough for `f32` activations.
+pub fn erf(x: f64) -> f64 {
+    const P: f64 = 0.327_591_1;
+    const A: [f64; 5] = [
+        0.254_829_592,
+        -0.284_496_736,
+        1.421_413_741,
+        -1.453_152_027,
+        1.061_405_429,
+    ];
+    let t = 1.0 / (1.0 + P * x.abs());
+    let poly = t * (A[0] + t * (A[1] + t * (A[2] + t * (A[3] + t * A[4]))));
+    let y = 1.0 - poly * (-x * x).exp();
+    if x < 0.0 { -y } else { y }
 }
 
 /// TensorFlow "SAME" padding of a length-`n` axis for kernel `k` and stride `s`:
