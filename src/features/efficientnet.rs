@@ -628,6 +628,18 @@ mod tests {
         }
     }
 
+    /// CPU time (user + system) of this process, all threads, from `/proc/self/stat` (Linux; NaN
+    /// elsewhere): on a loaded machine wall time says little.
+    fn cpu_seconds() -> f64 {
+        let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+            return f64::NAN;
+        };
+        let fields: Vec<&str> = stat.rsplit_once(')').map_or("", |r| r.1).split_whitespace().collect();
+        let ticks = |i: usize| fields.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(f64::NAN);
+        // Fields 14 and 15 (utime, stime) in clock ticks, 100 per second on Linux.
+        (ticks(11) + ticks(12)) / 100.0
+    }
+
     /// Timing, not a test:
     /// `cargo test --release --lib efficientnet::tests::bench -- --ignored --nocapture`.
     #[test]
@@ -649,17 +661,22 @@ mod tests {
                 let ex = EfficientNetExtractor::new(net.clone().with_threads(threads), config).unwrap();
                 ex.extract(&rgb).unwrap();
                 let runs = 5;
-                let start = std::time::Instant::now();
+                let (start, cpu0) = (std::time::Instant::now(), cpu_seconds());
                 for _ in 0..runs {
                     std::hint::black_box(ex.extract(&rgb).unwrap());
                 }
                 let s = start.elapsed().as_secs_f64() / runs as f64;
+                let cpu = (cpu_seconds() - cpu0) / runs as f64;
                 println!(
-                    "640x480, {}, {threads} thread(s): {:.1} ms/frame, {:.2} GMAC, {:.1} GFLOP/s",
+                    "640x480, {}, {threads} thread(s): {:.1} ms/frame wall, {:.1} ms CPU time/frame \
+                     ({:.1} ms per thread), {:.2} GMAC, {:.1} GFLOP/s wall, {:.1} GFLOP/s per CPU-second",
                     ex.describe(),
                     s * 1e3,
+                    cpu * 1e3,
+                    cpu * 1e3 / threads as f64,
                     macs as f64 / 1e9,
-                    2.0 * macs as f64 / s / 1e9
+                    2.0 * macs as f64 / s / 1e9,
+                    2.0 * macs as f64 / cpu / 1e9
                 );
             }
         }

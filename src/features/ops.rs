@@ -183,45 +183,49 @@ fn dense_rows_avx2(job: &DenseJob, out: &mut [f32]) {
     dense_rows::<true>(job, out)
 }
 
+/// `bias + sum_k x_r[k] * panel[k]` for 4 rows: 4 x `NR` accumulators that stay in registers.
+#[inline(always)]
+fn micro_kernel<const FMA: bool>(panel: &[f32], x: [&[f32]; MR], bias: &[f32; NR]) -> [[f32; NR]; MR] {
+    let mut acc = [*bias; MR];
+    for ((((w, &a0), &a1), &a2), &a3) in panel.chunks_exact(NR).zip(x[0]).zip(x[1]).zip(x[2]).zip(x[3]) {
+        let w: &[f32; NR] = w.try_into().unwrap();
+        for j in 0..NR {
+            acc[0][j] = madd::<FMA>(a0, w[j], acc[0][j]);
+            acc[1][j] = madd::<FMA>(a1, w[j], acc[1][j]);
+            acc[2][j] = madd::<FMA>(a2, w[j], acc[2][j]);
+            acc[3][j] = madd::<FMA>(a3, w[j], acc[3][j]);
+        }
+    }
+    acc
+}
+
 #[inline(always)]
 fn dense_rows<const FMA: bool>(job: &DenseJob, out: &mut [f32]) {
     let d = job.layer;
     let (cin, cout) = (d.cin, d.cout);
     let n = out.len() / cout;
-    let xrow = |r: usize| &job.x[(job.row0 + r) * cin..][..cin];
+    // Rows past the end of a chunk (at most 3) read zeros.
+    let zeros = vec![0.0; cin];
+    let xrow = |r: usize| {
+        if r < n {
+            &job.x[(job.row0 + r) * cin..][..cin]
+        } else {
+            &zeros[..]
+        }
+    };
     for mc in (0..n).step_by(MC) {
         let mend = (mc + MC).min(n);
         for (p, panel) in d.panels.chunks_exact(cin * NR).enumerate() {
             let c0 = p * NR;
             let cw = NR.min(cout - c0);
             let bias: &[f32; NR] = d.bias[c0..c0 + NR].try_into().unwrap();
-            let mut r = mc;
-            while r < mend {
-                let mr = MR.min(mend - r);
-                let mut acc = [*bias; MR];
-                if mr == MR {
-                    let (x0, x1, x2, x3) = (xrow(r), xrow(r + 1), xrow(r + 2), xrow(r + 3));
-                    for ((((w, &a0), &a1), &a2), &a3) in panel.chunks_exact(NR).zip(x0).zip(x1).zip(x2).zip(x3) {
-                        let w: &[f32; NR] = w.try_into().unwrap();
-                        for j in 0..NR {
-                            acc[0][j] = madd::<FMA>(a0, w[j], acc[0][j]);
-                            acc[1][j] = madd::<FMA>(a1, w[j], acc[1][j]);
-                            acc[2][j] = madd::<FMA>(a2, w[j], acc[2][j]);
-                            acc[3][j] = madd::<FMA>(a3, w[j], acc[3][j]);
-                        }
-                    }
-                } else {
-                    for (i, acc) in acc.iter_mut().enumerate().take(mr) {
-                        for (w, &a) in panel.chunks_exact(NR).zip(xrow(r + i)) {
-                            let w: &[f32; NR] = w.try_into().unwrap();
-                            for j in 0..NR {
-                                acc[j] = madd::<FMA>(a, w[j], acc[j]);
-                            }
-                        }
-                    }
-                }
-                for (i, acc) in acc.iter().enumerate().take(mr) {
+            for r in (mc..mend).step_by(MR) {
+                let acc = micro_kernel::<FMA>(panel, [xrow(r), xrow(r + 1), xrow(r + 2), xrow(r + 3)], bias);
+                for (i, acc) in acc.iter().enumerate() {
                     let row = r + i;
+                    if row >= mend {
+                        break;
+                    }
                     let o = &mut out[row * cout + c0..][..cw];
                     match job.residual {
                         Some(res) => {
@@ -237,7 +241,6 @@ fn dense_rows<const FMA: bool>(job: &DenseJob, out: &mut [f32]) {
                         }
                     }
                 }
-                r += mr;
             }
         }
     }
@@ -554,5 +557,59 @@ mod tests {
             }
         }
         assert_close(&got, &want, 1e-5);
+    }
+
+    fn cpu_seconds() -> f64 {
+        let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+        let fields: Vec<&str> = stat.rsplit_once(')').map_or("", |r| r.1).split_whitespace().collect();
+        let ticks = |i: usize| fields.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(f64::NAN);
+        (ticks(11) + ticks(12)) / 100.0
+    }
+
+    /// Timing, not a test: `cargo test --release --lib ops::tests::bench -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn bench_kernels() {
+        let time = |name: &str, macs: usize, f: &dyn Fn()| {
+            f();
+            let (t0, c0) = (std::time::Instant::now(), cpu_seconds());
+            let runs = 10;
+            for _ in 0..runs {
+                f();
+            }
+            let wall = t0.elapsed().as_secs_f64() / runs as f64;
+            let cpu = (cpu_seconds() - c0) / runs as f64;
+            println!(
+                "{name}: {:.2} ms wall, {:.2} ms CPU, {:.1} GFLOP/s per CPU-second",
+                wall * 1e3,
+                cpu * 1e3,
+                2.0 * macs as f64 / cpu / 1e9
+            );
+        };
+        for &(rows, cin, cout) in &[
+            (19200, 24, 144),
+            (19200, 144, 24),
+            (4800, 40, 240),
+            (4800, 240, 40),
+            (1200, 480, 80),
+        ] {
+            let x = noise(rows * cin, 1);
+            let layer = Dense::new(cin, cout, &noise(cin * cout, 2), &noise(cout, 3));
+            time(&format!("dense {rows}x{cin} -> {cout}"), rows * cin * cout, &|| {
+                std::hint::black_box(layer.forward(&x, Activation::Relu6, None, 1));
+            });
+        }
+        for &(h, w, c, k, s) in &[(120, 160, 144, 5, 2), (60, 80, 240, 3, 1), (240, 320, 96, 3, 2)] {
+            let x = noise(h * w * c, 4);
+            let layer = Depthwise::new(c, k, s, &noise(c * k * k, 5), &noise(c, 6));
+            let (oh, ow) = layer.output_size(h, w);
+            time(
+                &format!("depthwise {h}x{w}x{c} k{k} s{s}"),
+                oh * ow * c * k * k,
+                &|| {
+                    std::hint::black_box(layer.forward(&x, h, w, Activation::Relu6, 1));
+                },
+            );
+        }
     }
 }
