@@ -2,6 +2,7 @@
 mod bench;
 mod demo;
 mod eval;
+mod features;
 mod info;
 mod pack;
 mod progress;

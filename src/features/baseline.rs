@@ -24,14 +24,21 @@ pub struct Baseline {
 
 impl Default for Baseline {
     fn default() -> Self {
-        Baseline {
-            stride: 8,
-            radii: vec![4, 12, 32],
-        }
+        Baseline::with_stride(8)
     }
 }
 
 impl Baseline {
+    /// Windows of half a cell, one and a half cells and four cells around each cell: the cell
+    /// itself, its neighbours, and its surroundings.
+    pub fn with_stride(stride: u32) -> Baseline {
+        let stride = stride.max(1);
+        Baseline {
+            stride,
+            radii: vec![stride.div_ceil(2), (3 * stride).div_ceil(2), 4 * stride],
+        }
+    }
+
     pub fn dim(&self) -> u32 {
         (self.radii.len() * FEATURES_PER_SCALE) as u32
     }
