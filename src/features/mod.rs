@@ -4,13 +4,17 @@
 mod autoencoder;
 mod bake;
 mod baseline;
+pub mod efficientnet;
 mod error;
 mod map;
 mod npy;
+pub mod ops;
+pub mod safetensors;
 
 pub use autoencoder::{Autoencoder, AutoencoderConfig, FitReport};
 pub use bake::{BakeOptions, BakeProgress, Baked, bake};
 pub use baseline::Baseline;
+pub use efficientnet::{EfficientNetConfig, EfficientNetExtractor, EfficientNetLite0};
 pub use error::FeatureError;
 pub use map::FeatureMap;
 pub use npy::{NpyLayout, npy_path_of_frame, parse_npy_map, read_npy_map, write_npy_f32};
