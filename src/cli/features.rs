@@ -2,8 +2,11 @@
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
+use image::RgbImage;
+use image::imageops::FilterType;
 use scribblefield::features::{
-    BakeOptions, BakeProgress, Baseline, Extractor, FeatureError, NpyLayout, bake, npy_path_of_frame, read_npy_map,
+    BakeOptions, BakeProgress, Baseline, EfficientNetConfig, EfficientNetExtractor, Extractor, FeatureError,
+    FeatureMap, NpyLayout, bake, efficientnet, npy_path_of_frame, read_npy_map,
 };
 use scribblefield::scene::Scene;
 
@@ -13,6 +16,8 @@ use super::{CliResult, progress};
 pub enum FeatureKind {
     /// Colour and gradient statistics at several scales; needs no weights.
     Baseline,
+    /// ImageNet EfficientNet-Lite0 group outputs (weights: `--weights`, $SCRIBBLEFIELD_EFFICIENTNET or ../shared/models).
+    EfficientnetLite0,
     /// Precomputed per-frame maps from `--features-from DIR` (.npy, any dimension and size).
     Import,
 }
@@ -37,6 +42,17 @@ pub struct FeatureArgs {
     /// Pixels per feature cell of the computed extractors.
     #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=64))]
     feature_stride: u32,
+    /// EfficientNet-Lite0 weights (safetensors); see docs/features.md for where to get them.
+    #[arg(long)]
+    weights: Option<PathBuf>,
+    /// EfficientNet-Lite0 groups (0-6, strides 2,4,8,16,16,32,32) whose outputs make the features.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3")]
+    groups: Vec<usize>,
+    /// Frames whose shorter side is below this are upscaled by a whole factor before a network
+    /// sees them (ImageNet networks expect objects of a certain size); the grid still follows
+    /// `--feature-stride` in the frame's own pixels.
+    #[arg(long, default_value_t = 224)]
+    network_min_side: u32,
     /// Training steps of the autoencoder.
     #[arg(long, default_value_t = 3000, value_parser = clap::value_parser!(u32).range(1..))]
     autoencoder_steps: u32,
@@ -51,6 +67,10 @@ impl FeatureArgs {
             }
             (Some(FeatureKind::Import), Some(dir)) if !dir.is_dir() => {
                 Err(format!("--features-from {}: not a directory", dir.display()).into())
+            }
+            (Some(FeatureKind::EfficientnetLite0), _) => {
+                efficientnet::resolve_weights(self.weights.as_deref())?;
+                Ok(())
             }
             (k, Some(_)) if k != Some(FeatureKind::Import) => {
                 Err("--features-from only goes with --features import".into())
@@ -91,11 +111,37 @@ impl FeatureArgs {
                 let ex = Baseline::with_stride(self.feature_stride);
                 bake(
                     frames,
-                    |i| extract_frame(&ex, scene, i),
+                    |i| extract_frame(&ex, &scene.frames[i].rgb, i),
                     &ex.describe(),
                     &opts,
                     on_progress,
                 )?
+            }
+            FeatureKind::EfficientnetLite0 => {
+                let path = efficientnet::resolve_weights(self.weights.as_deref())?;
+                let k = upscale_factor(scene.width, scene.height, self.network_min_side);
+                let config = EfficientNetConfig {
+                    groups: self.groups.clone(),
+                    stride: self.feature_stride * k,
+                    normalize: true,
+                };
+                let ex = EfficientNetExtractor::load(&path, config)?;
+                let describe = match k {
+                    1 => ex.describe(),
+                    k => format!("{} on frames upscaled x{k}", ex.describe()),
+                };
+                let load = |i: usize| {
+                    let rgb = &scene.frames[i].rgb;
+                    let big;
+                    let input = if k == 1 {
+                        rgb
+                    } else {
+                        big = image::imageops::resize(rgb, rgb.width() * k, rgb.height() * k, FilterType::Triangle);
+                        &big
+                    };
+                    extract_frame(&ex, input, i)
+                };
+                bake(frames, load, &describe, &opts, on_progress)?
             }
             FeatureKind::Import => {
                 let dir = self
@@ -136,12 +182,13 @@ impl FeatureArgs {
     }
 }
 
-fn extract_frame(
-    ex: &dyn Extractor,
-    scene: &Scene,
-    i: usize,
-) -> Result<scribblefield::features::FeatureMap, FeatureError> {
-    ex.extract(&scene.frames[i].rgb).map_err(|e| match e {
+/// The whole factor that brings the shorter side to at least `min_side` (1 when it already is).
+fn upscale_factor(width: u32, height: u32, min_side: u32) -> u32 {
+    min_side.div_ceil(width.min(height).max(1)).max(1)
+}
+
+fn extract_frame(ex: &dyn Extractor, rgb: &RgbImage, i: usize) -> Result<FeatureMap, FeatureError> {
+    ex.extract(rgb).map_err(|e| match e {
         FeatureError::Frame { problem, .. } => FeatureError::Frame { frame: i, problem },
         e => e,
     })
