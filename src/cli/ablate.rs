@@ -6,7 +6,7 @@ use scribblefield::eval::curves::MethodCurve;
 use scribblefield::gpu::{GpuContext, GpuOptions};
 
 use super::CliResult;
-use super::simulate::{SimArgs, base_config, read_scene, run_one};
+use super::simulate::{SimArgs, base_config, read_scene, run_one, settings};
 
 #[derive(Args)]
 pub struct AblateArgs {
@@ -35,17 +35,15 @@ pub fn run(args: AblateArgs) -> CliResult {
         }
         scenes.push((name, path.clone(), scene, id));
     }
-    std::fs::create_dir_all(&args.output).map_err(|e| format!("{}: {e}", args.output.display()))?;
-    let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
-    eprintln!("training on {}", ctx.describe());
-    let mut curves = Vec::new();
+    // Every (scene, method) with its settings, checked before the GPU opens.
+    let mut runs = Vec::new();
     let mut notes = Vec::new();
     for (name, path, scene, id) in &scenes {
         let base = base_config(&args.sim, scene).map_err(|e| format!("{}: {e}", path.display()))?;
         let extractor = scene.features.as_ref().map(|f| f.extractor.as_str());
         let (methods, note) = ablation::methods(&base, extractor);
         if let Some(note) = note {
-            let line = format!("{}: {note}", path.display());
+            let line = format!("{name}: {note}");
             println!("note: {line}");
             notes.push(line);
         }
@@ -57,18 +55,32 @@ pub fn run(args: AblateArgs) -> CliResult {
             None => methods,
         };
         if methods.is_empty() {
-            return Err(format!("--only {:?}: matches no method for {}", args.only, path.display()).into());
+            return Err(format!(
+                "--only {}: matches no method for {}",
+                args.only.as_deref().unwrap_or_default().join(","),
+                path.display()
+            )
+            .into());
         }
         for method in methods {
-            let out = args.output.join(name).join(&method.name);
-            eprintln!("== {name}: {} -> {}", method.name, out.display());
-            let state = run_one(&ctx, path, scene, id.clone(), method.config, &args.sim, &out)?;
-            curves.push(MethodCurve {
-                scene: name.clone(),
-                method: method.name,
-                points: state.curve,
-            });
+            let s = settings(&args.sim, scene, id.clone(), method.config)
+                .map_err(|e| format!("{}: {}: {e}", path.display(), method.name))?;
+            runs.push((name.clone(), scene, method.name, s));
         }
+    }
+    std::fs::create_dir_all(&args.output).map_err(|e| format!("{}: {e}", args.output.display()))?;
+    let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
+    eprintln!("training on {}", ctx.describe());
+    let mut curves = Vec::new();
+    for (name, scene, method, settings) in runs {
+        let out = args.output.join(&name).join(&method);
+        eprintln!("== {name}: {method} -> {}", out.display());
+        let state = run_one(&ctx, scene, &settings, &args.sim, &out)?;
+        curves.push(MethodCurve {
+            scene: name,
+            method,
+            points: state.curve,
+        });
     }
     let header = format!(
         "Simulated user: {} clicks per round, {} steps per round after {} warm-up steps, budget {} clicks, preset {:?}{}, seed {}.\n{}\n",

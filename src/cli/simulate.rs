@@ -83,9 +83,10 @@ pub fn run(args: SimulateArgs) -> CliResult {
         );
         cfg.feature_supervision = false;
     }
+    let settings = settings(&args.sim, &scene, id, cfg).map_err(|e| format!("{}: {e}", args.archive.display()))?;
     let ctx = GpuContext::new_blocking(&scribblefield::gpu::GpuOptions::from_env())?;
     eprintln!("training on {}", ctx.describe());
-    let state = run_one(&ctx, &args.archive, &scene, id, cfg, &args.sim, &args.output)?;
+    let state = run_one(&ctx, &scene, &settings, &args.sim, &args.output)?;
     if let Some(why) = &state.stopped {
         println!("stopped early: {why}");
     }
@@ -133,6 +134,10 @@ pub fn base_config(sim: &SimArgs, scene: &Scene) -> Result<FieldConfig, Box<dyn 
         None => preset,
     };
     cfg.num_classes = classes;
+    // The rendered feature f is compared with the archive's codes: their width decides.
+    if let Some(codes) = &scene.features {
+        cfg.feature_dim = codes.dim;
+    }
     cfg.validate()?;
     Ok(cfg)
 }
@@ -163,7 +168,7 @@ pub fn apply_config_changes(base: &FieldConfig, changes: &serde_json::Value) -> 
     serde_json::from_value(merged).map_err(|e| e.to_string())
 }
 
-fn settings(sim: &SimArgs, scene: &Scene, id: SceneId, config: FieldConfig) -> Result<SimulateSettings, String> {
+pub fn settings(sim: &SimArgs, scene: &Scene, id: SceneId, config: FieldConfig) -> Result<SimulateSettings, String> {
     let frames = scene.frames.len() as u32;
     let split = match &sim.held_out {
         Some(list) => FrameSplit::explicit(frames, list).map_err(|e| format!("--held-out: {e}"))?,
@@ -187,14 +192,11 @@ fn settings(sim: &SimArgs, scene: &Scene, id: SceneId, config: FieldConfig) -> R
 /// Runs one simulated user into `out` with a progress bar, printing each evaluation.
 pub fn run_one(
     ctx: &GpuContext,
-    archive: &Path,
     scene: &Scene,
-    id: SceneId,
-    config: FieldConfig,
+    settings: &SimulateSettings,
     sim: &SimArgs,
     out: &Path,
 ) -> Result<simulate::SimulateState, Box<dyn std::error::Error>> {
-    let settings = settings(sim, scene, id, config).map_err(|e| format!("{}: {e}", archive.display()))?;
     let bar = progress::bar("training");
     let quiet = bar.is_hidden();
     let mut events = |event: SimEvent<'_>| match event {
@@ -227,7 +229,7 @@ pub fn run_one(
         budget: sim.budget,
         restart: sim.restart,
     };
-    let state = simulate::run(ctx, scene, &settings, options, out, &mut events)?;
+    let state = simulate::run(ctx, scene, settings, options, out, &mut events)?;
     bar.finish_and_clear();
     Ok(state)
 }

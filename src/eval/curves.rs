@@ -23,8 +23,9 @@ pub const ABLATION_HEADER: &str = "scene,method,round,clicks,mean_iou,pixel_acc,
 
 impl CurvePoint {
     fn csv_fields(&self) -> String {
+        // Shortest round-trip formatting: the file parses back to exactly these values.
         format!(
-            "{},{},{:.6},{:.6},{}",
+            "{},{},{},{},{}",
             self.round, self.clicks, self.mean_iou, self.pixel_acc, self.steps
         )
     }

@@ -565,7 +565,7 @@ fn load_state(
         return Err(SimulateError::Output {
             path,
             problem: format!(
-                "holds a run with other settings ({}: saved vs now); use another output folder or --restart",
+                "holds a run with other settings (saved vs now: {}); use another output folder or --restart",
                 diff.join("; ")
             ),
         });
