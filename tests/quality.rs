@@ -8,7 +8,7 @@
 use scribblefield::eval::EvalReport;
 use scribblefield::eval::headless::{render_and_score, train_schedule};
 use scribblefield::field::gpu::trainer::Trainer;
-use scribblefield::field::{AdamConfig, Encoding, FieldConfig};
+use scribblefield::field::{Encoding, FieldConfig};
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::test_support::gpu_for_tests;
 use scribblefield::labels::LabelSet;
@@ -16,23 +16,10 @@ use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
 use scribblefield::scene::Scene;
 use scribblefield::scene::demo::{DemoOptions, demo_scene};
 
-/// The budget of these tests: small widths, 256 rays of 4 + 12 samples, 100 warm-up steps and
-/// `DEMO_STEPS` with labels. About 6 minutes on lavapipe on 2 cores.
+/// The budget of these tests: `headless::budget_config` (small widths, 256 rays of 4 + 12
+/// samples), 100 warm-up steps and `DEMO_STEPS` with labels. About 6 minutes on lavapipe on 2 cores.
 fn budget_config(classes: usize) -> FieldConfig {
-    FieldConfig {
-        num_classes: classes as u32,
-        batch_rays: 256,
-        samples_coarse: 4,
-        samples_fine: 12,
-        feature_supervision: false,
-        adam: AdamConfig {
-            // At this short budget the interactive default (1e-3) learns the labels too slowly;
-            // 1e-2 was worse than 5e-3 (0.44 vs 0.58 mean IoU on the demo scene).
-            lr_annotating: 5e-3,
-            ..AdamConfig::default()
-        },
-        ..FieldConfig::small()
-    }
+    scribblefield::eval::headless::budget_config(classes as u32)
 }
 
 const WARMUP: u32 = 100;
