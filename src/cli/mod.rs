@@ -1,12 +1,15 @@
 //! Subcommands of the `scribblefield` binary, one module each.
+mod ablate;
 mod bench;
 mod demo;
 mod eval;
+mod features;
 mod info;
 mod pack;
 mod progress;
 mod scribble;
 mod segment;
+mod simulate;
 
 use std::path::PathBuf;
 
@@ -40,6 +43,10 @@ enum Command {
     ScribbleFromGt(scribble::ScribbleArgs),
     /// Train the field on a scene's scribbles (headless, on the GPU) and write masks of every frame.
     Segment(segment::SegmentArgs),
+    /// The paper's simulated user: click wrongly predicted pixels with their ground truth, train, score held-out frames; resumable.
+    Simulate(simulate::SimulateArgs),
+    /// Run the simulated user with each encoding (with and without feature supervision) and write a CSV, plots and tables.
+    Ablate(ablate::AblateArgs),
     /// Measure the training step (steps/s, rays/s, samples/s) against a plain matmul on the same adapter.
     Bench(bench::BenchArgs),
     /// Score masks against the archive's ground truth: per-class IoU, mean IoU, pixel accuracy.
@@ -64,6 +71,8 @@ pub fn run(cli: Cli) -> CliResult {
         Command::ScribbleFromGt(args) => scribble::run(args),
         Command::Segment(args) => segment::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Simulate(args) => simulate::run(args),
+        Command::Ablate(args) => ablate::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Serve { dir, port, bind } => {
             if !dir.is_dir() {

@@ -42,6 +42,15 @@ pub struct StepLosses {
     pub terms: LossTerms,
 }
 
+/// A trainer's resumable state (see [`Trainer::read_state`]); the vectors follow `ParamLayout`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainerState {
+    pub step: u32,
+    pub params: Vec<f32>,
+    pub first_moment: Vec<f32>,
+    pub second_moment: Vec<f32>,
+}
+
 /// The per-sample buffers between passes, owned here so passes can share them.
 struct SampleBuffers {
     encoding: wgpu::Buffer,
@@ -84,8 +93,8 @@ impl SampleBuffers {
 struct Optimizer {
     params: wgpu::Buffer,
     grads: wgpu::Buffer,
-    _first_moment: wgpu::Buffer,
-    _second_moment: wgpu::Buffer,
+    first_moment: wgpu::Buffer,
+    second_moment: wgpu::Buffer,
 }
 
 pub struct Trainer {
@@ -144,8 +153,8 @@ impl Trainer {
                 wgpu::BufferUsages::UNIFORM,
             )?,
             grads: storage_buffer_zeroed::<f32>(ctx, "field gradients", total)?,
-            _first_moment: storage_buffer_zeroed::<f32>(ctx, "Adam first moment", total)?,
-            _second_moment: storage_buffer_zeroed::<f32>(ctx, "Adam second moment", total)?,
+            first_moment: storage_buffer_zeroed::<f32>(ctx, "Adam first moment", total)?,
+            second_moment: storage_buffer_zeroed::<f32>(ctx, "Adam second moment", total)?,
         };
         let scene_buffers = SceneBuffers::upload(ctx, scene, cfg)?;
         let step_uniforms = crate::gpu::buffers::uniform_buffer_from(
@@ -355,8 +364,8 @@ impl Trainer {
             AdamBuffers {
                 params: &optimizer.params,
                 grads,
-                first_moment: &optimizer._first_moment,
-                second_moment: &optimizer._second_moment,
+                first_moment: &optimizer.first_moment,
+                second_moment: &optimizer.second_moment,
             },
             &step_uniforms,
         )
@@ -749,6 +758,55 @@ impl Trainer {
     /// Reads back the gradient of the latest step (tests: compare with the reference).
     pub fn read_gradients(&self) -> PendingRead<f32> {
         read_buffer_async::<f32>(&self.ctx, &self.optimizer.grads)
+    }
+
+    /// Everything a training run depends on besides the scene, the config and the labels: the
+    /// parameters, Adam's two moments and the step count (which seeds the ray batches and sets
+    /// Adam's bias corrections). Restoring it continues the run where it stopped.
+    pub async fn read_state(&self) -> Result<TrainerState, GpuError> {
+        let range = 0..self.layout.total as u64;
+        let params = read_elements_async::<f32>(&self.ctx, &self.optimizer.params, range.clone());
+        let first = read_elements_async::<f32>(&self.ctx, &self.optimizer.first_moment, range.clone());
+        let second = read_elements_async::<f32>(&self.ctx, &self.optimizer.second_moment, range);
+        Ok(TrainerState {
+            step: self.step,
+            params: params.await?,
+            first_moment: first.await?,
+            second_moment: second.await?,
+        })
+    }
+
+    /// Puts back a state from [`Trainer::read_state`] of a trainer with the same config.
+    pub fn restore_state(&mut self, state: &TrainerState) -> Result<(), GpuError> {
+        let total = self.layout.total;
+        for (what, len) in [
+            ("parameters", state.params.len()),
+            ("Adam first moment", state.first_moment.len()),
+            ("Adam second moment", state.second_moment.len()),
+        ] {
+            if len != total {
+                return Err(GpuError::invalid_argument(
+                    what,
+                    format!("{len} values given, the layout has {total}"),
+                ));
+            }
+        }
+        let queue = &self.ctx.queue;
+        queue.write_buffer(&self.optimizer.params, 0, bytemuck::cast_slice(&state.params));
+        queue.write_buffer(
+            &self.optimizer.first_moment,
+            0,
+            bytemuck::cast_slice(&state.first_moment),
+        );
+        queue.write_buffer(
+            &self.optimizer.second_moment,
+            0,
+            bytemuck::cast_slice(&state.second_moment),
+        );
+        self.step = state.step;
+        self.pending_losses = None;
+        self.last_losses = None;
+        Ok(())
     }
 
     /// Replaces the parameters (tests: start from the reference's values).
