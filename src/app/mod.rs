@@ -231,8 +231,8 @@ fn show_drop_hint(ctx: &egui::Context) {
 }
 
 fn show_loading(ui: &mut egui::Ui, load: &SceneLoad) {
-    let (status, text, fraction) = load.with_phase(|phase| match *phase {
-        LoadPhase::Connecting => ("loading", format!("Connecting to {}", load.url()), None),
+    let (status, text, fraction): (String, String, Option<f32>) = load.with_phase(|phase| match *phase {
+        LoadPhase::Connecting => ("loading".into(), format!("Connecting to {}", load.url()), None),
         LoadPhase::Downloading { received, total } => {
             let text = match total {
                 Some(t) => format!(
@@ -244,19 +244,31 @@ fn show_loading(ui: &mut egui::Ui, load: &SceneLoad) {
                 None => format!("Downloading {}: {}", load.url(), megabytes(received)),
             };
             (
-                "loading",
+                "loading".into(),
                 text,
                 total.filter(|&t| t > 0).map(|t| (received as f32 / t as f32).min(1.0)),
             )
         }
-        LoadPhase::Decoding { bytes } => (
-            "decoding",
-            format!("Decoding {} ({})", load.url(), megabytes(bytes)),
-            Some(1.0),
+        LoadPhase::Decoding { bytes, done, frames } => (
+            if frames > 0 {
+                format!("decoding {done}/{frames}")
+            } else {
+                "decoding".into()
+            },
+            if frames > 0 {
+                format!(
+                    "Decoding {} ({}): frame {done} of {frames}",
+                    load.url(),
+                    megabytes(bytes)
+                )
+            } else {
+                format!("Decoding {} ({})", load.url(), megabytes(bytes))
+            },
+            Some(if frames > 0 { done as f32 / frames as f32 } else { 0.0 }),
         ),
-        LoadPhase::Finished(_) | LoadPhase::Taken => ("loading", "Opening the scene".into(), Some(1.0)),
+        LoadPhase::Finished(_) | LoadPhase::Taken => ("loading".into(), "Opening the scene".into(), Some(1.0)),
     });
-    page_status::set(status);
+    page_status::set(&status);
     egui::CentralPanel::default().show(ui, |ui| {
         ui.vertical_centered(|ui| {
             ui.add_space(ui.available_height() * 0.35);
