@@ -214,8 +214,10 @@ impl Annotator {
         }
         let fragment = browser::page_fragment();
         let option = |key: &str| crate::labels::share::fragment_value(&fragment, key);
+        let software = gpu.is_software();
         let mut options = TrainingOptions {
             profile: option("profile").is_some_and(|v| v != "0"),
+            repaint_ms: super::repaint_interval_ms(software),
             ..TrainingOptions::default()
         };
         // `#coarse=N`: the quick first render of a stale mask at 1/N, even where it is not
@@ -394,6 +396,7 @@ impl Annotator {
                         labelled_pixels: self.summary.labelled_pixels,
                         factor: self.training.as_ref().map_or(1, |t| t.factor),
                         has_codes: self.scene.features.is_some(),
+                        animate: !self.gpu.as_ref().is_some_and(|g| g.is_software()),
                     },
                 );
             })

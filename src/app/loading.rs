@@ -88,12 +88,13 @@ pub struct SceneLoad {
 
 impl SceneLoad {
     /// Starts fetching `url`; `ctx` is asked to repaint whenever there is progress to show.
-    pub fn start(url: String, ctx: egui::Context) -> SceneLoad {
+    /// Progress asks for a repaint at most every `repaint_ms`.
+    pub fn start(url: String, ctx: egui::Context, repaint_ms: u64) -> SceneLoad {
         let phase = Rc::new(RefCell::new(LoadPhase::Connecting));
         let task_phase = phase.clone();
         let task_url = url.clone();
         wasm_bindgen_futures::spawn_local(async move {
-            let result = load(&task_url, &task_phase, &ctx).await;
+            let result = load(&task_url, &task_phase, &ctx, repaint_ms).await;
             *task_phase.borrow_mut() = LoadPhase::Finished(result);
             ctx.request_repaint();
         });
@@ -101,7 +102,7 @@ impl SceneLoad {
     }
 
     /// Decodes a scene archive the user picked or dropped (`name` is the file name).
-    pub fn from_bytes(name: String, bytes: Vec<u8>, ctx: egui::Context) -> SceneLoad {
+    pub fn from_bytes(name: String, bytes: Vec<u8>, ctx: egui::Context, repaint_ms: u64) -> SceneLoad {
         let phase = Rc::new(RefCell::new(LoadPhase::Decoding {
             bytes: bytes.len() as u64,
             done: 0,
@@ -116,7 +117,7 @@ impl SceneLoad {
                     bytes: bytes.len() as u64,
                 })
             } else {
-                decode(bytes, &task_name, &task_phase, &ctx).await
+                decode(bytes, &task_name, &task_phase, &ctx, repaint_ms).await
             };
             *task_phase.borrow_mut() = LoadPhase::Finished(result);
             ctx.request_repaint();
@@ -147,10 +148,15 @@ impl SceneLoad {
     }
 }
 
-async fn load(url: &str, phase: &RefCell<LoadPhase>, ctx: &egui::Context) -> Result<Box<Scene>, LoadError> {
-    let bytes = download(url, phase, ctx).await?;
+async fn load(
+    url: &str,
+    phase: &RefCell<LoadPhase>,
+    ctx: &egui::Context,
+    repaint_ms: u64,
+) -> Result<Box<Scene>, LoadError> {
+    let bytes = download(url, phase, ctx, repaint_ms).await?;
     let name = url.rsplit('/').next().filter(|n| !n.is_empty()).unwrap_or(url);
-    decode(bytes, name, phase, ctx).await
+    decode(bytes, name, phase, ctx, repaint_ms).await
 }
 
 /// Decodes an archive a slice of frames at a time, yielding to the browser between slices so
@@ -160,6 +166,7 @@ async fn decode(
     name: &str,
     phase: &RefCell<LoadPhase>,
     ctx: &egui::Context,
+    repaint_ms: u64,
 ) -> Result<Box<Scene>, LoadError> {
     let total = bytes.len() as u64;
     let show = |done: usize, frames: usize| {
@@ -168,9 +175,11 @@ async fn decode(
             done,
             frames,
         };
-        ctx.request_repaint();
+        // A repaint per slice would cost more than the slice on a CPU rasterizer.
+        ctx.request_repaint_after(std::time::Duration::from_millis(repaint_ms));
     };
     show(0, 0);
+    ctx.request_repaint();
     // Let the page paint "decoding" first.
     sleep_ms(0).await;
     let mut reader = ArchiveReader::new(std::io::Cursor::new(bytes), name)?;
@@ -191,7 +200,12 @@ async fn decode(
     Ok(Box::new(scene))
 }
 
-async fn download(url: &str, phase: &RefCell<LoadPhase>, ctx: &egui::Context) -> Result<Vec<u8>, LoadError> {
+async fn download(
+    url: &str,
+    phase: &RefCell<LoadPhase>,
+    ctx: &egui::Context,
+    repaint_ms: u64,
+) -> Result<Vec<u8>, LoadError> {
     let network = |e: JsValue| LoadError::Network {
         url: url.into(),
         detail: js_error_text(&e),
@@ -253,7 +267,7 @@ async fn download(url: &str, phase: &RefCell<LoadPhase>, ctx: &egui::Context) ->
         bytes.resize(start + data.length() as usize, 0);
         data.copy_to(&mut bytes[start..]);
         *phase.borrow_mut() = LoadPhase::Downloading { received, total };
-        ctx.request_repaint();
+        ctx.request_repaint_after(std::time::Duration::from_millis(repaint_ms));
     }
     Ok(bytes)
 }

@@ -30,6 +30,13 @@ use crate::gpu::GpuContext;
 use crate::labels::autosave::SceneSource;
 use crate::labels::share::fragment_value;
 
+/// How often progress (training numbers, decoded frames) asks for a repaint, at most. On a CPU
+/// rasterizer (SwiftShader) one repaint of the page keeps the device busy for about a second,
+/// and the work being reported on waits behind it; on a GPU a repaint is cheap.
+pub fn repaint_interval_ms(software: bool) -> u64 {
+    if software { 1000 } else { 100 }
+}
+
 pub struct App {
     stage: Stage,
     /// Adapter and backend, for the scene panel (and for bug reports).
@@ -75,7 +82,8 @@ impl App {
             .and_then(|m| ModelSize::parse(&m))
             .unwrap_or(default_model);
         let source = SceneSource::Url(browser::absolute_url(&scene_url));
-        let load = SceneLoad::start(scene_url, cc.egui_ctx.clone());
+        let software = gpu.as_ref().is_some_and(|g| g.is_software());
+        let load = SceneLoad::start(scene_url, cc.egui_ctx.clone(), repaint_interval_ms(software));
         App {
             stage: Stage::Loading { load, source },
             gpu_name,
@@ -83,6 +91,10 @@ impl App {
             model,
             inbox: Rc::default(),
         }
+    }
+
+    fn repaint_ms(&self) -> u64 {
+        repaint_interval_ms(self.gpu.as_ref().is_some_and(|g| g.is_software()))
     }
 
     /// Asks for a scene archive and opens it.
@@ -148,7 +160,7 @@ impl App {
             };
             // The old scene's training stops when its annotator is dropped here.
             self.stage = Stage::Loading {
-                load: SceneLoad::from_bytes(file.name, bytes, ctx.clone()),
+                load: SceneLoad::from_bytes(file.name, bytes, ctx.clone(), self.repaint_ms()),
                 source,
             };
         }

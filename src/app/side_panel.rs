@@ -25,6 +25,9 @@ pub struct SideFacts {
     /// The scene carries feature codes (with their PCA); else the features are shown through a
     /// PCA fitted to each render.
     pub has_codes: bool,
+    /// Spinners may animate (not on a CPU rasterizer, where every repaint costs the training
+    /// about a second).
+    pub animate: bool,
 }
 
 pub fn show(
@@ -39,6 +42,7 @@ pub fn show(
         labelled_pixels,
         factor,
         has_codes,
+        animate,
     } = *facts;
     let mut actions = SideActions::default();
     ui.heading("Training");
@@ -49,8 +53,10 @@ pub fn show(
     match &s.phase {
         Phase::Starting => {
             ui.horizontal(|ui| {
-                ui.spinner();
-                ui.label("uploading the scene, building kernels");
+                if animate {
+                    ui.spinner();
+                }
+                ui.label("uploading the scene, building kernels…");
             });
         }
         Phase::Running | Phase::Exporting { .. } => {

@@ -307,10 +307,14 @@ impl GpuFaults {
     }
 }
 
-/// Choices from the page's address.
+/// Choices from the page's address and the device.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct TrainingOptions {
     pub refresh: Refresh,
+    /// Asks for a repaint (new numbers in the panel) at most this often while training. On a
+    /// CPU rasterizer a repaint of the page takes about a second of the same device, and every
+    /// wait for training work waits behind it (see docs/web-app.md), so there it is rare.
+    pub repaint_ms: u64,
     /// Measure where a step's time goes before training (`#profile`), see [`TrainingTask::profile`].
     pub profile: bool,
 }
@@ -502,7 +506,7 @@ impl TrainingTask {
                 s.step_wait_ms = (done - submitted) / steps;
             }
             self.egui_ctx
-                .request_repaint_after(std::time::Duration::from_millis(250));
+                .request_repaint_after(std::time::Duration::from_millis(self.options.repaint_ms.max(50)));
             // Let the browser run the UI's frame before the next batch.
             sleep_ms(0).await;
         }
