@@ -315,6 +315,9 @@ pub struct TrainingOptions {
     /// CPU rasterizer a repaint of the page takes about a second of the same device, and every
     /// wait for training work waits behind it (see docs/web-app.md), so there it is rare.
     pub repaint_ms: u64,
+    /// Submit every stage of a step as its own command buffer instead of one per step
+    /// (`#split=1`; see docs/web-app.md for what it changes on SwiftShader).
+    pub split_steps: bool,
     /// Measure where a step's time goes before training (`#profile`), see [`TrainingTask::profile`].
     pub profile: bool,
 }
@@ -480,7 +483,11 @@ impl TrainingTask {
                 continue;
             }
             let start = now_ms();
-            trainer.train(batch);
+            if self.options.split_steps {
+                train_split(trainer, batch);
+            } else {
+                trainer.train(batch);
+            }
             trainer.request_losses();
             let submitted = now_ms();
             gpu_done(&self.ctx.queue).await;
@@ -562,6 +569,14 @@ impl TrainingTask {
             step = step.min(timed(start));
         }
         out.push(format!("step={step:.1} step_submit={step_submit:.1}"));
+        let mut split = f64::MAX;
+        for _ in 0..2 {
+            let start = now_ms();
+            train_split(trainer, 1);
+            gpu_done(&self.ctx.queue).await;
+            split = split.min(timed(start));
+        }
+        out.push(format!("step_split={split:.1}"));
         let stages = trainer.stage_count();
         let mut best = vec![(String::new(), f64::MAX); stages];
         for _ in 0..2 {
@@ -616,6 +631,16 @@ impl TrainingTask {
             masks,
         };
         Ok(set.to_zip(Some(labels)))
+    }
+}
+
+/// Trains `steps` steps submitting each stage on its own (see [`TrainingOptions::split_steps`]).
+fn train_split(trainer: &mut Trainer, steps: u32) {
+    let stages = trainer.stage_count();
+    for _ in 0..steps {
+        for i in 0..stages {
+            trainer.submit_stage(i);
+        }
     }
 }
 
