@@ -220,7 +220,7 @@ impl Annotator {
             // Training numbers: on a CPU rasterizer every repaint delays training by about a
             // second, so there the panel is updated every few seconds.
             repaint_ms: if software { 3000 } else { 250 },
-            split_steps: option("split").map_or(software, |v| v != "0"),
+            split_steps: option("split").is_some_and(|v| v != "0"),
             ..TrainingOptions::default()
         };
         // `#coarse=N`: the quick first render of a stale mask at 1/N, even where it is not

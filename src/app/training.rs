@@ -316,7 +316,7 @@ pub struct TrainingOptions {
     /// wait for training work waits behind it (see docs/web-app.md), so there it is rare.
     pub repaint_ms: u64,
     /// Submit every stage of a step as its own command buffer instead of one per step
-    /// (`#split=1`; see docs/web-app.md for what it changes on SwiftShader).
+    /// (`#split=1`; measured on SwiftShader: slower, see docs/web-app.md).
     pub split_steps: bool,
     /// Measure where a step's time goes before training (`#profile`), see [`TrainingTask::profile`].
     pub profile: bool,
