@@ -141,30 +141,46 @@ pub fn show(
                 format!("frame {frame} at step {}", r.step)
             };
             ui.label(RichText::new(what).small());
-            let width = ui.available_width();
+            // Two images a row, so all three fit beside the facts above on a small screen.
+            let width = ((ui.available_width() - ui.spacing().item_spacing.x) / 2.0).max(16.0);
             let size = egui::vec2(width, width * h as f32 / w.max(1) as f32);
-            show_image(ui, &r.rgb, None, size);
-            ui.label(RichText::new("rendered colour").small());
-            show_image(ui, &r.depth, None, size);
-            ui.label(RichText::new("rendered depth").small());
-            let features = show_image(ui, &r.features, None, size);
-            actions.features_rect = Some(features.rect);
+            let captioned = |ui: &mut egui::Ui, texture, caption: &str| {
+                ui.vertical(|ui| {
+                    let response = show_image(ui, texture, None, size);
+                    ui.label(RichText::new(caption).small());
+                    response
+                })
+                .inner
+            };
+            ui.horizontal_top(|ui| {
+                captioned(ui, &r.rgb, "rendered colour");
+                captioned(ui, &r.depth, "rendered depth");
+            });
             let (caption, why) = if has_codes {
                 (
-                    "rendered features (PCA of the scene's codes)",
+                    "rendered features, PCA of the scene's codes",
                     "The field's rendered feature vectors projected on the first three principal \
                      components of the scene's feature codes, as red, green and blue: the same \
                      colours as the codes themselves.",
                 )
             } else {
                 (
-                    "rendered features (PCA of this view)",
+                    "rendered features, PCA of this view",
                     "This scene carries no feature codes, so the feature branch is trained only \
                      through the semantic head; its rendered vectors are shown through a PCA \
                      fitted to this render (the colours change from render to render).",
                 )
             };
-            ui.label(RichText::new(caption).small()).on_hover_text(why);
+            ui.horizontal_top(|ui| {
+                let features = captioned(ui, &r.features, "rendered features");
+                // Only the part on screen (the panel scrolls).
+                let visible = features.rect.intersect(ui.clip_rect());
+                if visible.width() > 0.0 && visible.height() > 0.0 {
+                    actions.features_rect = Some(visible);
+                }
+                ui.add(egui::Label::new(RichText::new(caption).small()).wrap())
+                    .on_hover_text(why);
+            });
         }
         None => {
             ui.label(RichText::new("rendering this frame…").color(Color32::GRAY));
