@@ -4,9 +4,10 @@ use std::path::PathBuf;
 use clap::{Args, ValueEnum};
 use image::RgbImage;
 use image::imageops::FilterType;
+use scribblefield::features::dino::{DinoExtractor, DinoOutput, DinoVit};
 use scribblefield::features::{
     BakeOptions, BakeProgress, Baseline, EfficientNetConfig, EfficientNetExtractor, Extractor, FeatureError,
-    FeatureMap, NpyLayout, bake, efficientnet, npy_path_of_frame, read_npy_map,
+    FeatureMap, NpyLayout, bake, dino, efficientnet, npy_path_of_frame, read_npy_map,
 };
 use scribblefield::scene::Scene;
 
@@ -18,6 +19,9 @@ pub enum FeatureKind {
     Baseline,
     /// ImageNet EfficientNet-Lite0 group outputs (weights: `--weights`, $SCRIBBLEFIELD_EFFICIENTNET or ../shared/models).
     EfficientnetLite0,
+    /// DINO ViT-S/8 last-block keys at stride 8, from a checkpoint you supply (`--weights`,
+    /// $SCRIBBLEFIELD_DINO); never run on real weights here, see docs/features.md.
+    DinoVits8,
     /// Precomputed per-frame maps from `--features-from DIR` (.npy, any dimension and size).
     Import,
 }
@@ -70,6 +74,10 @@ impl FeatureArgs {
             }
             (Some(FeatureKind::EfficientnetLite0), _) => {
                 efficientnet::resolve_weights(self.weights.as_deref())?;
+                Ok(())
+            }
+            (Some(FeatureKind::DinoVits8), _) => {
+                dino::resolve_weights(self.weights.as_deref())?;
                 Ok(())
             }
             (k, Some(_)) if k != Some(FeatureKind::Import) => {
@@ -130,18 +138,24 @@ impl FeatureArgs {
                     1 => ex.describe(),
                     k => format!("{} on frames upscaled x{k}", ex.describe()),
                 };
-                let load = |i: usize| {
-                    let rgb = &scene.frames[i].rgb;
-                    let big;
-                    let input = if k == 1 {
-                        rgb
-                    } else {
-                        big = image::imageops::resize(rgb, rgb.width() * k, rgb.height() * k, FilterType::Triangle);
-                        &big
-                    };
-                    extract_frame(&ex, input, i)
-                };
+                let load = |i: usize| extract_upscaled(&ex, &scene.frames[i].rgb, k, i);
                 bake(frames, load, &describe, &opts, on_progress)?
+            }
+            FeatureKind::DinoVits8 => {
+                let path = dino::resolve_weights(self.weights.as_deref())?;
+                let k = upscale_factor(scene.width, scene.height, self.network_min_side);
+                let ex = DinoExtractor {
+                    vit: DinoVit::load_vits8(&path)?,
+                    output: DinoOutput::Keys,
+                };
+                let describe = format!("{} on frames upscaled x{k}", ex.describe());
+                bake(
+                    frames,
+                    |i| extract_upscaled(&ex, &scene.frames[i].rgb, k, i),
+                    &describe,
+                    &opts,
+                    on_progress,
+                )?
             }
             FeatureKind::Import => {
                 let dir = self
@@ -185,6 +199,15 @@ impl FeatureArgs {
 /// The whole factor that brings the shorter side to at least `min_side` (1 when it already is).
 fn upscale_factor(width: u32, height: u32, min_side: u32) -> u32 {
     min_side.div_ceil(width.min(height).max(1)).max(1)
+}
+
+/// Features of frame `i` from its colour upscaled `k` times (bilinear).
+fn extract_upscaled(ex: &dyn Extractor, rgb: &RgbImage, k: u32, i: usize) -> Result<FeatureMap, FeatureError> {
+    if k == 1 {
+        return extract_frame(ex, rgb, i);
+    }
+    let big = image::imageops::resize(rgb, rgb.width() * k, rgb.height() * k, FilterType::Triangle);
+    extract_frame(ex, &big, i)
 }
 
 fn extract_frame(ex: &dyn Extractor, rgb: &RgbImage, i: usize) -> Result<FeatureMap, FeatureError> {
