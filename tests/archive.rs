@@ -5,7 +5,7 @@ use glam::{DMat4, DQuat, DVec3};
 use half::f16;
 use image::{GrayImage, ImageBuffer, RgbImage};
 use scribblefield::labels::{ClassInfo, LabelSet, Stroke};
-use scribblefield::scene::archive::write_archive_bytes;
+use scribblefield::scene::archive::{ArchiveReader, write_archive_bytes};
 use scribblefield::scene::{Bounds, FeatureCodes, Frame, Intrinsics, Pca, Pose, Provenance, Scene, read_archive};
 use zip::write::SimpleFileOptions;
 
@@ -120,6 +120,38 @@ fn round_trip_is_exact() {
     assert_eq!(back, scene);
     // Writing the read scene again gives the same bytes: nothing drifts on repeated saves.
     assert_eq!(write_archive_bytes(&back).unwrap(), bytes);
+}
+
+#[test]
+fn incremental_reader_decodes_frame_by_frame_to_the_same_scene() {
+    let scene = tiny_scene();
+    let bytes = write_archive_bytes(&scene).unwrap();
+    let mut reader = ArchiveReader::new(Cursor::new(bytes.clone()), "tiny.scene.zip").unwrap();
+    assert_eq!(reader.frame_count(), 3);
+    assert_eq!(reader.manifest().width, W);
+    let mut seen = vec![reader.frames_done()];
+    while reader.decode_next_frame().unwrap() {
+        seen.push(reader.frames_done());
+    }
+    assert_eq!(seen, vec![0, 1, 2, 3]);
+    assert!(!reader.decode_next_frame().unwrap(), "no frame after the last");
+    assert_eq!(reader.finish().unwrap(), scene);
+    // `finish` decodes what is left, so stopping early gives the same scene too.
+    let reader = ArchiveReader::new(Cursor::new(bytes.as_slice()), "tiny.scene.zip").unwrap();
+    assert_eq!(reader.finish().unwrap(), scene);
+}
+
+#[test]
+fn incremental_reader_names_the_damaged_frame() {
+    let bytes = write_archive_bytes(&tiny_scene()).unwrap();
+    let mut e = entries(&bytes);
+    let i = e.iter().position(|(n, _)| n == "rgb/00001.png").unwrap();
+    e[i].1 = b"not a png".to_vec();
+    let damaged = repack(&e);
+    let mut reader = ArchiveReader::new(Cursor::new(damaged.as_slice()), "d.scene.zip").unwrap();
+    assert!(reader.decode_next_frame().unwrap());
+    let err = reader.decode_next_frame().unwrap_err().to_string();
+    assert_mentions(&err, &["d.scene.zip", "rgb/00001.png"]);
 }
 
 #[test]

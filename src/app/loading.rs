@@ -2,9 +2,10 @@
 //! the page), a streamed fetch that reports progress, or a file the user picked or dropped;
 //! then decoding.
 //!
-//! Decoding runs on the page's only thread in one go, after a repaint that shows "decoding".
-//! That is quick for the demo scene (a fraction of a second) but freezes the page for a few
-//! seconds on archives of hundreds of frames; chunked decoding belongs with the full annotator.
+//! Decoding runs on the page's only thread, a slice at a time: frames are decoded for about
+//! [`DECODE_SLICE_MS`], then the task yields to the browser (which paints the progress bar and
+//! answers input) before the next slice. Feature codes and labels are read in one piece at the
+//! end.
 use std::cell::RefCell;
 use std::rc::Rc;
 
@@ -12,9 +13,10 @@ use wasm_bindgen::JsCast;
 use wasm_bindgen::prelude::*;
 use wasm_bindgen_futures::JsFuture;
 
-use super::browser::{js_error_text, page_fragment, sleep_ms};
+use super::browser::{js_error_text, now_ms, page_fragment, sleep_ms};
 use crate::labels::share::parse_fragment;
-use crate::scene::{Scene, SceneError, read_archive};
+use crate::scene::archive::ArchiveReader;
+use crate::scene::{Scene, SceneError};
 
 /// Loaded when the page names no scene.
 pub const DEFAULT_SCENE_URL: &str = "demo.scene.zip";
@@ -22,6 +24,9 @@ pub const DEFAULT_SCENE_URL: &str = "demo.scene.zip";
 /// Largest archive the page will download. wasm32 memory ends at 4 GiB and the decoded scene
 /// takes several times the archive's size, so more than this cannot be opened anyway.
 pub const MAX_ARCHIVE_BYTES: u64 = 1 << 30;
+
+/// Decoding works this long between yields to the browser (a frame at 30 fps is 33 ms).
+pub const DECODE_SLICE_MS: f64 = 25.0;
 
 /// The scene to load: `scene=<url>` from the page's fragment (`#scene=...&labels=...`,
 /// percent-encoded), else [`DEFAULT_SCENE_URL`]. A relative URL is relative to the page.
@@ -64,8 +69,11 @@ pub enum LoadPhase {
         received: u64,
         total: Option<u64>,
     },
+    /// `frames` is 0 until the manifest has been read.
     Decoding {
         bytes: u64,
+        done: usize,
+        frames: usize,
     },
     Finished(Result<Box<Scene>, LoadError>),
     /// The result has been handed to the app.
@@ -80,12 +88,13 @@ pub struct SceneLoad {
 
 impl SceneLoad {
     /// Starts fetching `url`; `ctx` is asked to repaint whenever there is progress to show.
-    pub fn start(url: String, ctx: egui::Context) -> SceneLoad {
+    /// Progress asks for a repaint at most every `repaint_ms`.
+    pub fn start(url: String, ctx: egui::Context, repaint_ms: u64) -> SceneLoad {
         let phase = Rc::new(RefCell::new(LoadPhase::Connecting));
         let task_phase = phase.clone();
         let task_url = url.clone();
         wasm_bindgen_futures::spawn_local(async move {
-            let result = load(&task_url, &task_phase, &ctx).await;
+            let result = load(&task_url, &task_phase, &ctx, repaint_ms).await;
             *task_phase.borrow_mut() = LoadPhase::Finished(result);
             ctx.request_repaint();
         });
@@ -93,23 +102,22 @@ impl SceneLoad {
     }
 
     /// Decodes a scene archive the user picked or dropped (`name` is the file name).
-    pub fn from_bytes(name: String, bytes: Vec<u8>, ctx: egui::Context) -> SceneLoad {
+    pub fn from_bytes(name: String, bytes: Vec<u8>, ctx: egui::Context, repaint_ms: u64) -> SceneLoad {
         let phase = Rc::new(RefCell::new(LoadPhase::Decoding {
             bytes: bytes.len() as u64,
+            done: 0,
+            frames: 0,
         }));
         let task_phase = phase.clone();
         let task_name = name.clone();
         wasm_bindgen_futures::spawn_local(async move {
-            ctx.request_repaint();
-            // Let the page paint "decoding" before the thread is busy decoding.
-            sleep_ms(50).await;
             let result = if bytes.len() as u64 > MAX_ARCHIVE_BYTES {
                 Err(LoadError::TooLarge {
                     url: task_name,
                     bytes: bytes.len() as u64,
                 })
             } else {
-                read_archive(&bytes, &task_name).map(Box::new).map_err(LoadError::from)
+                decode(bytes, &task_name, &task_phase, &ctx, repaint_ms).await
             };
             *task_phase.borrow_mut() = LoadPhase::Finished(result);
             ctx.request_repaint();
@@ -140,19 +148,64 @@ impl SceneLoad {
     }
 }
 
-async fn load(url: &str, phase: &RefCell<LoadPhase>, ctx: &egui::Context) -> Result<Box<Scene>, LoadError> {
-    let bytes = download(url, phase, ctx).await?;
-    *phase.borrow_mut() = LoadPhase::Decoding {
-        bytes: bytes.len() as u64,
-    };
-    ctx.request_repaint();
-    // Let the page paint "decoding" before the thread is busy decoding.
-    sleep_ms(50).await;
+async fn load(
+    url: &str,
+    phase: &RefCell<LoadPhase>,
+    ctx: &egui::Context,
+    repaint_ms: u64,
+) -> Result<Box<Scene>, LoadError> {
+    let bytes = download(url, phase, ctx, repaint_ms).await?;
     let name = url.rsplit('/').next().filter(|n| !n.is_empty()).unwrap_or(url);
-    Ok(Box::new(read_archive(&bytes, name)?))
+    decode(bytes, name, phase, ctx, repaint_ms).await
 }
 
-async fn download(url: &str, phase: &RefCell<LoadPhase>, ctx: &egui::Context) -> Result<Vec<u8>, LoadError> {
+/// Decodes an archive a slice of frames at a time, yielding to the browser between slices so
+/// the page keeps painting (the progress bar moves) and answering input.
+async fn decode(
+    bytes: Vec<u8>,
+    name: &str,
+    phase: &RefCell<LoadPhase>,
+    ctx: &egui::Context,
+    repaint_ms: u64,
+) -> Result<Box<Scene>, LoadError> {
+    let total = bytes.len() as u64;
+    let show = |done: usize, frames: usize| {
+        *phase.borrow_mut() = LoadPhase::Decoding {
+            bytes: total,
+            done,
+            frames,
+        };
+        // A repaint per slice would cost more than the slice on a CPU rasterizer.
+        ctx.request_repaint_after(std::time::Duration::from_millis(repaint_ms));
+    };
+    show(0, 0);
+    ctx.request_repaint();
+    // Let the page paint "decoding" first.
+    sleep_ms(0).await;
+    let mut reader = ArchiveReader::new(std::io::Cursor::new(bytes), name)?;
+    let frames = reader.frame_count();
+    loop {
+        let slice_start = now_ms();
+        let mut more = true;
+        while more && now_ms() - slice_start < DECODE_SLICE_MS {
+            more = reader.decode_next_frame()?;
+        }
+        show(reader.frames_done(), frames);
+        if !more {
+            break;
+        }
+        sleep_ms(0).await;
+    }
+    let scene = reader.finish()?;
+    Ok(Box::new(scene))
+}
+
+async fn download(
+    url: &str,
+    phase: &RefCell<LoadPhase>,
+    ctx: &egui::Context,
+    repaint_ms: u64,
+) -> Result<Vec<u8>, LoadError> {
     let network = |e: JsValue| LoadError::Network {
         url: url.into(),
         detail: js_error_text(&e),
@@ -214,7 +267,7 @@ async fn download(url: &str, phase: &RefCell<LoadPhase>, ctx: &egui::Context) ->
         bytes.resize(start + data.length() as usize, 0);
         data.copy_to(&mut bytes[start..]);
         *phase.borrow_mut() = LoadPhase::Downloading { received, total };
-        ctx.request_repaint();
+        ctx.request_repaint_after(std::time::Duration::from_millis(repaint_ms));
     }
     Ok(bytes)
 }

@@ -30,6 +30,13 @@ use crate::gpu::GpuContext;
 use crate::labels::autosave::SceneSource;
 use crate::labels::share::fragment_value;
 
+/// How often progress (training numbers, decoded frames) asks for a repaint, at most. On a CPU
+/// rasterizer (SwiftShader) one repaint of the page keeps the device busy for about a second,
+/// and the work being reported on waits behind it; on a GPU a repaint is cheap.
+pub fn repaint_interval_ms(software: bool) -> u64 {
+    if software { 1000 } else { 100 }
+}
+
 pub struct App {
     stage: Stage,
     /// Adapter and backend, for the scene panel (and for bug reports).
@@ -75,7 +82,8 @@ impl App {
             .and_then(|m| ModelSize::parse(&m))
             .unwrap_or(default_model);
         let source = SceneSource::Url(browser::absolute_url(&scene_url));
-        let load = SceneLoad::start(scene_url, cc.egui_ctx.clone());
+        let software = gpu.as_ref().is_some_and(|g| g.is_software());
+        let load = SceneLoad::start(scene_url, cc.egui_ctx.clone(), repaint_interval_ms(software));
         App {
             stage: Stage::Loading { load, source },
             gpu_name,
@@ -83,6 +91,10 @@ impl App {
             model,
             inbox: Rc::default(),
         }
+    }
+
+    fn repaint_ms(&self) -> u64 {
+        repaint_interval_ms(self.gpu.as_ref().is_some_and(|g| g.is_software()))
     }
 
     /// Asks for a scene archive and opens it.
@@ -148,7 +160,7 @@ impl App {
             };
             // The old scene's training stops when its annotator is dropped here.
             self.stage = Stage::Loading {
-                load: SceneLoad::from_bytes(file.name, bytes, ctx.clone()),
+                load: SceneLoad::from_bytes(file.name, bytes, ctx.clone(), self.repaint_ms()),
                 source,
             };
         }
@@ -231,8 +243,8 @@ fn show_drop_hint(ctx: &egui::Context) {
 }
 
 fn show_loading(ui: &mut egui::Ui, load: &SceneLoad) {
-    let (status, text, fraction) = load.with_phase(|phase| match *phase {
-        LoadPhase::Connecting => ("loading", format!("Connecting to {}", load.url()), None),
+    let (status, text, fraction): (String, String, Option<f32>) = load.with_phase(|phase| match *phase {
+        LoadPhase::Connecting => ("loading".into(), format!("Connecting to {}", load.url()), None),
         LoadPhase::Downloading { received, total } => {
             let text = match total {
                 Some(t) => format!(
@@ -244,19 +256,31 @@ fn show_loading(ui: &mut egui::Ui, load: &SceneLoad) {
                 None => format!("Downloading {}: {}", load.url(), megabytes(received)),
             };
             (
-                "loading",
+                "loading".into(),
                 text,
                 total.filter(|&t| t > 0).map(|t| (received as f32 / t as f32).min(1.0)),
             )
         }
-        LoadPhase::Decoding { bytes } => (
-            "decoding",
-            format!("Decoding {} ({})", load.url(), megabytes(bytes)),
-            Some(1.0),
+        LoadPhase::Decoding { bytes, done, frames } => (
+            if frames > 0 {
+                format!("decoding {done}/{frames}")
+            } else {
+                "decoding".into()
+            },
+            if frames > 0 {
+                format!(
+                    "Decoding {} ({}): frame {done} of {frames}",
+                    load.url(),
+                    megabytes(bytes)
+                )
+            } else {
+                format!("Decoding {} ({})", load.url(), megabytes(bytes))
+            },
+            Some(if frames > 0 { done as f32 / frames as f32 } else { 0.0 }),
         ),
-        LoadPhase::Finished(_) | LoadPhase::Taken => ("loading", "Opening the scene".into(), Some(1.0)),
+        LoadPhase::Finished(_) | LoadPhase::Taken => ("loading".into(), "Opening the scene".into(), Some(1.0)),
     });
-    page_status::set(status);
+    page_status::set(&status);
     egui::CentralPanel::default().show(ui, |ui| {
         ui.vertical_centered(|ui| {
             ui.add_space(ui.available_height() * 0.35);

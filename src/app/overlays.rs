@@ -1,6 +1,7 @@
 //! Images drawn over and beside the frame: the scribbles, the field's mask and confidence, and
-//! the field's rendered colour and depth. Each becomes a texture of the frame's size, replaced
-//! when what it shows changes.
+//! the field's rendered colour, depth and features (3-component PCA as RGB). Each becomes a
+//! texture of the render's size (drawn stretched over the frame), replaced when what it shows
+//! changes.
 use egui::{Color32, ColorImage, TextureHandle, TextureOptions};
 
 use super::frame_view::class_color;
@@ -30,14 +31,23 @@ pub fn scribbles(labels: Option<&FrameLabels>, width: u32, height: u32, classes:
 pub struct RenderedTextures {
     pub frame: u32,
     pub step: u32,
+    /// A quick low-resolution render (the full one follows).
+    pub coarse: bool,
     pub mask: TextureHandle,
     pub confidence: TextureHandle,
     pub rgb: TextureHandle,
     pub depth: TextureHandle,
+    /// The rendered features through a 3-component PCA.
+    pub features: TextureHandle,
 }
 
 impl RenderedTextures {
-    pub fn new(ctx: &egui::Context, r: &RenderedFrame, frame: u32, step: u32, classes: &[ClassInfo]) -> Self {
+    pub fn new(
+        ctx: &egui::Context,
+        r: &RenderedFrame,
+        (frame, step, coarse): (u32, u32, bool),
+        classes: &[ClassInfo],
+    ) -> Self {
         let size = [r.width as usize, r.height as usize];
         let mask = r.classes.iter().map(|&c| class_color(classes, c as usize)).collect();
         // The top probability runs from 1/C (no idea) to 1 (certain); show the shortfall.
@@ -72,17 +82,36 @@ impl RenderedTextures {
                 }
             })
             .collect();
+        let features = if r.features_pca.len() == r.depth.len() {
+            r.features_pca
+                .iter()
+                .map(|c| {
+                    let [r, g, b] = c.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
+                    Color32::from_rgb(r, g, b)
+                })
+                .collect()
+        } else {
+            vec![Color32::GRAY; r.depth.len()]
+        };
         let tex = |name: &str, pixels: Vec<Color32>, options| {
             ctx.load_texture(format!("rendered {name}"), ColorImage::new(size, pixels), options)
+        };
+        // A coarse render is enlarged a lot: NEAREST shows its pixels for what they are.
+        let smooth = if coarse {
+            TextureOptions::NEAREST
+        } else {
+            TextureOptions::LINEAR
         };
         RenderedTextures {
             frame,
             step,
+            coarse,
             // NEAREST keeps class boundaries crisp when zoomed in.
             mask: tex("mask", mask, TextureOptions::NEAREST),
             confidence: tex("confidence", confidence, TextureOptions::NEAREST),
-            rgb: tex("colour", rgb, TextureOptions::LINEAR),
-            depth: tex("depth", depth, TextureOptions::LINEAR),
+            rgb: tex("colour", rgb, smooth),
+            depth: tex("depth", depth, smooth),
+            features: tex("features", features, smooth),
         }
     }
 }

@@ -1,5 +1,5 @@
 //! A one-line status on `<body data-status="...">` for scripts and tests to read: the canvas
-//! itself cannot be inspected from outside. Forms: `loading`, `decoding`,
+//! itself cannot be inspected from outside. Forms: `loading`, `decoding[ D/N]` (frames decoded),
 //! `ready frames=N size=WxH frame=I`, `error: <message>` (shown in the app too), and
 //! `crashed: <message>` (the app is gone; `index.html` shows the message over the canvas).
 use std::cell::RefCell;
@@ -42,5 +42,13 @@ pub fn set_share_link(link: &str) {
 pub fn set_gpu_lost(message: &str) {
     if let Some(body) = web_sys::window().and_then(|w| w.document()).and_then(|d| d.body()) {
         let _ = body.set_attribute("data-gpu-lost", message);
+    }
+}
+
+/// Puts the wall-clock profile of a training step (`#profile` in the address) on
+/// `<body data-profile="...">`.
+pub fn set_profile(text: &str) {
+    if let Some(body) = web_sys::window().and_then(|w| w.document()).and_then(|d| d.body()) {
+        let _ = body.set_attribute("data-profile", text);
     }
 }

@@ -1,5 +1,6 @@
 //! The panel beside the canvas: how training goes (steps, speed, loss, labelled pixels; pause
-//! and restart) and what the field renders for the visible frame (colour and depth).
+//! and restart) and what the field renders for the visible frame (colour, depth, and its
+//! features through a 3-component PCA).
 use egui::{Color32, RichText};
 
 use super::frame_view::show_image;
@@ -11,17 +12,38 @@ use crate::field::FieldConfig;
 pub struct SideActions {
     pub toggle_pause: bool,
     pub restart: bool,
+    /// Where the features image was drawn (for the page status, so tests can look at it).
+    pub features_rect: Option<egui::Rect>,
+}
+
+/// Facts about the annotation the panel shows.
+pub struct SideFacts {
+    pub frame: u32,
+    pub labelled_pixels: u64,
+    /// The field trains on frames this many times smaller.
+    pub factor: u32,
+    /// The scene carries feature codes (with their PCA); else the features are shown through a
+    /// PCA fitted to each render.
+    pub has_codes: bool,
+    /// Spinners may animate (not on a CPU rasterizer, where every repaint costs the training
+    /// about a second).
+    pub animate: bool,
 }
 
 pub fn show(
     ui: &mut egui::Ui,
     rendered: Option<&RenderedTextures>,
-    frame: u32,
     training: Option<&Shared>,
     config: Option<&FieldConfig>,
-    labelled_pixels: u64,
-    factor: u32,
+    facts: &SideFacts,
 ) -> SideActions {
+    let SideFacts {
+        frame,
+        labelled_pixels,
+        factor,
+        has_codes,
+        animate,
+    } = *facts;
     let mut actions = SideActions::default();
     ui.heading("Training");
     let Some(s) = training else {
@@ -31,8 +53,10 @@ pub fn show(
     match &s.phase {
         Phase::Starting => {
             ui.horizontal(|ui| {
-                ui.spinner();
-                ui.label("uploading the scene, building kernels");
+                if animate {
+                    ui.spinner();
+                }
+                ui.label("uploading the scene, building kernels…");
             });
         }
         Phase::Running | Phase::Exporting { .. } => {
@@ -72,6 +96,16 @@ pub fn show(
             row("labelled px", labelled_pixels.to_string());
             row("steps per batch", s.batch.to_string());
             row("render", format!("{:.0} ms", s.render_ms));
+            if let Some(r) = s.refresh {
+                let full = r.full_ms.map_or("…".to_string(), |ms| format!("{:.1} s", ms / 1000.0));
+                row("mask refresh", format!("{:.1} s, full {full}", r.first_ms / 1000.0));
+            }
+            if s.step_submit_ms + s.step_wait_ms > 0.0 {
+                row(
+                    "step (submit+GPU)",
+                    format!("{:.0} + {:.0} ms", s.step_submit_ms, s.step_wait_ms),
+                );
+            }
             row(
                 "resolution",
                 if factor > 1 {
@@ -97,13 +131,56 @@ pub fn show(
     ui.heading("Field's view");
     match rendered.filter(|r| r.frame == frame) {
         Some(r) => {
-            ui.label(RichText::new(format!("frame {frame} at step {}", r.step)).small());
-            let width = ui.available_width();
-            let size = egui::vec2(width, width * r.rgb.size()[1] as f32 / r.rgb.size()[0].max(1) as f32);
-            show_image(ui, &r.rgb, None, size);
-            ui.label(RichText::new("rendered colour").small());
-            show_image(ui, &r.depth, None, size);
-            ui.label(RichText::new("rendered depth").small());
+            let [w, h] = r.rgb.size();
+            let what = if r.coarse {
+                format!(
+                    "frame {frame} at step {}: quick {w} x {h} render, full one next",
+                    r.step
+                )
+            } else {
+                format!("frame {frame} at step {}", r.step)
+            };
+            ui.label(RichText::new(what).small());
+            // Two images a row, so all three fit beside the facts above on a small screen.
+            let width = ((ui.available_width() - ui.spacing().item_spacing.x) / 2.0).max(16.0);
+            let size = egui::vec2(width, width * h as f32 / w.max(1) as f32);
+            let captioned = |ui: &mut egui::Ui, texture, caption: &str| {
+                ui.vertical(|ui| {
+                    let response = show_image(ui, texture, None, size);
+                    ui.label(RichText::new(caption).small());
+                    response
+                })
+                .inner
+            };
+            ui.horizontal_top(|ui| {
+                captioned(ui, &r.rgb, "rendered colour");
+                captioned(ui, &r.depth, "rendered depth");
+            });
+            let (caption, why) = if has_codes {
+                (
+                    "rendered features, PCA of the scene's codes",
+                    "The field's rendered feature vectors projected on the first three principal \
+                     components of the scene's feature codes, as red, green and blue: the same \
+                     colours as the codes themselves.",
+                )
+            } else {
+                (
+                    "rendered features, PCA of this view",
+                    "This scene carries no feature codes, so the feature branch is trained only \
+                     through the semantic head; its rendered vectors are shown through a PCA \
+                     fitted to this render (the colours change from render to render).",
+                )
+            };
+            ui.horizontal_top(|ui| {
+                let features = captioned(ui, &r.features, "rendered features");
+                // Only the part on screen (the panel scrolls).
+                let visible = features.rect.intersect(ui.clip_rect());
+                if visible.width() > 0.0 && visible.height() > 0.0 {
+                    actions.features_rect = Some(visible);
+                }
+                ui.add(egui::Label::new(RichText::new(caption).small()).wrap())
+                    .on_hover_text(why);
+            });
         }
         None => {
             ui.label(RichText::new("rendering this frame…").color(Color32::GRAY));

@@ -6,6 +6,10 @@
 //!
 //! The batch is sized so one batch takes about [`TARGET_BATCH_MS`] of GPU time: the UI shares the
 //! GPU, and a longer queue of training work would delay every repaint behind it.
+//!
+//! The visible frame's mask refreshes progressively: when it is out of date (another frame is
+//! shown, or new labels have had one batch of training) the frame is first rendered at a
+//! fraction of its resolution ([`Refresh`]), shown enlarged, then rendered in full.
 use std::cell::RefCell;
 use std::future::Future;
 use std::pin::Pin;
@@ -19,7 +23,8 @@ use super::browser::{now_ms, sleep_ms};
 use super::training_scene::upscale_mask;
 use crate::export::MaskSet;
 use crate::field::FieldConfig;
-use crate::field::gpu::trainer::{RenderedFrame, StepLosses, Trainer};
+use crate::field::gpu::trainer::{DepthGuide, RenderedFrame, StepLosses, Trainer, ViewCamera};
+use crate::field::gpu::view::frame_depth_at;
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
 use crate::labels::scale::scale_labels;
@@ -32,6 +37,52 @@ const MAX_BATCH: u32 = 64;
 /// The visible frame is re-rendered at most this often while training (a render costs as much
 /// as tens of steps).
 const RENDER_INTERVAL_MS: f64 = 1500.0;
+
+/// How the visible frame's mask is refreshed when it is out of date.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Refresh {
+    /// The quick first render is this many times smaller on each axis (1: no quick render).
+    pub coarse_divisor: u32,
+    /// Render the quick one even when the full frame fits one render tile. A tile costs the
+    /// same however few of its rays are used, so there the quick render is no quicker; the
+    /// default leaves it out.
+    pub coarse_always: bool,
+}
+
+impl Default for Refresh {
+    fn default() -> Self {
+        Refresh {
+            coarse_divisor: 4,
+            coarse_always: false,
+        }
+    }
+}
+
+impl Refresh {
+    /// The quick render's size for a `width x height` frame rendered in tiles of `tile` rays,
+    /// or `None` when it would not come sooner than the full one.
+    pub fn coarse_size(&self, width: u32, height: u32, tile: u32) -> Option<(u32, u32)> {
+        if self.coarse_divisor <= 1 {
+            return None;
+        }
+        let size = (
+            width.div_ceil(self.coarse_divisor).max(1),
+            height.div_ceil(self.coarse_divisor).max(1),
+        );
+        let tiles = |pixels: u32| pixels.div_ceil(tile.max(1));
+        let quicker = tiles(size.0 * size.1) < tiles(width * height);
+        let smaller = size.0 * size.1 < width * height;
+        (smaller && (quicker || self.coarse_always)).then_some(size)
+    }
+}
+
+/// How long the latest refresh of the visible mask took, from the request (a frame shown, or
+/// labels handed over) to the first mask shown and to the full-resolution one.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RefreshTimes {
+    pub first_ms: f64,
+    pub full_ms: Option<f64>,
+}
 
 /// Where the training stands.
 #[derive(Clone, Debug, PartialEq)]
@@ -55,6 +106,8 @@ pub struct Rendered {
     pub labels_version: u64,
     pub step: u32,
     pub image: RenderedFrame,
+    /// A quick low-resolution render; the full one follows.
+    pub coarse: bool,
 }
 
 /// Requests from the UI and reports from the task.
@@ -67,8 +120,10 @@ pub struct Shared {
     pub visible_frame: u32,
     /// New labels to train on (the UI bumps the version with every edit).
     pending_labels: Option<(u64, LabelSet)>,
-    /// Render the visible frame as soon as possible (it changed, or new labels arrived).
+    /// Render the visible frame as soon as possible (it changed).
     render_soon: bool,
+    /// When the latest refresh was asked for (page clock, ms): a frame shown or labels given.
+    refresh_requested_ms: f64,
     export: Option<LabelSet>,
     stop: bool,
     // Reports.
@@ -83,6 +138,12 @@ pub struct Shared {
     pub batch: u32,
     pub render_ms: f64,
     pub labels_version: u64,
+    pub refresh: Option<RefreshTimes>,
+    /// Per step of the latest batch: recording and submitting, then waiting for the GPU.
+    pub step_submit_ms: f64,
+    pub step_wait_ms: f64,
+    /// The wall-clock profile (`#profile` in the address), once measured.
+    pub profile: Option<String>,
 }
 
 /// Handle to the training task of one scene.
@@ -108,6 +169,7 @@ impl Training {
         config: FieldConfig,
         labels: &LabelSet,
         visible_frame: u32,
+        options: TrainingOptions,
         egui_ctx: egui::Context,
     ) -> Training {
         let shared = Rc::new(RefCell::new(Shared {
@@ -116,6 +178,7 @@ impl Training {
             visible_frame,
             pending_labels: Some((0, scale_labels(labels, factor as f32))),
             render_soon: true,
+            refresh_requested_ms: now_ms(),
             export: None,
             stop: false,
             phase: Phase::Starting,
@@ -127,6 +190,10 @@ impl Training {
             batch: 1,
             render_ms: 0.0,
             labels_version: 0,
+            refresh: None,
+            step_submit_ms: 0.0,
+            step_wait_ms: 0.0,
+            profile: None,
         }));
         let device = ctx.describe();
         let faults = GpuFaults::watch(&ctx.device, &egui_ctx);
@@ -138,6 +205,7 @@ impl Training {
             egui_ctx,
             faults,
             full_size,
+            options,
         };
         wasm_bindgen_futures::spawn_local(task.run());
         Training {
@@ -158,9 +226,11 @@ impl Training {
 
     /// Hands the task labels to train on from now on.
     pub fn set_labels(&self, version: u64, labels: &LabelSet) {
-        // No render now: the field has not learnt anything from them yet; the periodic render
-        // while training shows their effect.
-        self.shared.borrow_mut().pending_labels = Some((version, scale_labels(labels, self.factor as f32)));
+        // No render now: the field has not learnt anything from them yet; the task refreshes
+        // the mask after a batch of training with them.
+        let mut s = self.shared.borrow_mut();
+        s.pending_labels = Some((version, scale_labels(labels, self.factor as f32)));
+        s.refresh_requested_ms = now_ms();
     }
 
     /// The user is drawing or pressing keys: hold the GPU for the UI a moment.
@@ -174,6 +244,7 @@ impl Training {
         if s.visible_frame != frame {
             s.visible_frame = frame;
             s.render_soon = true;
+            s.refresh_requested_ms = now_ms();
         }
     }
 
@@ -236,7 +307,23 @@ impl GpuFaults {
     }
 }
 
+/// Choices from the page's address and the device.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TrainingOptions {
+    pub refresh: Refresh,
+    /// Asks for a repaint (new numbers in the panel) at most this often while training. On a
+    /// CPU rasterizer a repaint of the page takes about a second of the same device, and every
+    /// wait for training work waits behind it (see docs/web-app.md), so there it is rare.
+    pub repaint_ms: u64,
+    /// Submit every stage of a step as its own command buffer instead of one per step
+    /// (`#split=1`; measured on SwiftShader: slower, see docs/web-app.md).
+    pub split_steps: bool,
+    /// Measure where a step's time goes before training (`#profile`), see [`TrainingTask::profile`].
+    pub profile: bool,
+}
+
 struct TrainingTask {
+    options: TrainingOptions,
     ctx: GpuContext,
     scene: Rc<Scene>,
     config: FieldConfig,
@@ -255,6 +342,16 @@ impl TrainingTask {
             Ok(t) => t,
             Err(e) => return self.fail(format!("cannot start training: {e}")),
         };
+        if self.options.profile {
+            match self.profile(&mut trainer).await {
+                Ok(text) => {
+                    web_sys::console::log_1(&format!("scribblefield profile: {text}").into());
+                    super::page_status::set_profile(&text);
+                    self.shared.borrow_mut().profile = Some(text);
+                }
+                Err(e) => return self.fail(format!("profiling failed: {e}")),
+            }
+        }
         self.shared.borrow_mut().phase = Phase::Running;
         self.egui_ctx.request_repaint();
         if let Err(e) = self.train(&mut trainer).await {
@@ -281,21 +378,28 @@ impl TrainingTask {
         let mut trained_version = 0u64;
         let mut last_render_end = f64::NEG_INFINITY;
         let mut rate = RateMeter::default();
+        // New labels wait for one batch of training before the mask is refreshed for them.
+        let mut labels_refresh = false;
+        let mut trained_since_labels = false;
+        // A coarse render of this frame is shown; the full one is next. With the request time.
+        let mut full_pending: Option<(u32, f64)> = None;
         loop {
             self.fault()?;
-            let (stop, labels, export, paused, render_due, frame, busy) = {
+            let (stop, labels, export, paused, periodic_due, frame, busy, frame_changed, requested) = {
                 let mut s = self.shared.borrow_mut();
                 let since = now_ms() - last_render_end;
                 // At most a quarter of the time goes to renders the user did not ask for.
-                let due = s.render_soon || since > RENDER_INTERVAL_MS.max(3.0 * s.render_ms);
+                let due = since > RENDER_INTERVAL_MS.max(3.0 * s.render_ms);
                 (
                     s.stop,
                     s.pending_labels.take(),
                     s.export.take(),
                     s.paused,
                     due,
-                    s.visible_frame,
+                    s.visible_frame.min(frames.saturating_sub(1)),
                     now_ms() < s.busy_until_ms,
+                    s.render_soon,
+                    s.refresh_requested_ms,
                 )
             };
             if stop {
@@ -307,6 +411,8 @@ impl TrainingTask {
                     .map_err(|e| format!("cannot upload the labels: {e}"))?;
                 trained_version = version;
                 self.shared.borrow_mut().labels_version = version;
+                labels_refresh = true;
+                trained_since_labels = false;
             }
             if busy {
                 sleep_ms(30).await;
@@ -321,25 +427,54 @@ impl TrainingTask {
                 self.egui_ctx.request_repaint();
                 continue;
             }
-            // A paused field still renders a frame the user steps to.
-            if render_due && (!paused || self.shared.borrow().render_soon) {
-                let start = now_ms();
-                let image = trainer
-                    .render_frame(frame.min(frames.saturating_sub(1)), w, h)
-                    .await
-                    .map_err(|e| format!("rendering frame {frame} failed: {e}"))?;
+            // The mask shown is out of date: quick render first, then the full one. A paused
+            // field still renders a frame the user steps to.
+            let stale = frame_changed || (labels_refresh && trained_since_labels);
+            if stale {
+                self.shared.borrow_mut().render_soon = false;
+                labels_refresh = false;
+                full_pending = None;
+                let coarse = self.options.refresh.coarse_size(w, h, trainer.config().batch_rays);
+                let image = match coarse {
+                    Some((cw, ch)) => {
+                        let view = ViewCamera::of_frame(scene, frame as usize, cw, ch)
+                            .ok_or_else(|| format!("frame {frame} is not in the scene"))?;
+                        let depth = frame_depth_at(scene, frame as usize, cw, ch);
+                        trainer
+                            .render_view(&view, DepthGuide::Measured(&depth))
+                            .await
+                            .map_err(|e| format!("rendering frame {frame} failed: {e}"))?
+                    }
+                    None => self.render_full(trainer, frame).await?,
+                };
                 last_render_end = now_ms();
+                let coarse = coarse.is_some();
+                if coarse {
+                    full_pending = Some((frame, requested));
+                }
+                self.publish(frame, trained_version, trainer.steps_done(), image, coarse);
                 let mut s = self.shared.borrow_mut();
-                s.render_ms = last_render_end - start;
-                s.render_soon = false;
-                s.rendered = Some(Rendered {
-                    frame,
-                    labels_version: trained_version,
-                    step: trainer.steps_done(),
-                    image,
+                s.refresh = Some(RefreshTimes {
+                    first_ms: last_render_end - requested,
+                    full_ms: (!coarse).then_some(last_render_end - requested),
                 });
-                drop(s);
-                self.egui_ctx.request_repaint();
+                continue;
+            }
+            if let Some((pending, requested)) = full_pending.take()
+                && pending == frame
+            {
+                let image = self.render_full(trainer, frame).await?;
+                last_render_end = now_ms();
+                self.publish(frame, trained_version, trainer.steps_done(), image, false);
+                if let Some(r) = &mut self.shared.borrow_mut().refresh {
+                    r.full_ms = Some(last_render_end - requested);
+                }
+                continue;
+            }
+            if periodic_due && !paused {
+                let image = self.render_full(trainer, frame).await?;
+                last_render_end = now_ms();
+                self.publish(frame, trained_version, trainer.steps_done(), image, false);
                 continue;
             }
             if paused {
@@ -348,15 +483,23 @@ impl TrainingTask {
                 continue;
             }
             let start = now_ms();
-            trainer.train(batch);
+            if self.options.split_steps {
+                train_split(trainer, batch);
+            } else {
+                trainer.train(batch);
+            }
             trainer.request_losses();
+            let submitted = now_ms();
             gpu_done(&self.ctx.queue).await;
-            let elapsed = (now_ms() - start).max(0.1);
+            let done = now_ms();
+            let elapsed = (done - start).max(0.1);
             rate.add(batch, elapsed);
+            trained_since_labels = true;
             // Aim the next batch at the target time, changing by at most 2x at a time so one
             // slow frame (a tab switch, a render in between) does not swing it wildly.
-            let wanted = f64::from(batch) * TARGET_BATCH_MS / elapsed;
-            batch = (wanted.clamp(f64::from(batch) / 2.0, f64::from(batch) * 2.0).round() as u32).clamp(1, MAX_BATCH);
+            let steps = f64::from(batch);
+            let wanted = steps * TARGET_BATCH_MS / elapsed;
+            batch = (wanted.clamp(steps / 2.0, steps * 2.0).round() as u32).clamp(1, MAX_BATCH);
             let losses = trainer
                 .poll_losses()
                 .map_err(|e| format!("reading the losses failed: {e}"))?;
@@ -366,12 +509,94 @@ impl TrainingTask {
                 s.steps_per_second = rate.per_second();
                 s.losses = losses;
                 s.batch = batch;
+                s.step_submit_ms = (submitted - start) / steps;
+                s.step_wait_ms = (done - submitted) / steps;
             }
             self.egui_ctx
-                .request_repaint_after(std::time::Duration::from_millis(250));
+                .request_repaint_after(std::time::Duration::from_millis(self.options.repaint_ms.max(50)));
             // Let the browser run the UI's frame before the next batch.
             sleep_ms(0).await;
         }
+    }
+
+    /// Renders `frame` at the training resolution, noting how long it took.
+    async fn render_full(&self, trainer: &mut Trainer, frame: u32) -> Result<RenderedFrame, String> {
+        let start = now_ms();
+        let image = trainer
+            .render_frame(frame, self.scene.width, self.scene.height)
+            .await
+            .map_err(|e| format!("rendering frame {frame} failed: {e}"))?;
+        self.shared.borrow_mut().render_ms = now_ms() - start;
+        Ok(image)
+    }
+
+    fn publish(&self, frame: u32, labels_version: u64, step: u32, image: RenderedFrame, coarse: bool) {
+        self.shared.borrow_mut().rendered = Some(Rendered {
+            frame,
+            labels_version,
+            step,
+            image,
+            coarse,
+        });
+        self.egui_ctx.request_repaint();
+    }
+
+    /// Where a step's time goes, by the wall clock (browsers offer no timestamp queries by
+    /// default): an empty submission, whole steps, each stage submitted alone, and a render
+    /// of frame 0, each timed from submission until the GPU reports it done. One line of
+    /// `name=ms` pairs (the stages' best of two).
+    async fn profile(&self, trainer: &mut Trainer) -> Result<String, String> {
+        let timed = |start: f64| now_ms() - start;
+        let mut out = Vec::new();
+        // Warm up (first use of every pipeline).
+        trainer.train(1);
+        gpu_done(&self.ctx.queue).await;
+        let mut empty = f64::MAX;
+        for _ in 0..3 {
+            let start = now_ms();
+            self.ctx.queue.submit(std::iter::empty::<wgpu::CommandBuffer>());
+            gpu_done(&self.ctx.queue).await;
+            empty = empty.min(timed(start));
+        }
+        out.push(format!("empty_submit={empty:.1}"));
+        let mut step = f64::MAX;
+        let mut step_submit = 0.0;
+        for _ in 0..2 {
+            let start = now_ms();
+            trainer.train(1);
+            step_submit = timed(start);
+            gpu_done(&self.ctx.queue).await;
+            step = step.min(timed(start));
+        }
+        out.push(format!("step={step:.1} step_submit={step_submit:.1}"));
+        let mut split = f64::MAX;
+        for _ in 0..2 {
+            let start = now_ms();
+            train_split(trainer, 1);
+            gpu_done(&self.ctx.queue).await;
+            split = split.min(timed(start));
+        }
+        out.push(format!("step_split={split:.1}"));
+        let stages = trainer.stage_count();
+        let mut best = vec![(String::new(), f64::MAX); stages];
+        for _ in 0..2 {
+            for (i, slot) in best.iter_mut().enumerate() {
+                let start = now_ms();
+                let name = trainer.submit_stage(i).unwrap_or("?");
+                gpu_done(&self.ctx.queue).await;
+                let ms = timed(start);
+                slot.0 = name.replace(' ', "_");
+                slot.1 = slot.1.min(ms);
+            }
+        }
+        let sum: f64 = best.iter().map(|b| b.1).sum();
+        out.push(format!("stages_sum={sum:.1}"));
+        out.extend(best.iter().map(|(name, ms)| format!("{name}={ms:.1}")));
+        let start = now_ms();
+        self.render_full(trainer, 0).await?;
+        out.push(format!("render_frame={:.1}", timed(start)));
+        self.fault()?;
+        Ok(out.join(" "))
     }
 
     /// Renders every frame into a masks zip (class ids, previews, labels, class manifest).
@@ -406,6 +631,16 @@ impl TrainingTask {
             masks,
         };
         Ok(set.to_zip(Some(labels)))
+    }
+}
+
+/// Trains `steps` steps submitting each stage on its own (see [`TrainingOptions::split_steps`]).
+fn train_split(trainer: &mut Trainer, steps: u32) {
+    let stages = trainer.stage_count();
+    for _ in 0..steps {
+        for i in 0..stages {
+            trainer.submit_stage(i);
+        }
     }
 }
 

@@ -20,6 +20,8 @@ pub struct DemoArgs {
     /// Number of frames on the orbit.
     #[arg(long, default_value_t = 36)]
     frames: u32,
+    #[command(flatten)]
+    features: super::features::FeatureArgs,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -36,13 +38,15 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 
 pub fn run(args: DemoArgs) -> CliResult {
     check_output(&args.output)?;
+    args.features.check()?;
     let opts = DemoOptions {
         seed: args.seed,
         width: args.size.0,
         height: args.size.1,
         frames: args.frames,
     };
-    let scene = demo_scene(&opts)?;
+    let mut scene = demo_scene(&opts)?;
+    args.features.apply(&mut scene)?;
     write_archive_path(&scene, &args.output)?;
     println!("wrote the demo scene to {}", args.output.display());
     print!("{}", scene.summary());

@@ -3,6 +3,7 @@ mod ablate;
 mod bench;
 mod demo;
 mod eval;
+mod features;
 mod info;
 mod pack;
 mod progress;

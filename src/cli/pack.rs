@@ -22,17 +22,20 @@ pub struct PackArgs {
     /// Keep at most this many frames (after --every).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     max_frames: Option<u32>,
+    #[command(flatten)]
+    features: super::features::FeatureArgs,
 }
 
 pub fn run(args: PackArgs) -> CliResult {
     check_output(&args.output)?;
+    args.features.check()?;
     let opts = ImportOptions {
         max_size: args.max_size,
         every: args.every,
         max_frames: args.max_frames,
     };
     let bar = progress::bar("loading");
-    let imported = import(&args.input, &opts, &mut |done, total| {
+    let mut imported = import(&args.input, &opts, &mut |done, total| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     })?;
@@ -40,6 +43,7 @@ pub fn run(args: PackArgs) -> CliResult {
     for w in &imported.warnings {
         eprintln!("warning: {w}");
     }
+    args.features.apply(&mut imported.scene)?;
     write_archive_path(&imported.scene, &args.output)?;
     println!(
         "packed {} ({:?} layout) into {}",

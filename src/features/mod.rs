@@ -1,11 +1,24 @@
 //! Dense image features for the archive (DESIGN §4): an extractor turns each frame into a
 //! feature map, the autoencoder compresses all frames' maps to 64-d codes, and a PCA of the
 //! codes is kept for display. Everything here runs on the CPU in the native packer.
+mod autoencoder;
+mod bake;
+mod baseline;
+pub mod dino;
+pub mod efficientnet;
 mod error;
 mod map;
+mod npy;
+pub mod ops;
+pub mod safetensors;
 
+pub use autoencoder::{Autoencoder, AutoencoderConfig, FitReport};
+pub use bake::{BakeOptions, BakeProgress, Baked, bake};
+pub use baseline::Baseline;
+pub use efficientnet::{EfficientNetConfig, EfficientNetExtractor, EfficientNetLite0};
 pub use error::FeatureError;
 pub use map::FeatureMap;
+pub use npy::{NpyLayout, npy_path_of_frame, parse_npy_map, read_npy_map, write_npy_f32};
 
 use image::RgbImage;
 

@@ -54,6 +54,8 @@ pub struct GpuContext {
     pub features: wgpu::Features,
     /// Compute passes can carry timestamp writes (see `gpu::timing`).
     pub has_timestamps: bool,
+    /// Set by [`GpuContext::treated_as_software`]: overrides what the adapter says.
+    software_override: Option<bool>,
 }
 
 impl GpuContext {
@@ -95,7 +97,15 @@ impl GpuContext {
             features,
             device,
             queue,
+            software_override: None,
         }
+    }
+
+    /// The same device, with kernels chosen as for a software rasterizer (`true`) or a GPU
+    /// (`false`) whatever the adapter is: to compare the kernel families on one device.
+    pub fn treated_as_software(mut self, software: bool) -> Self {
+        self.software_override = Some(software);
+        self
     }
 
     /// One line naming the adapter, driver and backend, for logs and bench reports.
@@ -105,6 +115,9 @@ impl GpuContext {
 
     /// True for software rasterizers (lavapipe, SwiftShader): slow, but exact enough for tests.
     pub fn is_software(&self) -> bool {
+        if let Some(software) = self.software_override {
+            return software;
+        }
         let named = |s: &str| s.to_ascii_lowercase().contains("swiftshader");
         self.adapter_info.device_type == wgpu::DeviceType::Cpu
             || named(&self.adapter_info.name)

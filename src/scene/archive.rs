@@ -30,73 +30,128 @@ pub mod limits {
 
 /// Reads a scene archive held in memory; `name` is used in error messages (file name or URL).
 pub fn read_archive(bytes: &[u8], name: &str) -> Result<Scene> {
-    let mut zip = ZipArchive::new(Cursor::new(bytes)).map_err(|source| SceneError::Zip {
-        file: name.into(),
-        source,
-    })?;
-    check_entry_names(&mut zip, name)?;
-    let manifest_bytes = read_entry(&mut zip, name, MANIFEST_FILE, limits::MAX_JSON_BYTES)?;
-    let at = |entry: &str| format!("{name}:{entry}");
-    let manifest: Manifest = serde_json::from_slice(&manifest_bytes).map_err(|source| SceneError::Json {
-        file: at(MANIFEST_FILE),
-        source,
-    })?;
-    check_manifest(&manifest, &at(MANIFEST_FILE))?;
+    let mut reader = ArchiveReader::new(Cursor::new(bytes), name)?;
+    while reader.decode_next_frame()? {}
+    reader.finish()
+}
 
-    let (w, h) = (manifest.width, manifest.height);
-    let mut frames = Vec::with_capacity(manifest.frames.len());
-    for (i, fe) in manifest.frames.iter().enumerate() {
+/// Reads an archive a piece at a time, for callers that must not stop for the whole decode
+/// (the web page decodes between animation frames): [`ArchiveReader::new`] checks the zip and
+/// the manifest, each [`ArchiveReader::decode_next_frame`] decodes one frame's images, and
+/// [`ArchiveReader::finish`] reads the feature codes and labels and returns the scene.
+/// [`read_archive`] is these three in a row; both check exactly the same things.
+pub struct ArchiveReader<R: Read + Seek> {
+    zip: ZipArchive<R>,
+    name: String,
+    manifest: Manifest,
+    frames: Vec<Frame>,
+}
+
+impl<R: Read + Seek> ArchiveReader<R> {
+    /// Opens the zip, checks its entry names and reads and checks `scene.json`.
+    pub fn new(source: R, name: &str) -> Result<Self> {
+        let mut zip = ZipArchive::new(source).map_err(|source| SceneError::Zip {
+            file: name.into(),
+            source,
+        })?;
+        check_entry_names(&mut zip, name)?;
+        let manifest_bytes = read_entry(&mut zip, name, MANIFEST_FILE, limits::MAX_JSON_BYTES)?;
+        let at = format!("{name}:{MANIFEST_FILE}");
+        let manifest: Manifest = serde_json::from_slice(&manifest_bytes).map_err(|source| SceneError::Json {
+            file: at.clone(),
+            source,
+        })?;
+        check_manifest(&manifest, &at)?;
+        let frames = Vec::with_capacity(manifest.frames.len());
+        Ok(ArchiveReader {
+            zip,
+            name: name.into(),
+            manifest,
+            frames,
+        })
+    }
+
+    /// The checked manifest (frame count, size, classes...).
+    pub fn manifest(&self) -> &Manifest {
+        &self.manifest
+    }
+
+    /// Frames decoded so far.
+    pub fn frames_done(&self) -> usize {
+        self.frames.len()
+    }
+
+    pub fn frame_count(&self) -> usize {
+        self.manifest.frames.len()
+    }
+
+    /// Decodes the next frame (colour, depth, ground truth); `false` once every frame is done.
+    pub fn decode_next_frame(&mut self) -> Result<bool> {
+        let i = self.frames.len();
+        let Some(fe) = self.manifest.frames.get(i) else {
+            return Ok(false);
+        };
+        let name = self.name.as_str();
+        let zip = &mut self.zip;
+        let at = |entry: &str| format!("{name}:{entry}");
+        let (w, h) = (self.manifest.width, self.manifest.height);
         let pose = Pose::from_row_major(&fe.pose);
         pose.check()
             .map_err(|p| SceneError::invalid(at(MANIFEST_FILE), format!("frame {i}: {p}")))?;
         let image_limit = w as u64 * h as u64 * 8 + (1 << 20);
-        let rgb_bytes = read_entry(&mut zip, name, &fe.rgb, image_limit)?;
+        let rgb_bytes = read_entry(zip, name, &fe.rgb, image_limit)?;
         let rgb = decode_rgb(&rgb_bytes, &at(&fe.rgb), w, h)?;
         let depth = match &fe.depth {
-            Some(d) => Some(decode_depth(
-                &read_entry(&mut zip, name, d, image_limit)?,
-                &at(d),
-                w,
-                h,
-            )?),
+            Some(d) => Some(decode_depth(&read_entry(zip, name, d, image_limit)?, &at(d), w, h)?),
             None => None,
         };
         let gt = match &fe.gt {
-            Some(g) => Some(decode_gt(&read_entry(&mut zip, name, g, image_limit)?, &at(g), w, h)?),
+            Some(g) => Some(decode_gt(&read_entry(zip, name, g, image_limit)?, &at(g), w, h)?),
             None => None,
         };
-        frames.push(Frame {
+        self.frames.push(Frame {
             pose,
             rgb,
             depth,
             gt,
             source: fe.source.clone(),
         });
+        Ok(true)
     }
 
-    let features = match &manifest.features {
-        Some(fe) => Some(read_features(&mut zip, name, fe, manifest.frame_count)?),
-        None => None,
-    };
-    let labels = match &manifest.labels {
-        Some(l) => {
-            let text = read_entry(&mut zip, name, l, limits::MAX_JSON_BYTES)?;
-            Some(LabelSet::from_json(&text, &at(l), manifest.frame_count)?)
-        }
-        None => None,
-    };
-    Ok(Scene {
-        width: w,
-        height: h,
-        intrinsics: manifest.intrinsics,
-        depth_scale: manifest.depth_scale,
-        bounds: manifest.bounds,
-        frames,
-        classes: manifest.classes,
-        features,
-        labels,
-        provenance: manifest.provenance,
-    })
+    /// Decodes the frames not yet decoded, then the feature codes and labels: the scene.
+    pub fn finish(mut self) -> Result<Scene> {
+        while self.decode_next_frame()? {}
+        let name = self.name.as_str();
+        let manifest = self.manifest;
+        let features = match &manifest.features {
+            Some(fe) => Some(read_features(&mut self.zip, name, fe, manifest.frame_count)?),
+            None => None,
+        };
+        let labels = match &manifest.labels {
+            Some(l) => {
+                let text = read_entry(&mut self.zip, name, l, limits::MAX_JSON_BYTES)?;
+                Some(LabelSet::from_json(
+                    &text,
+                    &format!("{name}:{l}"),
+                    manifest.frame_count,
+                )?)
+            }
+            None => None,
+        };
+        Ok(Scene {
+            width: manifest.width,
+            height: manifest.height,
+            intrinsics: manifest.intrinsics,
+            depth_scale: manifest.depth_scale,
+            bounds: manifest.bounds,
+            frames: self.frames,
+            classes: manifest.classes,
+            features,
+            labels,
+            provenance: manifest.provenance,
+        })
+    }
 }
 
 /// Reads a scene archive from a file.

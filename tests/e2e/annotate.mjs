@@ -34,9 +34,11 @@ const chromiumPath = process.env.CHROMIUM || "/usr/bin/chromium";
 const STEPS = Number(process.env.E2E_STEPS || 30);
 const MIN_IOU = Number(process.env.E2E_MIN_IOU || 0.2);
 // The page's options for a CPU rasterizer: the tiny model, frames at a quarter of their size
-// (40 x 30), and batches of 1200 rays, one render tile per frame (SwiftShader spends about 2.5 s
-// on every submission whatever its size, so fewer, larger batches get more done).
-const PAGE_OPTIONS = process.env.E2E_PAGE_OPTIONS || "model=tiny&res=4&rays=1200";
+// (40 x 30), and batches of 1200 rays, one render tile per frame (on SwiftShader every wait for
+// the GPU also waits for the page's repaints, so fewer, larger batches get more done). coarse=4
+// makes the page render a stale mask at 1/4 first even though a 40 x 30 frame is one tile
+// anyway, so the test sees the quick render come before the full one.
+const PAGE_OPTIONS = process.env.E2E_PAGE_OPTIONS || "model=tiny&res=4&rays=1200&coarse=4";
 // Frames scribbled on: spread around the demo's orbit so every object is seen from several
 // sides. Brush radius is the app's default for 160 x 120 frames.
 // Two frames from opposite sides of the orbit; more are added only when a class is missing.
@@ -234,10 +236,38 @@ try {
     console.log(`     ${STEPS} steps in ${seconds.toFixed(0)} s (${(STEPS / seconds).toFixed(2)} steps/s; page says ` +
       `sps=${statusField(s, "sps")}, loss=${statusField(s, "loss")})`);
   });
-  await goToFrame(page, 5);
-  await waitForStatus(page, (t) => Number(statusField(t, "rendered")) >= 0, "a render of frame 5", 120_000).catch(() => {});
+  await checks.check("a frame shown is refreshed at low resolution first, then in full", async () => {
+    await goToFrame(page, 5);
+    const shown = Date.now();
+    const seen = [];
+    let last;
+    while (Date.now() - shown < 240_000) {
+      last = await status(page);
+      const mask = statusField(last, "mask");
+      if (statusField(last, "frame") === "5" && seen[seen.length - 1]?.[0] !== mask) seen.push([mask, Date.now() - shown]);
+      if (mask === "full") break;
+      await new Promise((r) => setTimeout(r, 100));
+    }
+    console.log(`     masks of frame 5: ${seen.map(([m, ms]) => `${m} at ${(ms / 1000).toFixed(1)} s`).join(", ")}; ` +
+      `page says refresh_ms=${statusField(last, "refresh_ms")}, step_ms=${statusField(last, "step_ms")}`);
+    const order = seen.map(([m]) => m).filter((m) => m !== "none");
+    assert(order[0] === "coarse" && order.includes("full"), `masks came as ${order.join(", ") || "nothing"}`);
+  });
   const shot = await page.screenshot({ path: join(outDir, "annotate-mask-frame5.png") });
   console.log(`     (screenshot of frame 5 with the mask: ${saturatedColours(shot)} saturated colours)`);
+  await checks.check("the side panel shows the rendered features through a PCA", async () => {
+    const field = statusField(await status(page), "features");
+    assert(field, "the status gives no features panel (no render of this frame shown?)");
+    const [x, y, width, height] = field.split(",").map(Number);
+    assert(width > 20 && height > 10, `the features image is ${width} x ${height}`);
+    const png = await page.screenshot({ path: join(outDir, "annotate-features.png"), clip: { x, y, width, height } });
+    const { data, channels } = decodePng(png);
+    const distinct = new Set();
+    for (let i = 0; i < data.length; i += channels) distinct.add((data[i] << 16) | (data[i + 1] << 8) | data[i + 2]);
+    console.log(`     features panel ${width} x ${height}: ${distinct.size} distinct colours, ${saturatedColours(png)} saturated`);
+    // A blank panel is one colour; a flat grey fallback a handful (edges).
+    assert(distinct.size >= 30, `only ${distinct.size} distinct colours: is the panel blank?`);
+  });
 
   // Download the masks and score them.
   await checks.check(`the downloaded masks reach a mean IoU of ${MIN_IOU}`, async () => {

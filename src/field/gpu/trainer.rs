@@ -35,6 +35,9 @@ pub use super::view::{DepthGuide, FrameAssembler, RenderedFrame, ViewCamera};
 
 const SH: u32 = 16;
 
+/// A named stage of the training step and how to record it.
+type Stage<'a> = (&'static str, Box<dyn Fn(&mut wgpu::ComputePass<'_>) + 'a>);
+
 /// Losses of one step, as read back.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StepLosses {
@@ -521,9 +524,24 @@ impl Trainer {
             .write_buffer(&self.step_uniforms, 0, bytemuck::bytes_of(&uniforms));
         let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
         encoder.clear_buffer(&self.optimizer.grads, 0, None);
+        let stages = self.stages();
+        for (name, record) in &stages {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(name),
+                timestamp_writes: timer.timestamp_writes(name),
+            });
+            record(&mut pass);
+        }
+        drop(stages);
+        timer.resolve(&mut encoder);
+        self.ctx.queue.submit([encoder.finish()]);
+        Ok(Some(total_by_name(&timer.read(&self.ctx).times().await?)))
+    }
+
+    /// The stages of a training step in order, each recording its passes.
+    fn stages(&self) -> Vec<Stage<'_>> {
         let built = "training MLPs are built with gradients";
-        type Stage<'a> = (&'a str, Box<dyn Fn(&mut wgpu::ComputePass<'_>) + 'a>);
-        let stages: Vec<Stage<'_>> = vec![
+        vec![
             ("rays", Box::new(|p| self.ray_batch.record(p))),
             ("samples", Box::new(|p| self.sample_points.record(p))),
             ("encoding", Box::new(|p| self.encode.record(p))),
@@ -554,18 +572,43 @@ impl Trainer {
             ),
             ("encoding backward", Box::new(|p| self.hash_backward.record(p))),
             ("adam", Box::new(|p| self.adam.record(p))),
-        ];
-        for (name, record) in &stages {
+        ]
+    }
+
+    /// Stages in one training step (see [`Trainer::submit_stage`]).
+    pub fn stage_count(&self) -> usize {
+        self.stages().len()
+    }
+
+    /// Records stage `index` of a training step alone in its own command buffer and submits it;
+    /// stage 0 starts a new step. Submitting every stage in order trains one step exactly as
+    /// [`Trainer::train`] does. For wall-clock profiling where timestamp queries are missing
+    /// (the caller times each submission until the GPU is done). Returns the stage's name.
+    pub fn submit_stage(&mut self, index: usize) -> Option<&'static str> {
+        if index == 0 {
+            self.step += 1;
+            let uniforms = StepUniforms::for_step(&self.cfg, self.step, self.seed, self.learning_rate());
+            self.ctx
+                .queue
+                .write_buffer(&self.step_uniforms, 0, bytemuck::bytes_of(&uniforms));
+        }
+        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        if index == 0 {
+            encoder.clear_buffer(&self.optimizer.grads, 0, None);
+        }
+        let stages = self.stages();
+        let (name, record) = stages.get(index)?;
+        {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some(name),
-                timestamp_writes: timer.timestamp_writes(name),
+                timestamp_writes: None,
             });
             record(&mut pass);
         }
+        let name = *name;
         drop(stages);
-        timer.resolve(&mut encoder);
         self.ctx.queue.submit([encoder.finish()]);
-        Ok(Some(total_by_name(&timer.read(&self.ctx).times().await?)))
+        Some(name)
     }
 
     /// Renders frame `frame` at its own resolution, in tiles of one batch of rays each, with the

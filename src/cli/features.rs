@@ -1,0 +1,218 @@
+//! `--features` of `pack` and `demo-scene`: bake feature codes into the archive (DESIGN §4).
+use std::path::PathBuf;
+
+use clap::{Args, ValueEnum};
+use image::RgbImage;
+use image::imageops::FilterType;
+use scribblefield::features::dino::{DinoExtractor, DinoOutput, DinoVit};
+use scribblefield::features::{
+    BakeOptions, BakeProgress, Baseline, EfficientNetConfig, EfficientNetExtractor, Extractor, FeatureError,
+    FeatureMap, NpyLayout, bake, dino, efficientnet, npy_path_of_frame, read_npy_map,
+};
+use scribblefield::scene::Scene;
+
+use super::{CliResult, progress};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum FeatureKind {
+    /// Colour and gradient statistics at several scales; needs no weights.
+    Baseline,
+    /// ImageNet EfficientNet-Lite0 group outputs (weights: `--weights`, $SCRIBBLEFIELD_EFFICIENTNET or ../shared/models).
+    EfficientnetLite0,
+    /// DINO ViT-S/8 last-block keys at stride 8, from a checkpoint you supply (`--weights`,
+    /// $SCRIBBLEFIELD_DINO); never run on real weights here, see docs/features.md.
+    DinoVits8,
+    /// Precomputed per-frame maps from `--features-from DIR` (.npy, any dimension and size).
+    Import,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum LayoutArg {
+    Hwc,
+    Chw,
+}
+
+#[derive(Args, Debug)]
+pub struct FeatureArgs {
+    /// Bake 64-d feature codes into the archive from this extractor (an autoencoder compresses its features).
+    #[arg(long, value_enum)]
+    features: Option<FeatureKind>,
+    /// With `--features import`: the folder of per-frame `.npy` maps (`<frame name>.npy` or `00000.npy`, ...).
+    #[arg(long)]
+    features_from: Option<PathBuf>,
+    /// Axis order of the imported arrays.
+    #[arg(long, value_enum, default_value = "hwc")]
+    npy_layout: LayoutArg,
+    /// Pixels per feature cell of the computed extractors.
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=64))]
+    feature_stride: u32,
+    /// EfficientNet-Lite0 weights (safetensors); see docs/features.md for where to get them.
+    #[arg(long)]
+    weights: Option<PathBuf>,
+    /// EfficientNet-Lite0 groups (0-6, strides 2,4,8,16,16,32,32) whose outputs make the features.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3")]
+    groups: Vec<usize>,
+    /// Frames whose shorter side is below this are upscaled by a whole factor before a network
+    /// sees them (ImageNet networks expect objects of a certain size); the grid still follows
+    /// `--feature-stride` in the frame's own pixels.
+    #[arg(long, default_value_t = 224)]
+    network_min_side: u32,
+    /// Training steps of the autoencoder.
+    #[arg(long, default_value_t = 3000, value_parser = clap::value_parser!(u32).range(1..))]
+    autoencoder_steps: u32,
+}
+
+impl FeatureArgs {
+    /// Refuses combinations that cannot mean what the user wants, before any slow work.
+    pub fn check(&self) -> CliResult {
+        match (self.features, &self.features_from) {
+            (Some(FeatureKind::Import), None) => {
+                Err("--features import needs --features-from DIR (the folder of .npy maps)".into())
+            }
+            (Some(FeatureKind::Import), Some(dir)) if !dir.is_dir() => {
+                Err(format!("--features-from {}: not a directory", dir.display()).into())
+            }
+            (Some(FeatureKind::EfficientnetLite0), _) => {
+                efficientnet::resolve_weights(self.weights.as_deref())?;
+                Ok(())
+            }
+            (Some(FeatureKind::DinoVits8), _) => {
+                dino::resolve_weights(self.weights.as_deref())?;
+                Ok(())
+            }
+            (k, Some(_)) if k != Some(FeatureKind::Import) => {
+                Err("--features-from only goes with --features import".into())
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Bakes the codes into `scene` when `--features` was given.
+    pub fn apply(&self, scene: &mut Scene) -> CliResult {
+        let Some(kind) = self.features else { return Ok(()) };
+        let mut opts = BakeOptions::default();
+        opts.autoencoder.steps = self.autoencoder_steps;
+        let started = std::time::Instant::now();
+        let bar = progress::bar("features");
+        let quiet = bar.is_hidden();
+        let on_progress = |p: BakeProgress| match p {
+            BakeProgress::Extracting { done, total } => {
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            }
+            BakeProgress::Fitting { step, steps, loss } => {
+                if step == 100 {
+                    bar.set_message("autoencoder");
+                    bar.set_length(steps as u64);
+                }
+                bar.set_position(step as u64);
+                bar.set_message(format!("loss {loss:.3}"));
+                if quiet && step % 500 == 0 {
+                    eprintln!("autoencoder step {step}/{steps}: loss {loss:.4}");
+                }
+            }
+            BakeProgress::Encoding => bar.set_message("encoding"),
+        };
+        let frames = scene.frames.len();
+        let baked = match kind {
+            FeatureKind::Baseline => {
+                let ex = Baseline::with_stride(self.feature_stride);
+                bake(
+                    frames,
+                    |i| extract_frame(&ex, &scene.frames[i].rgb, i),
+                    &ex.describe(),
+                    &opts,
+                    on_progress,
+                )?
+            }
+            FeatureKind::EfficientnetLite0 => {
+                let path = efficientnet::resolve_weights(self.weights.as_deref())?;
+                let k = upscale_factor(scene.width, scene.height, self.network_min_side);
+                let config = EfficientNetConfig {
+                    groups: self.groups.clone(),
+                    stride: self.feature_stride * k,
+                    normalize: true,
+                };
+                let ex = EfficientNetExtractor::load(&path, config)?;
+                let describe = match k {
+                    1 => ex.describe(),
+                    k => format!("{} on frames upscaled x{k}", ex.describe()),
+                };
+                let load = |i: usize| extract_upscaled(&ex, &scene.frames[i].rgb, k, i);
+                bake(frames, load, &describe, &opts, on_progress)?
+            }
+            FeatureKind::DinoVits8 => {
+                let path = dino::resolve_weights(self.weights.as_deref())?;
+                let k = upscale_factor(scene.width, scene.height, self.network_min_side);
+                let ex = DinoExtractor {
+                    vit: DinoVit::load_vits8(&path)?,
+                    output: DinoOutput::Keys,
+                };
+                let describe = format!("{} on frames upscaled x{k}", ex.describe());
+                bake(
+                    frames,
+                    |i| extract_upscaled(&ex, &scene.frames[i].rgb, k, i),
+                    &describe,
+                    &opts,
+                    on_progress,
+                )?
+            }
+            FeatureKind::Import => {
+                let dir = self
+                    .features_from
+                    .as_ref()
+                    .ok_or("--features import needs --features-from DIR")?;
+                let layout = match self.npy_layout {
+                    LayoutArg::Hwc => NpyLayout::Hwc,
+                    LayoutArg::Chw => NpyLayout::Chw,
+                };
+                let load = |i: usize| {
+                    let source = scene.frames[i].source.as_deref();
+                    read_npy_map(&npy_path_of_frame(dir, i, source)?, layout)
+                };
+                bake(
+                    frames,
+                    load,
+                    &format!("imported from {}", dir.display()),
+                    &opts,
+                    on_progress,
+                )?
+            }
+        };
+        bar.finish_and_clear();
+        println!(
+            "features: {} -> {} dims on a {} x {} grid in {:.1} s; autoencoder reconstruction MSE {:.3} (mean predictor: {:.3}), code sparsity {:.2}",
+            baked.input_dim,
+            baked.codes.dim,
+            baked.codes.width,
+            baked.codes.height,
+            started.elapsed().as_secs_f64(),
+            baked.fit.reconstruction_mse,
+            baked.fit.baseline_mse,
+            baked.fit.code_sparsity
+        );
+        scene.features = Some(baked.codes);
+        Ok(())
+    }
+}
+
+/// The whole factor that brings the shorter side to at least `min_side` (1 when it already is).
+fn upscale_factor(width: u32, height: u32, min_side: u32) -> u32 {
+    min_side.div_ceil(width.min(height).max(1)).max(1)
+}
+
+/// Features of frame `i` from its colour upscaled `k` times (bilinear).
+fn extract_upscaled(ex: &dyn Extractor, rgb: &RgbImage, k: u32, i: usize) -> Result<FeatureMap, FeatureError> {
+    if k == 1 {
+        return extract_frame(ex, rgb, i);
+    }
+    let big = image::imageops::resize(rgb, rgb.width() * k, rgb.height() * k, FilterType::Triangle);
+    extract_frame(ex, &big, i)
+}
+
+fn extract_frame(ex: &dyn Extractor, rgb: &RgbImage, i: usize) -> Result<FeatureMap, FeatureError> {
+    ex.extract(rgb).map_err(|e| match e {
+        FeatureError::Frame { problem, .. } => FeatureError::Frame { frame: i, problem },
+        e => e,
+    })
+}

@@ -1,0 +1,249 @@
+//! A minimal reader of the safetensors format: an 8-byte little-endian header length, a JSON
+//! header `{name: {"dtype", "shape", "data_offsets": [begin, end]}, "__metadata__"?: {..}}` and
+//! the raw little-endian tensor bytes (offsets are relative to the end of the header).
+//! Only `F32` tensors are read; other dtypes are listed (their byte sizes checked) but not decoded.
+use super::FeatureError;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct TensorInfo {
+    pub dtype: String,
+    pub shape: Vec<usize>,
+    /// Byte range in the data section.
+    pub begin: usize,
+    pub end: usize,
+}
+
+/// A whole safetensors file in memory (the weights this crate reads are tens of MB).
+pub struct SafeTensors {
+    /// The file's name as given, for error messages.
+    file: String,
+    tensors: BTreeMap<String, TensorInfo>,
+    data: Vec<u8>,
+}
+
+fn dtype_size(dtype: &str) -> Option<usize> {
+    Some(match dtype {
+        "BOOL" | "U8" | "I8" | "F8_E4M3" | "F8_E5M2" => 1,
+        "I16" | "U16" | "F16" | "BF16" => 2,
+        "I32" | "U32" | "F32" => 4,
+        "I64" | "U64" | "F64" => 8,
+        _ => return None,
+    })
+}
+
+impl SafeTensors {
+    pub fn open(path: &Path) -> Result<Self, FeatureError> {
+        let bytes = std::fs::read(path).map_err(|e| FeatureError::io(path, e))?;
+        Self::from_bytes(path.display().to_string(), bytes)
+    }
+
+    /// Parses `bytes` (the content of a file named `file` in messages).
+    pub fn from_bytes(file: impl Into<String>, mut bytes: Vec<u8>) -> Result<Self, FeatureError> {
+        let file = file.into();
+        let bad = |problem: String| FeatureError::invalid(file.clone(), problem);
+        if bytes.len() < 8 {
+            return Err(bad(format!(
+                "not a safetensors file: {} bytes, shorter than the 8-byte header length (truncated?)",
+                bytes.len()
+            )));
+        }
+        let header_len = u64::from_le_bytes(bytes[..8].try_into().unwrap());
+        let available = bytes.len() as u64 - 8;
+        if header_len > available {
+            return Err(bad(format!(
+                "safetensors header says {header_len} header bytes but the file has only {available} after the \
+                 length (truncated, or not a safetensors file)"
+            )));
+        }
+        let header_end = 8 + header_len as usize;
+        let header: serde_json::Value = serde_json::from_slice(&bytes[8..header_end])
+            .map_err(|e| bad(format!("safetensors header is not valid JSON: {e}")))?;
+        let serde_json::Value::Object(entries) = header else {
+            return Err(bad("safetensors header is not a JSON object".into()));
+        };
+        let data_len = bytes.len() - header_end;
+        let mut tensors = BTreeMap::new();
+        for (name, entry) in entries {
+            if name == "__metadata__" {
+                continue;
+            }
+            let bad_entry = |what: &str| bad(format!("tensor `{name}`: {what} in the safetensors header"));
+            let dtype = entry
+                .get("dtype")
+                .and_then(|d| d.as_str())
+                .ok_or_else(|| bad_entry("no string `dtype`"))?
+                .to_string();
+            let shape = entry
+                .get("shape")
+                .and_then(|s| s.as_array())
+                .ok_or_else(|| bad_entry("no array `shape`"))?
+                .iter()
+                .map(|d| d.as_u64().map(|d| d as usize))
+                .collect::<Option<Vec<_>>>()
+                .ok_or_else(|| bad_entry("a `shape` that is not a list of non-negative integers"))?;
+            let offsets = entry
+                .get("data_offsets")
+                .and_then(|o| o.as_array())
+                .filter(|o| o.len() == 2)
+                .and_then(|o| Some((o[0].as_u64()? as usize, o[1].as_u64()? as usize)))
+                .ok_or_else(|| bad_entry("no `data_offsets` [begin, end]"))?;
+            let (begin, end) = offsets;
+            if begin > end || end > data_len {
+                return Err(bad(format!(
+                    "tensor `{name}`: data_offsets [{begin}, {end}] outside the {data_len} data bytes (truncated file?)"
+                )));
+            }
+            let size = dtype_size(&dtype).ok_or_else(|| bad_entry(&format!("unknown dtype `{dtype}`")))?;
+            let count: usize = shape.iter().product();
+            if count * size != end - begin {
+                return Err(bad(format!(
+                    "tensor `{name}`: shape {shape:?} of {dtype} needs {} bytes but data_offsets span {}",
+                    count * size,
+                    end - begin
+                )));
+            }
+            tensors.insert(
+                name,
+                TensorInfo {
+                    dtype,
+                    shape,
+                    begin,
+                    end,
+                },
+            );
+        }
+        bytes.drain(..header_end);
+        Ok(SafeTensors {
+            file,
+            tensors,
+            data: bytes,
+        })
+    }
+
+    pub fn file(&self) -> &str {
+        &self.file
+    }
+
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.tensors.keys().map(|k| k.as_str())
+    }
+
+    pub fn info(&self, name: &str) -> Option<&TensorInfo> {
+        self.tensors.get(name)
+    }
+
+    /// The F32 tensor `name`, which must have shape `shape`.
+    pub fn f32(&self, name: &str, shape: &[usize]) -> Result<Vec<f32>, FeatureError> {
+        let info = self.tensors.get(name).ok_or_else(|| {
+            FeatureError::invalid(
+                self.file.clone(),
+                format!("tensor `{name}` missing ({} tensors in the file)", self.tensors.len()),
+            )
+        })?;
+        if info.dtype != "F32" {
+            return Err(FeatureError::invalid(
+                self.file.clone(),
+                format!("tensor `{name}` is {}, expected F32", info.dtype),
+            ));
+        }
+        if info.shape != shape {
+            return Err(FeatureError::invalid(
+                self.file.clone(),
+                format!("tensor `{name}` has shape {:?}, expected {shape:?}", info.shape),
+            ));
+        }
+        Ok(self.data[info.begin..info.end]
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect())
+    }
+}
+
+/// Serialises F32 tensors as a safetensors file (for tests and small tools).
+pub fn to_bytes(tensors: &[(&str, &[usize], &[f32])]) -> Vec<u8> {
+    let mut header = serde_json::Map::new();
+    let mut data = Vec::new();
+    for (name, shape, values) in tensors {
+        let begin = data.len();
+        for v in values.iter() {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
+        header.insert(
+            name.to_string(),
+            serde_json::json!({"dtype": "F32", "shape": shape, "data_offsets": [begin, data.len()]}),
+        );
+    }
+    let mut json = serde_json::to_vec(&serde_json::Value::Object(header)).unwrap();
+    while !json.len().is_multiple_of(8) {
+        json.push(b' ');
+    }
+    let mut out = (json.len() as u64).to_le_bytes().to_vec();
+    out.extend_from_slice(&json);
+    out.extend_from_slice(&data);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> Vec<u8> {
+        to_bytes(&[
+            ("a.weight", &[2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, -6.5]),
+            ("b", &[1], &[7.0]),
+        ])
+    }
+
+    fn message(r: Result<impl Sized, FeatureError>) -> String {
+        match r {
+            Ok(_) => panic!("expected an error"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn reads_f32_tensors_by_name_and_shape() {
+        let st = SafeTensors::from_bytes("w.safetensors", sample()).unwrap();
+        assert_eq!(
+            st.f32("a.weight", &[2, 3]).unwrap(),
+            vec![1.0, 2.0, 3.0, 4.0, 5.0, -6.5]
+        );
+        assert_eq!(st.f32("b", &[1]).unwrap(), vec![7.0]);
+        assert_eq!(st.names().collect::<Vec<_>>(), vec!["a.weight", "b"]);
+    }
+
+    #[test]
+    fn a_missing_tensor_or_a_wrong_shape_names_the_file_and_the_tensor() {
+        let st = SafeTensors::from_bytes("w.safetensors", sample()).unwrap();
+        let m = message(st.f32("c.bias", &[3]));
+        assert!(m.contains("w.safetensors") && m.contains("`c.bias` missing"), "{m}");
+        let m = message(st.f32("a.weight", &[3, 2]));
+        assert!(
+            m.contains("w.safetensors") && m.contains("`a.weight` has shape [2, 3], expected [3, 2]"),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn a_truncated_file_or_a_bad_header_is_invalid_with_the_file_named() {
+        let bytes = sample();
+        let m = message(SafeTensors::from_bytes(
+            "w.safetensors",
+            bytes[..bytes.len() - 4].to_vec(),
+        ));
+        assert!(
+            m.contains("w.safetensors") && m.contains("truncated") && m.contains("`b`"),
+            "{m}"
+        );
+        let m = message(SafeTensors::from_bytes("w.safetensors", bytes[..20].to_vec()));
+        assert!(m.contains("w.safetensors") && m.contains("truncated"), "{m}");
+        let m = message(SafeTensors::from_bytes("w.safetensors", bytes[..5].to_vec()));
+        assert!(m.contains("w.safetensors") && m.contains("truncated"), "{m}");
+        let mut garbled = bytes.clone();
+        garbled[8] = b'[';
+        let m = message(SafeTensors::from_bytes("w.safetensors", garbled));
+        assert!(m.contains("w.safetensors") && m.contains("not valid JSON"), "{m}");
+    }
+}
