@@ -191,6 +191,14 @@ fn simulated_user_clicks_wrong_pixels_and_resumes_where_it_stopped() {
     let state = simulate::run(&ctx, &scene, &s, options, &out, &mut |_| {}).unwrap();
     assert_eq!(state.curve, second);
 
+    // A second run while one writes the folder is refused; a lock left by a dead process is not.
+    assert!(!out.join(simulate::LOCK_FILE).exists(), "the lock outlived its run");
+    std::fs::write(out.join(simulate::LOCK_FILE), "1").unwrap(); // pid 1 is alive
+    let err = simulate::run(&ctx, &scene, &s, options, &out, &mut |_| {}).unwrap_err();
+    assert!(err.to_string().contains("another run (process 1)"), "{err}");
+    std::fs::write(out.join(simulate::LOCK_FILE), "4000000000").unwrap(); // no such process
+    simulate::run(&ctx, &scene, &s, options, &out, &mut |_| {}).unwrap();
+
     // Other settings are refused, naming the field; --restart starts over.
     let other = SimulateSettings {
         steps_per_round: 30,

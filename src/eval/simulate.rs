@@ -39,6 +39,8 @@ pub const STATE_FILE: &str = "simulate.json";
 pub const CURVE_FILE: &str = "curve.csv";
 pub const LABELS_FILE: &str = "labels.json";
 pub const TRAINER_FILE: &str = "trainer.bin";
+/// Held while a run writes the folder: two runs in one folder would overwrite each other.
+pub const LOCK_FILE: &str = "simulate.lock";
 const STATE_FORMAT: &str = "scribblefield-simulate";
 const STATE_VERSION: u32 = 1;
 const TRAINER_MAGIC: &[u8; 8] = b"SFTRAIN1";
@@ -332,6 +334,7 @@ pub fn run(
     settings.check()?;
     check_scene(scene, settings)?;
     std::fs::create_dir_all(out).map_err(io_error(out))?;
+    let _lock = RunLock::acquire(out)?;
     let mut scene_only = scene.clone();
     scene_only.labels = None;
     let scene = &scene_only;
@@ -453,6 +456,53 @@ pub fn run(
         save(out, &state, &labels, &trainer)?;
     }
     Ok(state)
+}
+
+/// `simulate.lock` holding the process id; removed when dropped. A lock left by a process that
+/// no longer runs (killed, interrupted) is taken over where that can be checked (`/proc`).
+struct RunLock {
+    path: PathBuf,
+}
+
+impl RunLock {
+    fn acquire(out: &Path) -> Result<RunLock, SimulateError> {
+        let path = out.join(LOCK_FILE);
+        for _ in 0..2 {
+            match std::fs::OpenOptions::new().write(true).create_new(true).open(&path) {
+                Ok(mut file) => {
+                    use std::io::Write;
+                    write!(file, "{}", std::process::id()).map_err(io_error(&path))?;
+                    return Ok(RunLock { path });
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                    let holder = std::fs::read_to_string(&path).unwrap_or_default();
+                    let pid = holder.trim();
+                    let proc = Path::new("/proc");
+                    let stale = proc.join("self").exists() && !pid.is_empty() && !proc.join(pid).exists();
+                    if !stale {
+                        return Err(SimulateError::Output {
+                            path,
+                            problem: format!(
+                                "another run (process {pid}) is writing this folder; wait for it, or delete the lock file if no such process runs"
+                            ),
+                        });
+                    }
+                    std::fs::remove_file(&path).map_err(io_error(&path))?;
+                }
+                Err(e) => return Err(io_error(&path)(e)),
+            }
+        }
+        Err(SimulateError::Output {
+            path,
+            problem: "could not take the lock".into(),
+        })
+    }
+}
+
+impl Drop for RunLock {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
 }
 
 fn check_scene(scene: &Scene, settings: &SimulateSettings) -> Result<(), SimulateError> {
