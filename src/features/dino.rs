@@ -58,20 +58,14 @@ pub fn resolve_weights(flag: Option<&Path>) -> Result<PathBuf, FeatureError> {
 
 /// [`resolve_weights`] with the environment variable's value given.
 pub fn resolve_weights_from(flag: Option<&Path>, env: Option<OsString>) -> Result<PathBuf, FeatureError> {
-    let (path, from) = match (flag, env.filter(|v| !v.is_empty())) {
-        (Some(p), _) => (p.to_path_buf(), "given".to_string()),
-        (None, Some(v)) => (PathBuf::from(v), format!("from {WEIGHTS_ENV}")),
-        (None, None) => (PathBuf::from(DEFAULT_WEIGHTS), "the default".to_string()),
-    };
-    if path.is_file() {
-        Ok(path)
-    } else {
-        Err(FeatureError::Missing {
-            what: format!("DINO ViT-S/8 weights ({from})"),
-            path,
-            hint: weights_hint(),
-        })
-    }
+    super::weights::resolve_weights_file(
+        flag,
+        env,
+        WEIGHTS_ENV,
+        DEFAULT_WEIGHTS,
+        "DINO ViT-S/8 weights",
+        weights_hint,
+    )
 }
 
 /// The network input for an RGB frame: ImageNet-normalised, channels last, padded by repeating
@@ -174,10 +168,7 @@ impl DinoVit {
     /// Loads DINO ViT-S/8 from `path`, checking that the file is one (width 384, patch 8,
     /// 12 blocks, MLP 1536).
     pub fn load_vits8(path: &Path) -> Result<Self, FeatureError> {
-        if !path.is_file() {
-            return Err(resolve_weights_from(Some(path), None).unwrap_err());
-        }
-        let st = SafeTensors::open(path)?;
+        let st = SafeTensors::open(&resolve_weights_from(Some(path), None)?)?;
         let vit = Self::from_safetensors(&st, VITS8_HEADS)?;
         let mlp = vit.blocks.first().map_or(0, |b| b.fc1.cout);
         if (vit.dim, vit.patch, vit.blocks.len(), mlp) != (VITS8_DIM, VITS8_PATCH, VITS8_DEPTH, VITS8_MLP) {

@@ -57,24 +57,14 @@ pub fn resolve_weights(flag: Option<&Path>) -> Result<PathBuf, FeatureError> {
 
 /// [`resolve_weights`] with the environment variable's value given.
 pub fn resolve_weights_from(flag: Option<&Path>, env: Option<OsString>) -> Result<PathBuf, FeatureError> {
-    let (path, from) = match (flag, env.filter(|v| !v.is_empty())) {
-        (Some(p), _) => (p.to_path_buf(), "given".to_string()),
-        (None, Some(v)) => (PathBuf::from(v), format!("from {WEIGHTS_ENV}")),
-        (None, None) => (PathBuf::from(DEFAULT_WEIGHTS), "the default".to_string()),
-    };
-    if path.is_file() {
-        Ok(path)
-    } else {
-        Err(missing(&path, &from))
-    }
-}
-
-fn missing(path: &Path, from: &str) -> FeatureError {
-    FeatureError::Missing {
-        what: format!("EfficientNet-Lite0 weights ({from})"),
-        path: path.to_path_buf(),
-        hint: weights_hint(),
-    }
+    super::weights::resolve_weights_file(
+        flag,
+        env,
+        WEIGHTS_ENV,
+        DEFAULT_WEIGHTS,
+        "EfficientNet-Lite0 weights",
+        weights_hint,
+    )
 }
 
 /// The network input for an RGB frame: `(pixel - 127) / 128`, channels last.
@@ -140,10 +130,8 @@ impl EfficientNetLite0 {
     /// Loads the weights file `path` (names of the PyTorch checkpoint: `_conv_stem.weight`,
     /// `_blocks.N._expand_conv.weight`, ...). Uses all cores by default ([`Self::with_threads`]).
     pub fn load(path: &Path) -> Result<Self, FeatureError> {
-        if !path.is_file() {
-            return Err(missing(path, "given"));
-        }
-        Self::from_safetensors(&SafeTensors::open(path)?)
+        let path = resolve_weights_from(Some(path), None)?;
+        Self::from_safetensors(&SafeTensors::open(&path)?)
     }
 
     pub fn from_safetensors(st: &SafeTensors) -> Result<Self, FeatureError> {

@@ -11,6 +11,7 @@ mod map;
 mod npy;
 pub mod ops;
 pub mod safetensors;
+mod weights;
 
 pub use autoencoder::{Autoencoder, AutoencoderConfig, FitReport};
 pub use bake::{BakeOptions, BakeProgress, Baked, bake};
