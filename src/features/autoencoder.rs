@@ -180,7 +180,10 @@ impl Autoencoder {
         cfg: &AutoencoderConfig,
         mut progress: impl FnMut(u32, u32, f64),
     ) -> (Autoencoder, FitReport) {
-        assert!(dim > 0 && rows.len() % dim == 0 && rows.len() >= dim, "no rows to fit");
+        assert!(
+            dim > 0 && rows.len().is_multiple_of(dim) && rows.len() >= dim,
+            "no rows to fit"
+        );
         let n = rows.len() / dim;
         let (mean, inv_std) = standardization(rows, dim);
         let mut rng = SplitMix64::new(cfg.seed ^ 0xae5e_ed00);
