@@ -1,6 +1,7 @@
 //! scribblefield: scribbles on a few RGB-D frames, propagated to dense masks by a neural field.
 #[cfg(target_arch = "wasm32")]
 pub mod app;
+pub mod colors;
 pub mod eval;
 pub mod export;
 #[cfg(not(target_arch = "wasm32"))]

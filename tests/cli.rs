@@ -230,6 +230,25 @@ fn scribble_segment_eval_round() {
     assert_clean_failure(&o, &["bad.json", "frame 99"]);
     let o = run(&["segment", &path("d.scene.zip"), "-o", &path("m2")]);
     assert_clean_failure(&o, &["ships no labels", "--labels"]);
+    // A typo in a config field is named before any training, whichever preset it changes.
+    std::fs::write(d.join("typo.json"), r#"{"batch_ray": 64}"#).unwrap();
+    let o = run(&[
+        "segment",
+        &path("d.scene.zip"),
+        "--labels",
+        &path("l.json"),
+        "-o",
+        &path("m3"),
+        "--preset",
+        "budget",
+        "--config",
+        &path("typo.json"),
+    ]);
+    assert_clean_failure(&o, &["typo.json", "batch_ray"]);
+    assert!(
+        !d.join("m3").exists(),
+        "a refused run must not create its output folder"
+    );
     let o = run(&["eval", &path("d.scene.zip"), &path("nowhere")]);
     assert_clean_failure(&o, &["nowhere"]);
 }

@@ -90,17 +90,8 @@ pub fn class_color(classes: &[ClassInfo], id: usize) -> Color32 {
     if let Some(c) = classes.get(id) {
         return Color32::from_rgb(c.color[0], c.color[1], c.color[2]);
     }
-    const PALETTE: [Color32; 8] = [
-        Color32::from_rgb(230, 25, 75),
-        Color32::from_rgb(60, 180, 75),
-        Color32::from_rgb(255, 225, 25),
-        Color32::from_rgb(0, 130, 200),
-        Color32::from_rgb(245, 130, 48),
-        Color32::from_rgb(145, 30, 180),
-        Color32::from_rgb(70, 240, 240),
-        Color32::from_rgb(240, 50, 230),
-    ];
-    PALETTE[id % PALETTE.len()]
+    let [r, g, b] = crate::colors::distinct_color(id);
+    Color32::from_rgb(r, g, b)
 }
 
 /// Draws `texture` as large as fits in `max` keeping its aspect ratio, with `overlay` (a

@@ -17,18 +17,6 @@ pub struct Palette {
     renaming: Option<(usize, String)>,
 }
 
-/// Colours for new classes, after the scene's own: distinct and readable on photos.
-const NEW_CLASS_COLOURS: [[u8; 3]; 8] = [
-    [230, 25, 75],
-    [60, 180, 75],
-    [255, 225, 25],
-    [0, 130, 200],
-    [245, 130, 48],
-    [145, 30, 180],
-    [70, 240, 240],
-    [240, 50, 230],
-];
-
 impl Palette {
     /// `used[i]`: class i has labelled pixels (shown, so the user sees what is missing).
     pub fn show(
@@ -103,11 +91,8 @@ impl Palette {
         }
         if classes.len() < usize::from(u8::MAX) && ui.button("+ class").clicked() {
             let n = classes.len();
-            let colour = NEW_CLASS_COLOURS
-                .iter()
-                .copied()
-                .find(|c| classes.iter().all(|k| k.color != *c))
-                .unwrap_or(NEW_CLASS_COLOURS[n % NEW_CLASS_COLOURS.len()]);
+            let taken: Vec<[u8; 3]> = classes.iter().map(|k| k.color).collect();
+            let colour = crate::colors::unused_color(&taken);
             actions.push(PaletteAction::Add(ClassInfo {
                 name: format!("class {}", n + 1),
                 color: colour,

@@ -83,17 +83,12 @@ pub fn run(args: AblateArgs) -> CliResult {
         });
     }
     let header = format!(
-        "Simulated user: {} clicks per round, {} steps per round after {} warm-up steps, budget {} clicks, preset {:?}{}, seed {}.\n{}\n",
+        "Simulated user: {} clicks per round, {} steps per round after {} warm-up steps, budget {} clicks, preset {}, seed {}.\n{}\n",
         args.sim.clicks_per_round,
         args.sim.steps_per_round,
         args.sim.warmup,
         args.sim.budget,
-        args.sim.preset,
-        args.sim
-            .config
-            .as_ref()
-            .map(|p| format!(" with {}", p.display()))
-            .unwrap_or_default(),
+        args.sim.field.describe(),
         args.sim.seed,
         notes.iter().map(|n| format!("\nNote: {n}\n")).collect::<String>(),
     );

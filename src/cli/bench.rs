@@ -8,19 +8,16 @@ use scribblefield::gpu::{GpuContext, GpuOptions};
 use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
 use scribblefield::scene::demo::{DemoOptions, demo_scene};
 
-use super::{CliResult, load_field_config};
+use super::CliResult;
+use super::field_config::FieldConfigArgs;
 
 #[derive(Args)]
 pub struct BenchArgs {
     /// Rays per batch (overrides the config's).
     #[arg(long)]
     rays: Option<u32>,
-    /// Field config as JSON (fields not given keep their defaults).
-    #[arg(long)]
-    config: Option<std::path::PathBuf>,
-    /// Start from the small config instead of the default.
-    #[arg(long)]
-    small: bool,
+    #[command(flatten)]
+    field: FieldConfigArgs,
     /// Timed training steps.
     #[arg(long, default_value_t = 5)]
     steps: u32,
@@ -43,7 +40,7 @@ fn mlp_macs_per_sample(trainer: &Trainer) -> f64 {
 }
 
 pub fn run(args: BenchArgs) -> CliResult {
-    let mut cfg = load_field_config(args.config.as_deref(), args.small)?;
+    let mut cfg = args.field.resolve(0)?;
     if let Some(r) = args.rays {
         cfg.batch_rays = r;
     }

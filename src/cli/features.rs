@@ -2,12 +2,10 @@
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
-use image::RgbImage;
-use image::imageops::FilterType;
 use scribblefield::features::dino::{DinoExtractor, DinoOutput, DinoVit};
 use scribblefield::features::{
-    BakeOptions, BakeProgress, Baseline, EfficientNetConfig, EfficientNetExtractor, Extractor, FeatureError,
-    FeatureMap, NpyLayout, bake, dino, efficientnet, npy_path_of_frame, read_npy_map,
+    BakeOptions, BakeProgress, Baked, Baseline, EfficientNetConfig, EfficientNetExtractor, Extractor, FeatureError,
+    NpyLayout, Upscaled, bake, dino, efficientnet, npy_path_of_frame, read_npy_map, upscale_factor,
 };
 use scribblefield::scene::Scene;
 
@@ -116,14 +114,7 @@ impl FeatureArgs {
         let frames = scene.frames.len();
         let baked = match kind {
             FeatureKind::Baseline => {
-                let ex = Baseline::with_stride(self.feature_stride);
-                bake(
-                    frames,
-                    |i| extract_frame(&ex, &scene.frames[i].rgb, i),
-                    &ex.describe(),
-                    &opts,
-                    on_progress,
-                )?
+                bake_frames(scene, &Baseline::with_stride(self.feature_stride), &opts, on_progress)?
             }
             FeatureKind::EfficientnetLite0 => {
                 let path = efficientnet::resolve_weights(self.weights.as_deref())?;
@@ -133,29 +124,23 @@ impl FeatureArgs {
                     stride: self.feature_stride * k,
                     normalize: true,
                 };
-                let ex = EfficientNetExtractor::load(&path, config)?;
-                let describe = match k {
-                    1 => ex.describe(),
-                    k => format!("{} on frames upscaled x{k}", ex.describe()),
+                let ex = Upscaled {
+                    inner: EfficientNetExtractor::load(&path, config)?,
+                    factor: k,
                 };
-                let load = |i: usize| extract_upscaled(&ex, &scene.frames[i].rgb, k, i);
-                bake(frames, load, &describe, &opts, on_progress)?
+                bake_frames(scene, &ex, &opts, on_progress)?
             }
             FeatureKind::DinoVits8 => {
                 let path = dino::resolve_weights(self.weights.as_deref())?;
                 let k = upscale_factor(scene.width, scene.height, self.network_min_side);
-                let ex = DinoExtractor {
-                    vit: DinoVit::load_vits8(&path)?,
-                    output: DinoOutput::Keys,
+                let ex = Upscaled {
+                    inner: DinoExtractor {
+                        vit: DinoVit::load_vits8(&path)?,
+                        output: DinoOutput::Keys,
+                    },
+                    factor: k,
                 };
-                let describe = format!("{} on frames upscaled x{k}", ex.describe());
-                bake(
-                    frames,
-                    |i| extract_upscaled(&ex, &scene.frames[i].rgb, k, i),
-                    &describe,
-                    &opts,
-                    on_progress,
-                )?
+                bake_frames(scene, &ex, &opts, on_progress)?
             }
             FeatureKind::Import => {
                 let dir = self
@@ -196,23 +181,18 @@ impl FeatureArgs {
     }
 }
 
-/// The whole factor that brings the shorter side to at least `min_side` (1 when it already is).
-fn upscale_factor(width: u32, height: u32, min_side: u32) -> u32 {
-    min_side.div_ceil(width.min(height).max(1)).max(1)
-}
-
-/// Features of frame `i` from its colour upscaled `k` times (bilinear).
-fn extract_upscaled(ex: &dyn Extractor, rgb: &RgbImage, k: u32, i: usize) -> Result<FeatureMap, FeatureError> {
-    if k == 1 {
-        return extract_frame(ex, rgb, i);
-    }
-    let big = image::imageops::resize(rgb, rgb.width() * k, rgb.height() * k, FilterType::Triangle);
-    extract_frame(ex, &big, i)
-}
-
-fn extract_frame(ex: &dyn Extractor, rgb: &RgbImage, i: usize) -> Result<FeatureMap, FeatureError> {
-    ex.extract(rgb).map_err(|e| match e {
-        FeatureError::Frame { problem, .. } => FeatureError::Frame { frame: i, problem },
-        e => e,
-    })
+/// Bakes the codes `ex` extracts from every frame of `scene`.
+fn bake_frames(
+    scene: &Scene,
+    ex: &dyn Extractor,
+    opts: &BakeOptions,
+    progress: impl FnMut(BakeProgress),
+) -> Result<Baked, FeatureError> {
+    bake(
+        scene.frames.len(),
+        |i| ex.extract(&scene.frames[i].rgb).map_err(|e| e.at_frame(i)),
+        &ex.describe(),
+        opts,
+        progress,
+    )
 }

@@ -4,6 +4,7 @@ mod bench;
 mod demo;
 mod eval;
 mod features;
+mod field_config;
 mod info;
 mod pack;
 mod progress;
@@ -98,21 +99,4 @@ fn check_output(out: &std::path::Path) -> CliResult {
         return Err(format!("{}: output directory does not exist", parent.display()).into());
     }
     Ok(())
-}
-
-/// The field config of `segment` and `bench`: a JSON file (fields not given keep their
-/// defaults), else the small or the default config.
-fn load_field_config(
-    path: Option<&std::path::Path>,
-    small: bool,
-) -> Result<scribblefield::field::FieldConfig, Box<dyn std::error::Error>> {
-    use scribblefield::field::FieldConfig;
-    match path {
-        Some(path) => {
-            let text = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
-            Ok(serde_json::from_slice(&text).map_err(|e| format!("{}: {e}", path.display()))?)
-        }
-        None if small => Ok(FieldConfig::small()),
-        None => Ok(FieldConfig::default()),
-    }
 }

@@ -8,7 +8,8 @@ use scribblefield::gpu::{GpuContext, GpuOptions};
 use scribblefield::labels::LabelSet;
 use scribblefield::scene::read_archive_path;
 
-use super::{CliResult, load_field_config, progress};
+use super::field_config::FieldConfigArgs;
+use super::{CliResult, progress};
 
 #[derive(Args)]
 pub struct SegmentArgs {
@@ -26,12 +27,8 @@ pub struct SegmentArgs {
     /// Warm-up steps before labels join (colour, depth and features only).
     #[arg(long, default_value_t = 100)]
     warmup: u32,
-    /// Field config as JSON (fields not given keep their defaults); see `FieldConfig`.
-    #[arg(long)]
-    config: Option<PathBuf>,
-    /// Start from the small config (8 levels, 2^14 table, widths 32, 1024 rays): for CPU devices.
-    #[arg(long)]
-    small: bool,
+    #[command(flatten)]
+    field: FieldConfigArgs,
     #[arg(long, default_value_t = 0)]
     seed: u32,
 }
@@ -53,8 +50,10 @@ pub fn run(args: SegmentArgs) -> CliResult {
     if labels.classes.is_empty() {
         return Err("labels define no classes".into());
     }
-    let mut cfg = load_field_config(args.config.as_deref(), args.small)?;
-    cfg.num_classes = labels.classes.len() as u32;
+    let mut cfg = args.field.resolve(labels.classes.len() as u32)?;
+    if let Some(codes) = &scene.features {
+        cfg.feature_dim = codes.dim;
+    }
     if scene.features.is_none() && cfg.feature_supervision {
         eprintln!(
             "note: {} has no feature codes; training without feature supervision",

@@ -1,35 +1,19 @@
 use std::path::{Path, PathBuf};
 
-use clap::{Args, ValueEnum};
+use clap::Args;
 use scribblefield::eval::simulate::{self, FrameSplit, RunOptions, SceneId, SimEvent, SimulateSettings};
 use scribblefield::field::FieldConfig;
 use scribblefield::gpu::GpuContext;
 use scribblefield::scene::Scene;
 
+use super::field_config::FieldConfigArgs;
 use super::{CliResult, progress};
-
-/// The base field config, before `--config` changes fields of it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum Preset {
-    /// DESIGN §5 (hash table 2^19, widths 128, 4096 rays): for a real GPU.
-    Default,
-    /// 8 levels, 2^14 table, widths 32, 1024 rays.
-    Small,
-    /// The quality tests' CPU budget: `small` with 256 rays of 4 + 12 samples, no feature
-    /// supervision, annotating lr 5e-3 (about 0.2-0.5 s a step on lavapipe).
-    Budget,
-}
 
 /// The simulated user's schedule, shared by `simulate` and `ablate`.
 #[derive(Args, Clone, Debug)]
 pub struct SimArgs {
-    /// Base field config; `--config` overrides fields of it.
-    #[arg(long, value_enum, default_value_t = Preset::Default)]
-    pub preset: Preset,
-    /// Field config as JSON: fields given replace the preset's (`adam` and `loss` field by field,
-    /// `encoding` as a whole); see `FieldConfig`.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
+    #[command(flatten)]
+    pub field: FieldConfigArgs,
     /// Stop once this many clicks are labelled (a rerun with a larger budget continues).
     #[arg(long, default_value_t = 100)]
     pub budget: u32,
@@ -116,56 +100,15 @@ pub fn read_scene(archive: &Path) -> Result<(Scene, SceneId), Box<dyn std::error
     Ok((scene, id))
 }
 
-/// The preset with `--config` applied and `num_classes` from the scene.
+/// The preset with `--config` applied, `num_classes` and `feature_dim` from the scene.
 pub fn base_config(sim: &SimArgs, scene: &Scene) -> Result<FieldConfig, Box<dyn std::error::Error>> {
-    let classes = scene.classes.len() as u32;
-    let preset = match sim.preset {
-        Preset::Default => FieldConfig::default(),
-        Preset::Small => FieldConfig::small(),
-        Preset::Budget => scribblefield::eval::headless::budget_config(classes),
-    };
-    let mut cfg = match &sim.config {
-        Some(path) => {
-            let text = std::fs::read(path).map_err(|e| format!("--config {}: {e}", path.display()))?;
-            let changes: serde_json::Value =
-                serde_json::from_slice(&text).map_err(|e| format!("--config {}: {e}", path.display()))?;
-            apply_config_changes(&preset, &changes).map_err(|e| format!("--config {}: {e}", path.display()))?
-        }
-        None => preset,
-    };
-    cfg.num_classes = classes;
+    let mut cfg = sim.field.resolve(scene.classes.len() as u32)?;
     // The rendered feature f is compared with the archive's codes: their width decides.
     if let Some(codes) = &scene.features {
         cfg.feature_dim = codes.dim;
     }
     cfg.validate()?;
     Ok(cfg)
-}
-
-/// `base` with the fields of the JSON object `changes` replaced: nested objects (`adam`, `loss`)
-/// field by field, `encoding` (a tagged choice) as a whole. Unknown fields are an error.
-pub fn apply_config_changes(base: &FieldConfig, changes: &serde_json::Value) -> Result<FieldConfig, String> {
-    use serde_json::Value;
-    let Value::Object(changes) = changes else {
-        return Err("must be a JSON object of FieldConfig fields".into());
-    };
-    let mut merged = serde_json::to_value(base).expect("configs serialize");
-    let Value::Object(fields) = &mut merged else {
-        unreachable!("a config serializes to an object")
-    };
-    for (key, value) in changes {
-        match (fields.get_mut(key), value) {
-            (Some(Value::Object(inner)), Value::Object(new)) if key != "encoding" => {
-                for (k, v) in new {
-                    inner.insert(k.clone(), v.clone());
-                }
-            }
-            _ => {
-                fields.insert(key.clone(), value.clone());
-            }
-        }
-    }
-    serde_json::from_value(merged).map_err(|e| e.to_string())
 }
 
 pub fn settings(sim: &SimArgs, scene: &Scene, id: SceneId, config: FieldConfig) -> Result<SimulateSettings, String> {
@@ -232,25 +175,4 @@ pub fn run_one(
     let state = simulate::run(ctx, scene, settings, options, out, &mut events)?;
     bar.finish_and_clear();
     Ok(state)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn config_changes_replace_fields_of_the_preset() {
-        let base = scribblefield::eval::headless::budget_config(6);
-        let changes =
-            serde_json::json!({"batch_rays": 128, "adam": {"lr_warmup": 1e-2}, "encoding": {"kind": "hash_only"}});
-        let c = apply_config_changes(&base, &changes).unwrap();
-        assert_eq!(c.batch_rays, 128);
-        assert_eq!(c.adam.lr_warmup, 1e-2);
-        assert_eq!(c.adam.lr_annotating, base.adam.lr_annotating);
-        assert_eq!(c.encoding, scribblefield::field::Encoding::HashOnly);
-        assert_eq!(c.samples_fine, base.samples_fine);
-        let e = apply_config_changes(&base, &serde_json::json!({"batch_ray": 1})).unwrap_err();
-        assert!(e.contains("batch_ray"), "{e}");
-        assert!(apply_config_changes(&base, &serde_json::json!([1])).is_err());
-    }
 }

@@ -5,6 +5,8 @@ use std::fmt::Write;
 
 use image::{Rgb, RgbImage};
 
+use crate::colors::distinct_color;
+
 /// One line of the plot.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Series {
@@ -21,18 +23,6 @@ pub struct LinePlot {
     pub y_range: (f64, f64),
     pub series: Vec<Series>,
 }
-
-/// Line colours, in series order (repeating).
-pub const PALETTE: [[u8; 3]; 8] = [
-    [31, 119, 180],
-    [255, 127, 14],
-    [44, 160, 44],
-    [214, 39, 40],
-    [148, 103, 189],
-    [140, 86, 75],
-    [227, 119, 194],
-    [127, 127, 127],
-];
 
 const WIDTH: u32 = 800;
 const HEIGHT: u32 = 480;
@@ -153,7 +143,7 @@ impl LinePlot {
             escape(&self.y_label)
         );
         for (i, series) in self.series.iter().enumerate() {
-            let [cr, cg, cb] = PALETTE[i % PALETTE.len()];
+            let [cr, cg, cb] = distinct_color(i);
             let colour = format!("rgb({cr},{cg},{cb})");
             let pts: Vec<String> = series
                 .points
@@ -216,7 +206,7 @@ impl LinePlot {
         centred(&self.x_label, b + 30.0, &mut img);
         text(&mut img, 4.0, t - 22.0, &self.y_label, black);
         for (i, series) in self.series.iter().enumerate() {
-            let colour = Rgb(PALETTE[i % PALETTE.len()]);
+            let colour = Rgb(distinct_color(i));
             let pts: Vec<(f64, f64)> = series.points.iter().map(|&(x, y)| map(x, y)).collect();
             for w in pts.windows(2) {
                 line(&mut img, w[0], w[1], colour, 2);
@@ -405,13 +395,13 @@ mod tests {
         let map = p.mapper();
         // The second series ends at (10, 0.9): its colour is drawn there.
         let (x, y) = map(10.0, 0.9);
-        assert_eq!(img.get_pixel(x.round() as u32, y.round() as u32).0, PALETTE[1]);
+        assert_eq!(img.get_pixel(x.round() as u32, y.round() as u32).0, distinct_color(1));
         let (x, y) = map(5.0, 0.4);
-        assert_eq!(img.get_pixel(x.round() as u32, y.round() as u32).0, PALETTE[0]);
+        assert_eq!(img.get_pixel(x.round() as u32, y.round() as u32).0, distinct_color(0));
         // The axes' corner is black and the legend has both colours.
         assert_eq!(img.get_pixel(AREA.0 as u32, AREA.3 as u32).0, [0, 0, 0]);
         let legend_y = |i: f64| (AREA.1 + 10.0 + 20.0 * i) as u32;
-        assert_eq!(img.get_pixel(AREA.2 as u32 + 20, legend_y(0.0)).0, PALETTE[0]);
-        assert_eq!(img.get_pixel(AREA.2 as u32 + 20, legend_y(1.0)).0, PALETTE[1]);
+        assert_eq!(img.get_pixel(AREA.2 as u32 + 20, legend_y(0.0)).0, distinct_color(0));
+        assert_eq!(img.get_pixel(AREA.2 as u32 + 20, legend_y(1.0)).0, distinct_color(1));
     }
 }

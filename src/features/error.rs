@@ -27,6 +27,14 @@ impl FeatureError {
             problem: problem.into(),
         }
     }
+    /// The error with frame index `frame` filled in: extractors see one image and do not know
+    /// which frame of the scene it is.
+    pub fn at_frame(self, frame: usize) -> Self {
+        match self {
+            FeatureError::Frame { problem, .. } => FeatureError::Frame { frame, problem },
+            e => e,
+        }
+    }
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         FeatureError::Io {
             path: path.into(),

@@ -11,6 +11,7 @@ mod map;
 mod npy;
 pub mod ops;
 pub mod safetensors;
+mod upscale;
 mod weights;
 
 pub use autoencoder::{Autoencoder, AutoencoderConfig, FitReport};
@@ -20,6 +21,7 @@ pub use efficientnet::{EfficientNetConfig, EfficientNetExtractor, EfficientNetLi
 pub use error::FeatureError;
 pub use map::FeatureMap;
 pub use npy::{NpyLayout, npy_path_of_frame, parse_npy_map, read_npy_map, write_npy_f32};
+pub use upscale::{Upscaled, upscale_factor};
 
 use image::RgbImage;
 

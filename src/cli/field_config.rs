@@ -1,0 +1,108 @@
+//! `--preset` and `--config` of `segment`, `bench`, `simulate` and `ablate`: one way to say which
+//! field config a command trains.
+use std::path::PathBuf;
+
+use clap::{Args, ValueEnum};
+use scribblefield::field::FieldConfig;
+
+/// The base field config, before `--config` changes fields of it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Preset {
+    /// DESIGN §5 (hash table 2^19, widths 128, 4096 rays): for a real GPU.
+    Default,
+    /// 8 levels, 2^14 table, widths 32, 1024 rays.
+    Small,
+    /// The quality tests' CPU budget: `small` with 256 rays of 4 + 12 samples, no feature
+    /// supervision, annotating lr 5e-3 (about 0.2-0.5 s a step on lavapipe).
+    Budget,
+}
+
+#[derive(Args, Clone, Debug)]
+pub struct FieldConfigArgs {
+    /// Base field config; `--config` overrides fields of it.
+    #[arg(long, value_enum, default_value_t = Preset::Default)]
+    pub preset: Preset,
+    /// Field config as JSON: fields given replace the preset's (`adam` and `loss` field by field,
+    /// `encoding` as a whole); see `FieldConfig`. Unknown fields are an error.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+}
+
+impl FieldConfigArgs {
+    /// The preset with `--config` applied, for `classes` classes (not validated: callers adjust
+    /// fields from the scene first).
+    pub fn resolve(&self, classes: u32) -> Result<FieldConfig, Box<dyn std::error::Error>> {
+        let preset = match self.preset {
+            Preset::Default => FieldConfig::default(),
+            Preset::Small => FieldConfig::small(),
+            Preset::Budget => scribblefield::eval::headless::budget_config(classes),
+        };
+        let mut cfg = match &self.config {
+            Some(path) => {
+                let text = std::fs::read(path).map_err(|e| format!("--config {}: {e}", path.display()))?;
+                let changes: serde_json::Value =
+                    serde_json::from_slice(&text).map_err(|e| format!("--config {}: {e}", path.display()))?;
+                apply_config_changes(&preset, &changes).map_err(|e| format!("--config {}: {e}", path.display()))?
+            }
+            None => preset,
+        };
+        cfg.num_classes = classes;
+        Ok(cfg)
+    }
+
+    /// How the config was chosen, for reports: `budget` or `budget with cfg.json`.
+    pub fn describe(&self) -> String {
+        let preset = format!("{:?}", self.preset).to_lowercase();
+        match &self.config {
+            Some(path) => format!("{preset} with {}", path.display()),
+            None => preset,
+        }
+    }
+}
+
+/// `base` with the fields of the JSON object `changes` replaced: nested objects (`adam`, `loss`)
+/// field by field, `encoding` (a tagged choice) as a whole. Unknown fields are an error.
+pub fn apply_config_changes(base: &FieldConfig, changes: &serde_json::Value) -> Result<FieldConfig, String> {
+    use serde_json::Value;
+    let Value::Object(changes) = changes else {
+        return Err("must be a JSON object of FieldConfig fields".into());
+    };
+    let mut merged = serde_json::to_value(base).expect("configs serialize");
+    let Value::Object(fields) = &mut merged else {
+        unreachable!("a config serializes to an object")
+    };
+    for (key, value) in changes {
+        match (fields.get_mut(key), value) {
+            (Some(Value::Object(inner)), Value::Object(new)) if key != "encoding" => {
+                for (k, v) in new {
+                    inner.insert(k.clone(), v.clone());
+                }
+            }
+            _ => {
+                fields.insert(key.clone(), value.clone());
+            }
+        }
+    }
+    serde_json::from_value(merged).map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn config_changes_replace_fields_of_the_preset() {
+        let base = scribblefield::eval::headless::budget_config(6);
+        let changes =
+            serde_json::json!({"batch_rays": 128, "adam": {"lr_warmup": 1e-2}, "encoding": {"kind": "hash_only"}});
+        let c = apply_config_changes(&base, &changes).unwrap();
+        assert_eq!(c.batch_rays, 128);
+        assert_eq!(c.adam.lr_warmup, 1e-2);
+        assert_eq!(c.adam.lr_annotating, base.adam.lr_annotating);
+        assert_eq!(c.encoding, scribblefield::field::Encoding::HashOnly);
+        assert_eq!(c.samples_fine, base.samples_fine);
+        let e = apply_config_changes(&base, &serde_json::json!({"batch_ray": 1})).unwrap_err();
+        assert!(e.contains("batch_ray"), "{e}");
+        assert!(apply_config_changes(&base, &serde_json::json!([1])).is_err());
+    }
+}
