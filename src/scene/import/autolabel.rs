@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use super::bounds::from_depth;
 use super::classes::{class_infos, numbered};
-use super::frames::{FrameFiles, InvalidDepth, files_by_stem, frame_order, load_frames, select};
+use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, files_by_stem, frame_order, load_frames, scene_of, select};
 use super::images::load_mask;
 use super::resize::{resize_nearest, same_aspect};
 use super::text::{read_bbox, read_class_names, read_intrinsics, read_pose};
@@ -27,8 +27,6 @@ const INTRINSICS_FILE: &str = "intrinsics.txt";
 const BBOX_FILE: &str = "bbox.txt";
 const CLASSES_FILE: &str = "classes.txt";
 const IMAGE_EXTS: &[&str] = &["png", "jpg", "jpeg"];
-/// autolabel stores depth in millimetres.
-const DEPTH_SCALE: f64 = 0.001;
 
 /// Whether `dir` has autolabel's camera files (poses or intrinsics) beside its rgb/ folder.
 pub(super) fn has_camera_files(dir: &Path) -> bool {
@@ -135,18 +133,10 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
         })?
     };
 
-    let (width, height) = loaded.size;
     let scene = Scene {
-        width,
-        height,
-        intrinsics,
-        depth_scale: DEPTH_SCALE,
-        bounds,
-        frames: loaded.frames,
         classes: classes.clone(),
-        features: None,
         labels,
-        provenance: Default::default(),
+        ..scene_of(loaded.frames, loaded.size, intrinsics, bounds)
     };
     Ok(Built {
         scene,

@@ -7,9 +7,9 @@ use super::ImportOptions;
 use super::images::{load_depth, load_gt, load_rgb};
 use super::resize::{resize_nearest, resize_rgb, same_aspect, target_size};
 use crate::scene::archive::limits;
-use crate::scene::camera::Pose;
+use crate::scene::camera::{Bounds, Intrinsics, Pose};
 use crate::scene::error::{Result, SceneError};
-use crate::scene::scene::Frame;
+use crate::scene::scene::{Frame, Scene};
 
 /// The files and pose of one frame of a capture.
 pub(super) struct FrameFiles {
@@ -70,6 +70,25 @@ pub(super) enum InvalidDepth {
     ZeroOnly,
     /// 65535 also means "no reading" (7-Scenes); it is stored as 0.
     ZeroAndMax,
+}
+
+/// Every importer stores depth in millimetres.
+pub(super) const DEPTH_SCALE: f64 = 0.001;
+
+/// An imported scene of `frames` (of `size`) with no classes, labels or features yet.
+pub(super) fn scene_of(frames: Vec<Frame>, size: (u32, u32), intrinsics: Intrinsics, bounds: Bounds) -> Scene {
+    Scene {
+        width: size.0,
+        height: size.1,
+        intrinsics,
+        depth_scale: DEPTH_SCALE,
+        bounds,
+        frames,
+        classes: vec![],
+        features: None,
+        labels: None,
+        provenance: Default::default(),
+    }
 }
 
 pub(super) struct Loaded {

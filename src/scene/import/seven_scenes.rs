@@ -5,18 +5,16 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::bounds::from_depth;
-use super::frames::{FrameFiles, InvalidDepth, files_by_stem, frame_order, load_frames, select};
+use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, files_by_stem, frame_order, load_frames, scene_of, select};
 use super::text::{read_intrinsics, read_pose};
 use super::{Built, ImportOptions, Layout, shown};
 use crate::scene::camera::Intrinsics;
 use crate::scene::error::{Result, SceneError};
-use crate::scene::scene::Scene;
 
 const INTRINSICS_FILE: &str = "camera-intrinsics.txt";
 const COLOR: &str = ".color";
 const DEPTH: &str = ".depth";
 const POSE: &str = ".pose";
-const DEPTH_SCALE: f64 = 0.001;
 /// The Kinect calibration 7-Scenes documents, for its 640x480 images; the dataset ships no
 /// intrinsics file, so a missing one means these.
 const DEFAULT_INTRINSICS: Intrinsics = Intrinsics {
@@ -104,19 +102,7 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
     })?;
     notes.push("bounds: central 98 % of back-projected depth and all camera centres, padded by 5 %".into());
 
-    let (width, height) = loaded.size;
-    let scene = Scene {
-        width,
-        height,
-        intrinsics,
-        depth_scale: DEPTH_SCALE,
-        bounds,
-        frames: loaded.frames,
-        classes: vec![],
-        features: None,
-        labels: None,
-        provenance: Default::default(),
-    };
+    let scene = scene_of(loaded.frames, loaded.size, intrinsics, bounds);
     Ok(Built {
         scene,
         layout: Layout::SevenScenes,

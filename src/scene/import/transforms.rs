@@ -7,19 +7,17 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use super::bounds::{from_cameras, from_depth};
-use super::frames::{FrameFiles, InvalidDepth, load_frames, select};
+use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, load_frames, scene_of, select};
 use super::images::dimensions;
 use super::text::pose_from_numbers;
 use super::{Built, ImportOptions, Layout, shown};
 use crate::scene::archive::limits;
 use crate::scene::camera::{Intrinsics, Pose};
 use crate::scene::error::{Result, SceneError};
-use crate::scene::scene::Scene;
 
 pub(super) const FILE: &str = "transforms.json";
 /// Extensions tried, in order, for a `file_path` given without one (NeRF synthetic scenes).
 const IMAGE_EXTS: &[&str] = &["png", "jpg", "jpeg", "PNG", "JPG", "JPEG"];
-const DEPTH_SCALE: f64 = 0.001;
 /// Relative difference under which two per-frame intrinsics values count as the same.
 const SAME_VALUE: f64 = 1e-6;
 /// Missing images listed by name in the warning; the rest are counted.
@@ -198,19 +196,7 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
         }
     };
 
-    let (width, height) = loaded.size;
-    let scene = Scene {
-        width,
-        height,
-        intrinsics,
-        depth_scale: DEPTH_SCALE,
-        bounds,
-        frames: loaded.frames,
-        classes: vec![],
-        features: None,
-        labels: None,
-        provenance: Default::default(),
-    };
+    let scene = scene_of(loaded.frames, loaded.size, intrinsics, bounds);
     Ok(Built {
         scene,
         layout: Layout::Transforms,
