@@ -283,7 +283,7 @@ fn with_features(mut scene: Scene) -> Scene {
         height: fh,
         width: fw,
         dim,
-        extractor: "gt one-hot".into(),
+        extractor: "gt-one-hot codes of the class at the cell centre".into(),
         pca: Pca::fit(&values, dim as usize).unwrap(),
         data,
     });
@@ -355,7 +355,7 @@ fn ablate_writes_a_csv_a_table_and_plots_with_and_without_features() {
 
     let curves = parse_ablation_csv(&std::fs::read_to_string(out_feat.join("ablation.csv")).unwrap()).unwrap();
     let methods: Vec<&str> = curves.iter().map(|c| c.method.as_str()).collect();
-    assert_eq!(methods, ["hash+freq", "hash+freq+features(gt_one-hot)"]);
+    assert_eq!(methods, ["hash+freq", "hash+freq+features(gt-one-hot)"]);
     assert!(out_feat.join("plot-feat.png").is_file());
 }
 

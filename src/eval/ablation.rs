@@ -17,7 +17,8 @@ pub struct Method {
 
 /// The encodings (frequency only with L = 10, hash grid only, hash grid + frequency with the
 /// base config's octaves) each without feature supervision and, when the scene has feature codes,
-/// with it (named `+features(<extractor>)`). `base` supplies everything else. Returns the methods
+/// with it (named `+features(<extractor>)`, the extractor by the first word of the archive's
+/// description: `baseline`, `efficientnet-lite0`, `imported`). `base` supplies everything else. Returns the methods
 /// and, for a scene without codes, a note saying what was skipped.
 pub fn methods(base: &FieldConfig, extractor: Option<&str>) -> (Vec<Method>, Option<String>) {
     let hash_freq = match base.encoding {
@@ -36,7 +37,7 @@ pub fn methods(base: &FieldConfig, extractor: Option<&str>) -> (Vec<Method>, Opt
         }
         for (name, encoding) in encodings {
             let name = match (supervised, extractor) {
-                (true, Some(e)) => format!("{name}+features({})", sanitize(e)),
+                (true, Some(e)) => format!("{name}+features({})", extractor_name(e)),
                 _ => name.to_string(),
             };
             out.push(Method {
@@ -54,6 +55,18 @@ pub fn methods(base: &FieldConfig, extractor: Option<&str>) -> (Vec<Method>, Opt
             .to_string()
     });
     (out, note)
+}
+
+/// The extractor's short name: the first word of its description (which goes on with its
+/// settings, e.g. `baseline colour+gradient statistics, windows of ...`).
+fn extractor_name(description: &str) -> String {
+    let first = description.split_whitespace().next().unwrap_or("");
+    let first = first.trim_end_matches([',', ';', ':']);
+    if first.is_empty() {
+        "features".to_string()
+    } else {
+        sanitize(first)
+    }
 }
 
 /// A name safe for a CSV field, a file name and markdown: letters, digits and `+-_.()`, others
@@ -142,10 +155,12 @@ mod tests {
         assert_eq!(m[2].config.batch_rays, base.batch_rays);
         assert!(note.unwrap().contains("no feature codes"));
 
-        let (m, note) = methods(&base, Some("dino v2/s"));
+        let (m, note) = methods(&base, Some("dino/v2, keys of block 12 on frames upscaled x2"));
         assert_eq!(m.len(), 6);
         assert!(note.is_none());
-        assert_eq!(m[5].name, "hash+freq+features(dino_v2_s)");
+        assert_eq!(m[5].name, "hash+freq+features(dino_v2)");
+        let (m, _) = methods(&base, Some("   "));
+        assert_eq!(m[3].name, "freq-only+features(features)");
         assert!(m[5].config.feature_supervision);
     }
 
