@@ -89,15 +89,22 @@ impl LinePlot {
         move |x, y| (l + (x - x0) / (x1 - x0) * (r - l), b - (y - y0) / (y1 - y0) * (b - t))
     }
 
+    /// The figure's width: the default, or wider so the longest legend entry fits.
+    pub fn width(&self) -> u32 {
+        let longest = self.series.iter().map(|s| text_width(&s.name)).max().unwrap_or(0);
+        WIDTH.max((AREA.2 as i64 + 46 + longest + 12) as u32)
+    }
+
     pub fn to_svg(&self) -> String {
         let map = self.mapper();
         let (l, t, r, b) = AREA;
+        let width = self.width();
         let mut s = String::new();
         let _ = writeln!(
             s,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{HEIGHT}" viewBox="0 0 {WIDTH} {HEIGHT}" font-family="sans-serif" font-size="12">"#
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{HEIGHT}" viewBox="0 0 {width} {HEIGHT}" font-family="sans-serif" font-size="12">"#
         );
-        let _ = writeln!(s, r#"<rect width="{WIDTH}" height="{HEIGHT}" fill="white"/>"#);
+        let _ = writeln!(s, r#"<rect width="{width}" height="{HEIGHT}" fill="white"/>"#);
         let _ = writeln!(
             s,
             r#"<text x="{}" y="24" text-anchor="middle" font-size="15">{}</text>"#,
@@ -179,7 +186,7 @@ impl LinePlot {
 
     /// The same figure as a PNG-ready image (text in a built-in 3 x 5 pixel font, doubled).
     pub fn to_image(&self) -> RgbImage {
-        let mut img = RgbImage::from_pixel(WIDTH, HEIGHT, Rgb([255, 255, 255]));
+        let mut img = RgbImage::from_pixel(self.width(), HEIGHT, Rgb([255, 255, 255]));
         let map = self.mapper();
         let (l, t, r, b) = AREA;
         let black = Rgb([0, 0, 0]);
@@ -403,5 +410,22 @@ mod tests {
         let legend_y = |i: f64| (AREA.1 + 10.0 + 20.0 * i) as u32;
         assert_eq!(img.get_pixel(AREA.2 as u32 + 20, legend_y(0.0)).0, distinct_color(0));
         assert_eq!(img.get_pixel(AREA.2 as u32 + 20, legend_y(1.0)).0, distinct_color(1));
+    }
+
+    #[test]
+    fn long_legend_names_widen_the_figure_to_fit() {
+        let mut p = plot();
+        assert_eq!(p.width(), WIDTH);
+        p.series[1].name = "freq-only+features(efficientnet-lite0)".into();
+        let img = p.to_image();
+        assert!(img.width() > WIDTH);
+        // The legend's last glyph (")") has ink within the last 24 pixels of the image.
+        let (w, h) = img.dimensions();
+        let legend_row = (AREA.1 + 30.0) as u32;
+        let inked = (w - 24..w)
+            .flat_map(|x| (legend_row - 6..legend_row + 6).map(move |y| (x, y)))
+            .any(|(x, y)| x < w && y < h && img.get_pixel(x, y).0 == [0, 0, 0]);
+        assert!(inked, "legend text does not reach the right part of a {w} px image");
+        assert!(p.to_svg().contains(&format!("width=\"{w}\"")));
     }
 }
