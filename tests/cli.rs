@@ -192,20 +192,18 @@ fn scribble_segment_eval_round() {
     let config = r#"{"hash_levels": 4, "log2_hash_table_size": 12, "density_width": 16, "color_width": 16,
         "feature_width": 16, "semantic_width": 16, "samples_coarse": 4, "samples_fine": 12, "batch_rays": 64}"#;
     std::fs::write(d.join("c.json"), config).unwrap();
-    let o = run(&[
-        "segment",
-        &path("d.scene.zip"),
-        "--labels",
-        &path("l.json"),
-        "-o",
-        &path("masks"),
-        "--config",
-        &path("c.json"),
-        "--warmup",
-        "5",
-        "--steps",
-        "10",
-    ]);
+    // `segment` of the demo archive with `labels` into `out`, plus `extra` flags.
+    let segment = |labels: &str, out: &str, extra: &[&str]| {
+        let (scene, labels, out) = (path("d.scene.zip"), path(labels), path(out));
+        let mut args = vec!["segment", &scene, "--labels", &labels, "-o", &out];
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let o = segment(
+        "l.json",
+        "masks",
+        &["--config", &path("c.json"), "--warmup", "5", "--steps", "10"],
+    );
     let t = text(&o);
     assert!(o.status.success(), "{t}");
     assert!(t.contains("wrote 24 masks") && t.contains("mean IoU"), "{t}");
@@ -219,31 +217,13 @@ fn scribble_segment_eval_round() {
 
     // Labels that do not fit the scene, and a scene without labels, fail cleanly.
     std::fs::write(d.join("bad.json"), r#"{"format":"scribblefield-labels","version":1,"classes":[{"name":"a","color":[1,2,3]}],"frames":[{"frame":99,"strokes":[]}]}"#).unwrap();
-    let o = run(&[
-        "segment",
-        &path("d.scene.zip"),
-        "--labels",
-        &path("bad.json"),
-        "-o",
-        &path("m2"),
-    ]);
+    let o = segment("bad.json", "m2", &[]);
     assert_clean_failure(&o, &["bad.json", "frame 99"]);
     let o = run(&["segment", &path("d.scene.zip"), "-o", &path("m2")]);
     assert_clean_failure(&o, &["ships no labels", "--labels"]);
     // A typo in a config field is named before any training, whichever preset it changes.
     std::fs::write(d.join("typo.json"), r#"{"batch_ray": 64}"#).unwrap();
-    let o = run(&[
-        "segment",
-        &path("d.scene.zip"),
-        "--labels",
-        &path("l.json"),
-        "-o",
-        &path("m3"),
-        "--preset",
-        "budget",
-        "--config",
-        &path("typo.json"),
-    ]);
+    let o = segment("l.json", "m3", &["--preset", "budget", "--config", &path("typo.json")]);
     assert_clean_failure(&o, &["typo.json", "batch_ray"]);
     assert!(
         !d.join("m3").exists(),

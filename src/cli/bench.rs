@@ -40,7 +40,7 @@ fn mlp_macs_per_sample(trainer: &Trainer) -> f64 {
 }
 
 pub fn run(args: BenchArgs) -> CliResult {
-    let mut cfg = args.field.resolve(0)?;
+    let mut cfg = args.field.resolve(0, None)?;
     if let Some(r) = args.rays {
         cfg.batch_rays = r;
     }

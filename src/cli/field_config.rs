@@ -1,9 +1,10 @@
 //! `--preset` and `--config` of `segment`, `bench`, `simulate` and `ablate`: one way to say which
 //! field config a command trains.
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
 use scribblefield::field::FieldConfig;
+use scribblefield::scene::{FeatureCodes, Scene};
 
 /// The base field config, before `--config` changes fields of it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -29,9 +30,14 @@ pub struct FieldConfigArgs {
 }
 
 impl FieldConfigArgs {
-    /// The preset with `--config` applied, for `classes` classes (not validated: callers adjust
-    /// fields from the scene first).
-    pub fn resolve(&self, classes: u32) -> Result<FieldConfig, Box<dyn std::error::Error>> {
+    /// The preset with `--config` applied, for `classes` classes and, when the archive has
+    /// feature codes, their width (the rendered feature f is compared with them). Not validated:
+    /// callers may change more fields first.
+    pub fn resolve(
+        &self,
+        classes: u32,
+        codes: Option<&FeatureCodes>,
+    ) -> Result<FieldConfig, Box<dyn std::error::Error>> {
         let preset = match self.preset {
             Preset::Default => FieldConfig::default(),
             Preset::Small => FieldConfig::small(),
@@ -47,6 +53,9 @@ impl FieldConfigArgs {
             None => preset,
         };
         cfg.num_classes = classes;
+        if let Some(codes) = codes {
+            cfg.feature_dim = codes.dim;
+        }
         Ok(cfg)
     }
 
@@ -57,6 +66,18 @@ impl FieldConfigArgs {
             Some(path) => format!("{preset} with {}", path.display()),
             None => preset,
         }
+    }
+}
+
+/// Turns feature supervision off, with a note naming `archive`, when the scene has no codes to
+/// supervise with (`segment` and `simulate` train what they can rather than refuse).
+pub fn without_missing_codes(cfg: &mut FieldConfig, scene: &Scene, archive: &Path) {
+    if scene.features.is_none() && cfg.feature_supervision {
+        eprintln!(
+            "note: {} has no feature codes; training without feature supervision",
+            archive.display()
+        );
+        cfg.feature_supervision = false;
     }
 }
 

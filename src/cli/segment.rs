@@ -8,7 +8,7 @@ use scribblefield::gpu::{GpuContext, GpuOptions};
 use scribblefield::labels::LabelSet;
 use scribblefield::scene::read_archive_path;
 
-use super::field_config::FieldConfigArgs;
+use super::field_config::{FieldConfigArgs, without_missing_codes};
 use super::{CliResult, progress};
 
 #[derive(Args)]
@@ -50,17 +50,10 @@ pub fn run(args: SegmentArgs) -> CliResult {
     if labels.classes.is_empty() {
         return Err("labels define no classes".into());
     }
-    let mut cfg = args.field.resolve(labels.classes.len() as u32)?;
-    if let Some(codes) = &scene.features {
-        cfg.feature_dim = codes.dim;
-    }
-    if scene.features.is_none() && cfg.feature_supervision {
-        eprintln!(
-            "note: {} has no feature codes; training without feature supervision",
-            args.archive.display()
-        );
-        cfg.feature_supervision = false;
-    }
+    let mut cfg = args
+        .field
+        .resolve(labels.classes.len() as u32, scene.features.as_ref())?;
+    without_missing_codes(&mut cfg, &scene, &args.archive);
     cfg.validate()?;
 
     let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;

@@ -6,7 +6,7 @@ use scribblefield::field::FieldConfig;
 use scribblefield::gpu::GpuContext;
 use scribblefield::scene::Scene;
 
-use super::field_config::FieldConfigArgs;
+use super::field_config::{FieldConfigArgs, without_missing_codes};
 use super::{CliResult, progress};
 
 /// The simulated user's schedule, shared by `simulate` and `ablate`.
@@ -60,13 +60,7 @@ pub struct SimulateArgs {
 pub fn run(args: SimulateArgs) -> CliResult {
     let (scene, id) = read_scene(&args.archive)?;
     let mut cfg = base_config(&args.sim, &scene)?;
-    if scene.features.is_none() && cfg.feature_supervision {
-        eprintln!(
-            "note: {} has no feature codes; training without feature supervision",
-            args.archive.display()
-        );
-        cfg.feature_supervision = false;
-    }
+    without_missing_codes(&mut cfg, &scene, &args.archive);
     let settings = settings(&args.sim, &scene, id, cfg).map_err(|e| format!("{}: {e}", args.archive.display()))?;
     let ctx = GpuContext::new_blocking(&scribblefield::gpu::GpuOptions::from_env())?;
     eprintln!("training on {}", ctx.describe());
@@ -102,11 +96,7 @@ pub fn read_scene(archive: &Path) -> Result<(Scene, SceneId), Box<dyn std::error
 
 /// The preset with `--config` applied, `num_classes` and `feature_dim` from the scene.
 pub fn base_config(sim: &SimArgs, scene: &Scene) -> Result<FieldConfig, Box<dyn std::error::Error>> {
-    let mut cfg = sim.field.resolve(scene.classes.len() as u32)?;
-    // The rendered feature f is compared with the archive's codes: their width decides.
-    if let Some(codes) = &scene.features {
-        cfg.feature_dim = codes.dim;
-    }
+    let cfg = sim.field.resolve(scene.classes.len() as u32, scene.features.as_ref())?;
     cfg.validate()?;
     Ok(cfg)
 }
