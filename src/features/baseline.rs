@@ -1,18 +1,30 @@
 //! A feature extractor that needs no weights, so packing works with nothing downloaded:
-//! colour and gradient statistics of windows of several sizes around each cell.
+//! illumination-invariant colour and texture statistics of windows of several sizes around each
+//! cell.
 //!
-//! Per scale (window half-size r): mean and standard deviation of CIE L*a*b* (6), mean gradient
-//! magnitude of L* (1) and its split into four unsigned orientation bins (4). Windows of a few
-//! sizes let a cell see both its own texture and its surroundings, which is what makes pixels of
-//! one object resemble each other more than their raw colour does. Box sums come from integral
-//! images, so the cost is a few passes over the image whatever the window size.
+//! Per scale (window half-size r): mean and standard deviation of the chromaticity (linear RGB
+//! divided by its sum; 6) and the orientation histogram of log-intensity gradients (four unsigned
+//! bins) divided by the window's mean gradient magnitude (4). None of these change when a surface
+//! is lit more or less: a shadow on a table, or the side of the table away from the light, keeps
+//! the table's values. With brightness in the features instead (CIE L\*a\*b\* means and gradient
+//! energies, this extractor's first version), the trained field gave every dark unlabelled region
+//! the class of whichever scribbled object had dark pixels: on the demo scene with scribbles on two
+//! frames, mean IoU 0.60-0.70 over three seeds against 0.71-0.85 with these features (issue 3's
+//! note). Windows of a few sizes let a cell see both its own texture and its surroundings. Box
+//! sums come from integral images, so the cost is a few passes over the image whatever the
+//! window size.
 use image::RgbImage;
 
 use super::{Extractor, FeatureError, FeatureMap};
 
-/// Quantities summed per window: L, a, b, L², a², b², |∇L|, four orientation bins.
+/// Quantities summed per window: chromaticity r, g, b, their squares, |∇ log I|, four
+/// orientation bins of ∇ log I.
 const CHANNELS: usize = 11;
-const FEATURES_PER_SCALE: usize = 11;
+const FEATURES_PER_SCALE: usize = 10;
+/// Added to the linear intensity before its logarithm and to the gradient magnitude before
+/// dividing by it, so black pixels and flat windows give zeros rather than noise.
+const INTENSITY_FLOOR: f64 = 1e-3;
+const MAGNITUDE_FLOOR: f64 = 1e-3;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Baseline {
@@ -48,7 +60,7 @@ impl Extractor for Baseline {
     fn describe(&self) -> String {
         let radii: Vec<String> = self.radii.iter().map(|r| r.to_string()).collect();
         format!(
-            "baseline colour+gradient statistics, windows of half-size {} px, stride {}",
+            "baseline chromaticity+gradient-orientation statistics, windows of half-size {} px, stride {}",
             radii.join(","),
             self.stride
         )
@@ -86,8 +98,9 @@ impl Extractor for Baseline {
                         f[c] = mean as f32;
                         f[c + 3] = var.sqrt() as f32;
                     }
-                    for c in 6..CHANNELS {
-                        f[c] = (sums[c] / n) as f32;
+                    let magnitude = sums[6] / n + MAGNITUDE_FLOOR;
+                    for b in 0..4 {
+                        f[6 + b] = (sums[7 + b] / n / magnitude) as f32;
                     }
                 }
             }
@@ -96,24 +109,47 @@ impl Extractor for Baseline {
     }
 }
 
-/// L*a*b* scaled to roughly unit range (L/100, a/100, b/100), their squares, and the Sobel
-/// gradient of L split by orientation.
+/// Linear RGB, which scales with the light falling on a surface (sRGB does not).
+fn linear_rgb(p: [u8; 3]) -> [f64; 3] {
+    p.map(|c| {
+        let c = c as f64 / 255.0;
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    })
+}
+
+/// Chromaticity, its square, and the central-difference gradient of log intensity (zero on the
+/// image border) as its magnitude and split into four unsigned orientation bins.
 fn per_pixel_channels(rgb: &RgbImage) -> Vec<[f64; CHANNELS]> {
     let (w, h) = (rgb.width() as usize, rgb.height() as usize);
-    let lab: Vec<[f64; 3]> = rgb.pixels().map(|p| srgb_to_lab(p.0)).collect();
-    let l = |x: usize, y: usize| lab[y * w + x][0];
+    let linear: Vec<[f64; 3]> = rgb.pixels().map(|p| linear_rgb(p.0)).collect();
+    let log_intensity: Vec<f64> = linear
+        .iter()
+        .map(|c| (c[0] + c[1] + c[2] + INTENSITY_FLOOR).ln())
+        .collect();
+    let l = |x: usize, y: usize| log_intensity[y * w + x];
     let mut out = vec![[0.0; CHANNELS]; w * h];
     for y in 0..h {
-        let (ym, yp) = (y.saturating_sub(1), (y + 1).min(h - 1));
         for x in 0..w {
-            let (xm, xp) = (x.saturating_sub(1), (x + 1).min(w - 1));
-            let gx = (l(xp, ym) + 2.0 * l(xp, y) + l(xp, yp)) - (l(xm, ym) + 2.0 * l(xm, y) + l(xm, yp));
-            let gy = (l(xm, yp) + 2.0 * l(x, yp) + l(xp, yp)) - (l(xm, ym) + 2.0 * l(x, ym) + l(xp, ym));
-            let (gx, gy) = (gx / 8.0, gy / 8.0);
+            let gx = if x == 0 || x + 1 == w {
+                0.0
+            } else {
+                (l(x + 1, y) - l(x - 1, y)) / 2.0
+            };
+            let gy = if y == 0 || y + 1 == h {
+                0.0
+            } else {
+                (l(x, y + 1) - l(x, y - 1)) / 2.0
+            };
             let mag = (gx * gx + gy * gy).sqrt();
-            let [lv, a, b] = lab[y * w + x];
+            let [r, g, b] = linear[y * w + x];
+            let sum = r + g + b + INTENSITY_FLOOR;
+            let (r, g, b) = (r / sum, g / sum, b / sum);
             let o = &mut out[y * w + x];
-            *o = [lv, a, b, lv * lv, a * a, b * b, mag, 0.0, 0.0, 0.0, 0.0];
+            *o = [r, g, b, r * r, g * g, b * b, mag, 0.0, 0.0, 0.0, 0.0];
             if mag > 0.0 {
                 // Unsigned orientation in [0, π), soft-assigned to the two nearest of four bins.
                 let theta = gy.atan2(gx).rem_euclid(std::f64::consts::PI);
@@ -126,31 +162,6 @@ fn per_pixel_channels(rgb: &RgbImage) -> Vec<[f64; CHANNELS]> {
         }
     }
     out
-}
-
-fn srgb_to_lab(p: [u8; 3]) -> [f64; 3] {
-    let lin = |c: u8| {
-        let c = c as f64 / 255.0;
-        if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    };
-    let (r, g, b) = (lin(p[0]), lin(p[1]), lin(p[2]));
-    // D65 white.
-    let x = (0.4124 * r + 0.3576 * g + 0.1805 * b) / 0.95047;
-    let y = 0.2126 * r + 0.7152 * g + 0.0722 * b;
-    let z = (0.0193 * r + 0.1192 * g + 0.9505 * b) / 1.08883;
-    let f = |t: f64| {
-        if t > 216.0 / 24389.0 {
-            t.cbrt()
-        } else {
-            (24389.0 / 27.0 * t + 16.0) / 116.0
-        }
-    };
-    let (fx, fy, fz) = (f(x), f(y), f(z));
-    [(116.0 * fy - 16.0) / 100.0, 5.0 * (fx - fy), 2.0 * (fy - fz)]
 }
 
 /// Summed-area tables of every channel, `(w + 1) x (h + 1)`.
@@ -202,16 +213,17 @@ mod tests {
     use image::Rgb;
 
     #[test]
-    fn a_flat_image_has_its_colour_as_mean_and_no_spread_or_gradient() {
+    fn a_flat_image_has_its_chromaticity_as_mean_and_no_spread_or_gradient() {
         let img = RgbImage::from_pixel(40, 24, Rgb([200, 30, 30]));
         let map = Baseline::default().extract(&img).unwrap();
-        assert_eq!((map.width, map.height, map.dim), (5, 3, 33));
-        let lab = srgb_to_lab([200, 30, 30]);
-        for cell in map.data.chunks(33) {
+        assert_eq!((map.width, map.height, map.dim), (5, 3, 30));
+        let [r, g, b] = linear_rgb([200, 30, 30]);
+        let sum = r + g + b + INTENSITY_FLOOR;
+        for cell in map.data.chunks(30) {
             for s in 0..3 {
-                let f = &cell[s * 11..(s + 1) * 11];
-                for c in 0..3 {
-                    assert!((f[c] as f64 - lab[c]).abs() < 1e-5, "{f:?}");
+                let f = &cell[s * 10..(s + 1) * 10];
+                for (c, want) in [r / sum, g / sum, b / sum].into_iter().enumerate() {
+                    assert!((f[c] as f64 - want).abs() < 1e-6, "{f:?}");
                     assert!(f[c + 3].abs() < 1e-3, "{f:?}");
                 }
                 assert!(f[6..].iter().all(|v| v.abs() < 1e-9), "{f:?}");
@@ -221,11 +233,13 @@ mod tests {
 
     #[test]
     fn vertical_edges_land_in_the_horizontal_gradient_bin_and_only_near_the_edge() {
-        let img = RgbImage::from_fn(
-            64,
-            16,
-            |x, _| if x < 32 { Rgb([0, 0, 0]) } else { Rgb([255, 255, 255]) },
-        );
+        let img = RgbImage::from_fn(64, 16, |x, _| {
+            if x < 32 {
+                Rgb([20, 20, 20])
+            } else {
+                Rgb([255, 255, 255])
+            }
+        });
         let ex = Baseline {
             stride: 8,
             radii: vec![4],
@@ -233,9 +247,39 @@ mod tests {
         let map = ex.extract(&img).unwrap();
         let near = map.cell(3, 1); // centre x = 28: the window [24, 33) covers the edge
         let far = map.cell(0, 1);
-        assert!(near[6] > 0.01 && (near[7] - near[6]).abs() < 1e-6, "{near:?}");
-        assert!(near[8..].iter().all(|v| v.abs() < 1e-9));
+        // The histogram is divided by the mean magnitude: all of it in the first bin.
+        assert!(near[6] > 0.9 && near[6] <= 1.0, "{near:?}");
+        assert!(near[7..].iter().all(|v| v.abs() < 1e-9), "{near:?}");
         assert!(far[6].abs() < 1e-9);
+    }
+
+    /// The point of this extractor: a region in shadow (the same surface under a quarter of the
+    /// light) has nearly the features of the lit region.
+    #[test]
+    fn features_barely_change_when_the_light_dims() {
+        let texture = |x: u32, y: u32| {
+            let stripe = ((x / 3 + y / 5) % 2) as f64;
+            [0.55 + 0.3 * stripe, 0.35 + 0.2 * stripe, 0.2 + 0.1 * stripe]
+        };
+        let to_srgb = |c: f64| {
+            let s = if c <= 0.0031308 {
+                12.92 * c
+            } else {
+                1.055 * c.powf(1.0 / 2.4) - 0.055
+            };
+            (s * 255.0).round().clamp(0.0, 255.0) as u8
+        };
+        let lit = RgbImage::from_fn(48, 32, |x, y| Rgb(texture(x, y).map(to_srgb)));
+        let shadow = RgbImage::from_fn(48, 32, |x, y| Rgb(texture(x, y).map(|c| to_srgb(0.25 * c))));
+        let ex = Baseline::with_stride(4);
+        let (a, b) = (ex.extract(&lit).unwrap(), ex.extract(&shadow).unwrap());
+        let worst = a
+            .data
+            .iter()
+            .zip(&b.data)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst < 0.03, "features moved by {worst} when the light dimmed");
     }
 
     #[test]
