@@ -1,6 +1,6 @@
 // Glue between the density MLP and the three heads (see field/reference/model.rs):
 //   colour input   = [SH(d) (written by sh_encode) | g]
-//   semantic input = [relu(f) | g]
+//   semantic input = [relu(f) | g], or [relu(f)] when the config's semantic_geometry_input is off
 // and, backwards, the sums that route the heads' input gradients to f and to the density output
 // [h0 | g]. One invocation per sample; rows are sample-major.
 //!include _dispatch.wgsl
@@ -19,6 +19,11 @@ struct GlueDims {
     grad_feature: u32,
     // FieldConfig::semantic_trunk_gradient: share of the semantic gradient passed back into f, g.
     semantic_trunk_scale: f32,
+    // Columns of g in the semantic input: geometry, or 0 (FieldConfig::semantic_geometry_dim).
+    semantic_geometry: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 // Each entry point uses its own subset of these bindings (derived layouts).
@@ -29,7 +34,7 @@ struct GlueDims {
 @group(0) @binding(2) var<storage, read> feature_out: array<f32>;
 // [SH | g], row stride sh + geometry.
 @group(0) @binding(3) var<storage, read_write> color_in: array<f32>;
-// [relu(f) | g], row stride feature + geometry.
+// [relu(f) | g], row stride feature + semantic_geometry.
 @group(0) @binding(4) var<storage, read_write> semantic_in: array<f32>;
 // Gradients, same strides as their forward buffers.
 @group(0) @binding(5) var<storage, read> semantic_in_grad: array<f32>;
@@ -59,11 +64,12 @@ fn assemble(
     let d = dims.feature;
     let density_row = n * (1u + g) + 1u;
     let color_row = n * (dims.sh + g) + dims.sh;
-    let semantic_row = n * (d + g);
+    let semantic_row = n * (d + dims.semantic_geometry);
     for (var j = 0u; j < g; j++) {
-        let v = density_out[density_row + j];
-        color_in[color_row + j] = v;
-        semantic_in[semantic_row + d + j] = v;
+        color_in[color_row + j] = density_out[density_row + j];
+    }
+    for (var j = 0u; j < dims.semantic_geometry; j++) {
+        semantic_in[semantic_row + d + j] = density_out[density_row + j];
     }
     for (var k = 0u; k < d; k++) {
         semantic_in[semantic_row + k] = max(feature_out[n * d + k], 0.0);
@@ -83,7 +89,7 @@ fn gather_feature(
         return;
     }
     let d = dims.feature;
-    let semantic_row = n * (d + dims.geometry);
+    let semantic_row = n * (d + dims.semantic_geometry);
     for (var k = 0u; k < d; k++) {
         if feature_out[n * d + k] > 0.0 {
             let at = n * dims.grad_stride + dims.grad_feature + k;
@@ -107,9 +113,14 @@ fn gather_geometry(
     }
     let g = dims.geometry;
     let d = dims.feature;
+    let sg = dims.semantic_geometry;
     density_out_grad[n * (1u + g)] = grad_heads[n * dims.grad_stride + dims.grad_h0];
     for (var j = 0u; j < g; j++) {
-        density_out_grad[n * (1u + g) + 1u + j] = color_in_grad[n * (dims.sh + g) + dims.sh + j]
-            + dims.semantic_trunk_scale * semantic_in_grad[n * (d + g) + d + j] + feature_in_grad[n * g + j];
+        var semantic = 0.0;
+        if j < sg {
+            semantic = dims.semantic_trunk_scale * semantic_in_grad[n * (d + sg) + d + j];
+        }
+        density_out_grad[n * (1u + g) + 1u + j] = color_in_grad[n * (dims.sh + g) + dims.sh + j] + semantic
+            + feature_in_grad[n * g + j];
     }
 }

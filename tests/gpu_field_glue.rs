@@ -11,15 +11,28 @@ fn values(len: usize, salt: f32) -> Vec<f32> {
 
 #[test]
 fn glue_matches_reference_arithmetic() {
-    let Some(ctx) = gpu_for_tests("glue_matches_reference_arithmetic") else {
+    check_glue("glue_matches_reference_arithmetic", true);
+}
+
+/// `semantic_geometry_input: false`: the semantic input is relu(f) alone, and no semantic
+/// gradient reaches g.
+#[test]
+fn glue_without_geometry_in_the_semantic_input() {
+    check_glue("glue_without_geometry_in_the_semantic_input", false);
+}
+
+fn check_glue(name: &str, semantic_sees_geometry: bool) {
+    let Some(ctx) = gpu_for_tests(name) else {
         return;
     };
     let (n, g, d, sh) = (1037usize, 15usize, 8usize, 16usize);
+    // Columns of g in the semantic input.
+    let sg = if semantic_sees_geometry { g } else { 0 };
     // Composite rows [dh0, dcolour (3), dlogits (C = 2), df (D)].
     let (stride, h0_at, f_at) = (1 + 3 + 2 + d, 0usize, 6usize);
     let density_out = values(n * (1 + g), 0.1);
     let feature_out = values(n * d, 0.2);
-    let semantic_in_grad = values(n * (d + g), 0.3);
+    let semantic_in_grad = values(n * (d + sg), 0.3);
     let grad_heads0 = values(n * stride, 0.4);
     let color_in_grad = values(n * (sh + g), 0.5);
     let feature_in_grad = values(n * g, 0.6);
@@ -29,7 +42,7 @@ fn glue_matches_reference_arithmetic() {
     let density_out_b = buf("density out", &density_out);
     let feature_out_b = buf("feature out", &feature_out);
     let color_in_b = buf("color in", &color_sh);
-    let semantic_in_b = storage_buffer_garbage::<f32>(&ctx, "semantic in", n * (d + g)).unwrap();
+    let semantic_in_b = storage_buffer_garbage::<f32>(&ctx, "semantic in", n * (d + sg)).unwrap();
     let semantic_in_grad_b = buf("semantic in grad", &semantic_in_grad);
     let grad_heads_b = buf("grad heads", &grad_heads0);
     let density_out_grad_b = storage_buffer_garbage::<f32>(&ctx, "density out grad", n * (1 + g)).unwrap();
@@ -44,6 +57,8 @@ fn glue_matches_reference_arithmetic() {
         grad_h0: h0_at as u32,
         grad_feature: f_at as u32,
         semantic_trunk_scale: 1.0,
+        semantic_geometry: sg as u32,
+        _pad: [0; 3],
     };
     let buffers = GlueBuffers {
         density_out: &density_out_b,
@@ -81,12 +96,12 @@ fn glue_matches_reference_arithmetic() {
         );
         assert_eq!(&color_in[row + sh..row + sh + g], geo);
         let relu: Vec<f32> = f.iter().map(|v| v.max(0.0)).collect();
-        assert_eq!(&semantic_in[s * (d + g)..s * (d + g) + d], &relu[..]);
-        assert_eq!(&semantic_in[s * (d + g) + d..(s + 1) * (d + g)], geo);
+        assert_eq!(&semantic_in[s * (d + sg)..s * (d + sg) + d], &relu[..]);
+        assert_eq!(&semantic_in[s * (d + sg) + d..(s + 1) * (d + sg)], &geo[..sg]);
         for k in 0..d {
             let at = s * stride + f_at + k;
             let via_semantic = if f[k] > 0.0 {
-                semantic_in_grad[s * (d + g) + k]
+                semantic_in_grad[s * (d + sg) + k]
             } else {
                 0.0
             };
@@ -102,7 +117,12 @@ fn glue_matches_reference_arithmetic() {
             "dL/dh0 copied"
         );
         for j in 0..g {
-            let want = color_in_grad[row + sh + j] + semantic_in_grad[s * (d + g) + d + j] + feature_in_grad[s * g + j];
+            let via_semantic = if j < sg {
+                semantic_in_grad[s * (d + sg) + d + j]
+            } else {
+                0.0
+            };
+            let want = color_in_grad[row + sh + j] + via_semantic + feature_in_grad[s * g + j];
             assert!((density_grad[s * (1 + g) + 1 + j] - want).abs() <= 1e-6 * want.abs().max(1.0));
         }
     }

@@ -117,11 +117,24 @@ fn profile_a_step() {
 /// of the GPU's random picks and jitter), same gradient in every parameter range.
 #[test]
 fn one_step_gradient_matches_the_reference() {
+    check_one_step_gradient("one_step_gradient_matches_the_reference", true);
+}
+
+/// The same with the semantic head on relu(f) alone (`semantic_geometry_input: false`).
+#[test]
+fn one_step_gradient_matches_the_reference_without_geometry_in_the_semantic_head() {
+    check_one_step_gradient(
+        "one_step_gradient_matches_the_reference_without_geometry_in_the_semantic_head",
+        false,
+    );
+}
+
+fn check_one_step_gradient(name: &str, semantic_geometry_input: bool) {
     use scribblefield::field::gpu::rays::{StepUniforms, pick_pixel, sample_jitter};
     use scribblefield::field::gpu::scene_buffers::LabelIndex;
     use scribblefield::field::reference::{FieldModel, RayTarget, SampledRay, TrainingRay, sampling};
 
-    let Some(ctx) = gpu_for_tests("one_step_gradient_matches_the_reference") else {
+    let Some(ctx) = gpu_for_tests(name) else {
         return;
     };
     let mut scene = demo_scene(&DemoOptions {
@@ -155,6 +168,7 @@ fn one_step_gradient_matches_the_reference() {
         // Not 1: the GPU must scale the semantic gradient into the shared field as the
         // reference does (1 is the same code with a factor of one).
         semantic_trunk_gradient: 0.5,
+        semantic_geometry_input,
         ..FieldConfig::small()
     };
     let seed = 3;

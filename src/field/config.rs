@@ -136,6 +136,11 @@ pub struct FieldConfig {
     /// field (the feature MLP, the density MLP and the encoding): 1 is the paper's model, 0 trains
     /// the head alone on features shaped by colour, depth and feature codes.
     pub semantic_trunk_gradient: f32,
+    /// Whether the semantic head sees the geometry feature g beside relu(f) (the paper's
+    /// [relu(f), g]). Without it the head sees relu(f) alone, so classes follow the rendered
+    /// features, which feature supervision ties to the image's codes, and not the shading and
+    /// albedo g carries for the colour head (shadows then stop looking like dark objects).
+    pub semantic_geometry_input: bool,
 }
 
 impl Default for FieldConfig {
@@ -165,6 +170,7 @@ impl Default for FieldConfig {
             adam: AdamConfig::default(),
             batch_rays: 4096,
             semantic_trunk_gradient: 1.0,
+            semantic_geometry_input: true,
         }
     }
 }
@@ -255,10 +261,19 @@ impl FieldConfig {
         )
     }
 
-    /// Semantic head: [relu(f), geometry feature] → width → classes.
+    /// Columns of the geometry feature in the semantic head's input (0 or `geometry_dim`).
+    pub fn semantic_geometry_dim(&self) -> usize {
+        if self.semantic_geometry_input {
+            self.geometry_dim as usize
+        } else {
+            0
+        }
+    }
+
+    /// Semantic head: [relu(f), geometry feature (if `semantic_geometry_input`)] → width → classes.
     pub fn semantic_dims(&self) -> Vec<usize> {
         mlp_dims(
-            (self.feature_dim + self.geometry_dim) as usize,
+            self.feature_dim as usize + self.semantic_geometry_dim(),
             self.semantic_width,
             1,
             self.num_classes as usize,
@@ -390,6 +405,11 @@ mod tests {
         assert_eq!(c.color_dims(), vec![31, 128, 128, 3]);
         assert_eq!(c.feature_dims(), vec![15, 64, 64, 64]);
         assert_eq!(c.semantic_dims(), vec![79, 64, 2]);
+        let feature_only = FieldConfig {
+            semantic_geometry_input: false,
+            ..FieldConfig::default()
+        };
+        assert_eq!(feature_only.semantic_dims(), vec![64, 64, 2]);
         FieldConfig::small().validate().unwrap();
     }
 

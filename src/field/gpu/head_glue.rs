@@ -24,6 +24,9 @@ pub struct GlueDims {
     /// `FieldConfig::semantic_trunk_gradient`: scales the semantic input's gradient on its way
     /// back into f and g.
     pub semantic_trunk_scale: f32,
+    /// Columns of g in the semantic input (`FieldConfig::semantic_geometry_dim`: geometry or 0).
+    pub semantic_geometry: u32,
+    pub _pad: [u32; 3],
 }
 
 /// The per-sample buffers the glue reads and writes (row strides in `GlueDims` terms).
@@ -34,7 +37,7 @@ pub struct GlueBuffers<'a> {
     pub feature_out: &'a wgpu::Buffer,
     /// [SH | g], stride sh + geometry.
     pub color_in: &'a wgpu::Buffer,
-    /// [relu(f) | g], stride feature + geometry.
+    /// [relu(f) | g], stride feature + semantic_geometry.
     pub semantic_in: &'a wgpu::Buffer,
     pub semantic_in_grad: &'a wgpu::Buffer,
     /// The composite's gradient rows; `gather_feature` adds the semantic path into dL/df.

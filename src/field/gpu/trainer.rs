@@ -72,6 +72,7 @@ impl SampleBuffers {
     fn new(ctx: &GpuContext, cfg: &FieldConfig) -> Result<Self, GpuError> {
         let n = cfg.batch_rays as usize * cfg.samples_per_ray();
         let (e, g, d) = (cfg.encoding_dim(), cfg.geometry_dim as usize, cfg.feature_dim as usize);
+        let sg = cfg.semantic_geometry_dim();
         let sh = SH as usize;
         let make = |label: &str, width: usize| {
             ctx.ensure_storage_binding_fits(label, (n * width * 4) as u64)?;
@@ -86,8 +87,8 @@ impl SampleBuffers {
             feature_in_grad: make("feature input gradient", g)?,
             color_in: make("colour input", sh + g)?,
             color_in_grad: make("colour input gradient", sh + g)?,
-            semantic_in: make("semantic input", d + g)?,
-            semantic_in_grad: make("semantic input gradient", d + g)?,
+            semantic_in: make("semantic input", d + sg)?,
+            semantic_in_grad: make("semantic input gradient", d + sg)?,
         })
     }
 }
@@ -168,6 +169,7 @@ impl Trainer {
         let samples = SampleBuffers::new(ctx, cfg)?;
         let n = cfg.batch_rays * cfg.samples_per_ray() as u32;
         let (g, d, c) = (cfg.geometry_dim, cfg.feature_dim, cfg.num_classes);
+        let sg = cfg.semantic_geometry_dim() as u32;
 
         let ray_batch = RayBatchPass::new(ctx, cfg, &scene_buffers, &step_uniforms).await?;
         let frame_tile = FrameTilePass::new(ctx, cfg, &scene_buffers, &step_uniforms, &ray_batch).await?;
@@ -313,12 +315,12 @@ impl Trainer {
                 layout: &layout.semantic,
                 rows: n,
                 params: &optimizer.params,
-                input: RowView::packed(&samples.semantic_in, d + g),
+                input: RowView::packed(&samples.semantic_in, d + sg),
                 output: Some(RowView::packed(&logits, c)),
                 gradients: Some(MlpGradients {
                     grads: grads.clone(),
                     output_grad: grad_view(composite_layout.grad_logits_offset()),
-                    input_grad: Some(RowView::packed(&samples.semantic_in_grad, d + g)),
+                    input_grad: Some(RowView::packed(&samples.semantic_in_grad, d + sg)),
                 }),
             },
         )
@@ -334,6 +336,8 @@ impl Trainer {
                 grad_h0: CompositeLayout::GRAD_H0 as u32,
                 grad_feature: composite_layout.grad_feature_offset() as u32,
                 semantic_trunk_scale: cfg.semantic_trunk_gradient,
+                semantic_geometry: sg,
+                _pad: [0; 3],
             },
             &GlueBuffers {
                 density_out: &samples.density_out,

@@ -6,7 +6,7 @@
 //! [h₀, g] = density_mlp(e)                                  σ = exp(h₀), g: geometry feature
 //! rgb = sigmoid(color_mlp([sh4(d), g]))
 //! f   = feature_mlp(g)                                      (linear)
-//! s   = semantic_mlp([relu(f), g])                          (C logits)
+//! s   = semantic_mlp([relu(f), g]) or semantic_mlp(relu(f))  (C logits; `semantic_geometry_input`)
 //! value = [rgb, z-depth of the sample, s, f]                (render::Channels order)
 //! ```
 //! then all values are rendered with one set of weights (`render`), and `loss::ray_loss`
@@ -163,7 +163,7 @@ impl FieldModel {
             .output()
             .iter()
             .map(|f| f.max(R::ZERO))
-            .chain(geometry.iter().copied())
+            .chain(geometry[..self.config.semantic_geometry_dim()].iter().copied())
             .collect();
         let semantic = mlp::forward(&l.semantic.dims, &params[l.semantic.range()], &semantic_in);
 

@@ -89,7 +89,19 @@ fn wall_ray(cfg: &FieldConfig, rng: &mut SplitMix64, labelled: bool) -> Training
 
 #[test]
 fn whole_model_gradient_matches_finite_differences() {
-    let model = FieldModel::new(tiny_config()).unwrap();
+    check_whole_model_gradient(tiny_config());
+}
+
+#[test]
+fn whole_model_gradient_without_geometry_in_the_semantic_head() {
+    check_whole_model_gradient(FieldConfig {
+        semantic_geometry_input: false,
+        ..tiny_config()
+    });
+}
+
+fn check_whole_model_gradient(config: FieldConfig) {
+    let model = FieldModel::new(config).unwrap();
     let mut rng = SplitMix64::new(41);
     let mut batch: Vec<TrainingRay> = (0..3).map(|i| wall_ray(&model.config, &mut rng, i != 1)).collect();
     // One ray without depth (uniform samples, no depth term) and one labelled with class 2.
