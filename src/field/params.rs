@@ -156,9 +156,9 @@ mod tests {
         }
         assert_eq!(end, layout.total);
         // 16 levels × 2^19 × 2 + density 44·128+128·128+128·16 + colour 31·128+128·128+128·3
-        // + feature 15·64+64·64+64·64 + semantic 79·64+64·2.
+        // + feature 15·64+64·64+64·64 + semantic 64·64+64·2 (relu(f) alone; 79·64+64·2 with g).
         assert_eq!(layout.hash_table.len(), 16_777_216);
-        assert_eq!(layout.total - layout.hash_table.len(), 24_064 + 20_736 + 9_152 + 5_184);
+        assert_eq!(layout.total - layout.hash_table.len(), 24_064 + 20_736 + 9_152 + 4_224);
     }
 
     #[test]

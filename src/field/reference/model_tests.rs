@@ -93,9 +93,9 @@ fn whole_model_gradient_matches_finite_differences() {
 }
 
 #[test]
-fn whole_model_gradient_without_geometry_in_the_semantic_head() {
+fn whole_model_gradient_with_geometry_in_the_semantic_head() {
     check_whole_model_gradient(FieldConfig {
-        semantic_geometry_input: false,
+        semantic_geometry_input: true,
         ..tiny_config()
     });
 }
