@@ -103,22 +103,26 @@ fn demo_scribbles_on_two_frames_propagate_to_every_frame() {
     );
 }
 
-/// Measured with `segment` at this budget: 0.667 with these features, 0.577 without (the target
-/// of issue 3 is 0.85, not reached at this budget).
-const MEASURED_DEMO_FLOOR: f64 = 0.6;
+/// Measured by this test: 0.813 (pixel accuracy 0.971); with `segment` over trainer seeds 0, 1,
+/// 2: 0.813, 0.817, 0.815 (the
+/// semantic head on relu(f) alone, illumination-invariant baseline features); 0.64-0.87 with the
+/// paper's [relu(f), g] head, 0.60-0.70 with the first, brightness-bearing baseline features.
+/// Issue 3's target is 0.85.
+const MEASURED_DEMO_FLOOR: f64 = 0.78;
 
 #[test]
-#[ignore = "measurement (about 20 minutes on lavapipe): the encodings at the same budget"]
+#[ignore = "measurement (about 6 minutes on lavapipe): the encodings at the same budget"]
 fn encoding_ablation_on_the_demo_scene() {
     let Some(ctx) = gpu_for_tests("encoding_ablation_on_the_demo_scene") else {
         return;
     };
-    let scene = demo();
+    let scene = demo_with_features();
     let labels = scribble_frames(&scene, &[0, 12], &ScribbleOptions::default());
     let mut rows = Vec::new();
     for encoding in [Encoding::default(), Encoding::freq_only_baseline(), Encoding::HashOnly] {
         let cfg = FieldConfig {
             encoding,
+            feature_supervision: true,
             ..budget_config(scene.classes.len())
         };
         let report = train_and_score(&ctx, &scene, &labels, &cfg, DEMO_STEPS, 0..scene.frames.len());
@@ -158,8 +162,9 @@ fn ycb_scribbles_on_frame_0_propagate_to_frames_1_to_9() {
         ..budget_config(scene.classes.len())
     };
     let report = train_and_score(&ctx, &scene, &labels, &cfg, YCB_STEPS, 1..scene.frames.len());
-    // Measured with `segment` at this budget on frames 1-9: mean IoU 0.540, pixel accuracy 0.81
-    // with these features; 0.385 and 0.65 without.
+    // Measured by this test on frames 1-9: mean IoU 0.536, pixel accuracy 0.871 (relu(f)-only
+    // semantic head, illumination-invariant features). Earlier: 0.540 and 0.81 with the first
+    // baseline features and the paper's head; 0.385 and 0.65 without features.
     assert!(report.mean_iou > 0.45, "mean IoU {:.3} on frames 1-9", report.mean_iou);
 }
 
