@@ -258,7 +258,7 @@ fn pack_bakes_baseline_and_imported_features() {
     let o = pack(&["--features", "baseline", "--autoencoder-steps", "200"]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(
-        text(&o).contains("features: 33 -> 64 dims on a 20 x 15 grid"),
+        text(&o).contains("features: 30 -> 64 dims on a 20 x 15 grid"),
         "{}",
         text(&o)
     );
