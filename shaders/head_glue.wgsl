@@ -1,6 +1,6 @@
 // Glue between the density MLP and the three heads (see field/reference/model.rs):
 //   colour input   = [SH(d) (written by sh_encode) | g]
-//   semantic input = [relu(f) | g], or [relu(f)] when the config's semantic_geometry_input is off
+//   semantic input = [relu(f) | g], or [relu(f)] alone (FieldConfig::semantic_geometry_dim() = 0)
 // and, backwards, the sums that route the heads' input gradients to f and to the density output
 // [h0 | g]. One invocation per sample; rows are sample-major.
 //!include _dispatch.wgsl

@@ -14,7 +14,7 @@ fn glue_matches_reference_arithmetic() {
     check_glue("glue_matches_reference_arithmetic", true);
 }
 
-/// `semantic_geometry_input: false`: the semantic input is relu(f) alone, and no semantic
+/// `SemanticInput::Feature`: the semantic input is relu(f) alone, and no semantic
 /// gradient reaches g.
 #[test]
 fn glue_without_geometry_in_the_semantic_input() {

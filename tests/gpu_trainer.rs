@@ -1,6 +1,6 @@
 //! The assembled GPU trainer on the demo scene: it trains (losses fall) and nothing is NaN.
 use scribblefield::field::gpu::trainer::Trainer;
-use scribblefield::field::{AdamConfig, FieldConfig};
+use scribblefield::field::{AdamConfig, FieldConfig, SemanticInput};
 use scribblefield::gpu::test_support::gpu_for_tests;
 use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
 use scribblefield::scene::demo::{DemoOptions, demo_scene};
@@ -117,19 +117,22 @@ fn profile_a_step() {
 /// of the GPU's random picks and jitter), same gradient in every parameter range.
 #[test]
 fn one_step_gradient_matches_the_reference() {
-    check_one_step_gradient("one_step_gradient_matches_the_reference", false);
-}
-
-/// The same with the paper's semantic head on [relu(f), g] (`semantic_geometry_input: true`).
-#[test]
-fn one_step_gradient_matches_the_reference_with_geometry_in_the_semantic_head() {
     check_one_step_gradient(
-        "one_step_gradient_matches_the_reference_with_geometry_in_the_semantic_head",
-        true,
+        "one_step_gradient_matches_the_reference",
+        SemanticInput::FeatureAndGeometry,
     );
 }
 
-fn check_one_step_gradient(name: &str, semantic_geometry_input: bool) {
+/// The same with the semantic head on relu(f) alone.
+#[test]
+fn one_step_gradient_matches_the_reference_with_the_feature_only_semantic_head() {
+    check_one_step_gradient(
+        "one_step_gradient_matches_the_reference_with_the_feature_only_semantic_head",
+        SemanticInput::Feature,
+    );
+}
+
+fn check_one_step_gradient(name: &str, semantic_input: SemanticInput) {
     use scribblefield::field::gpu::rays::{StepUniforms, pick_pixel, sample_jitter};
     use scribblefield::field::gpu::scene_buffers::LabelIndex;
     use scribblefield::field::reference::{FieldModel, RayTarget, SampledRay, TrainingRay, sampling};
@@ -168,7 +171,7 @@ fn check_one_step_gradient(name: &str, semantic_geometry_input: bool) {
         // Not 1: the GPU must scale the semantic gradient into the shared field as the
         // reference does (1 is the same code with a factor of one).
         semantic_trunk_gradient: 0.5,
-        semantic_geometry_input,
+        semantic_input,
         ..FieldConfig::small()
     };
     let seed = 3;

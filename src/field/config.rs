@@ -44,6 +44,24 @@ impl Default for Encoding {
     }
 }
 
+/// The semantic head's input.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SemanticInput {
+    /// `Feature` when feature supervision is on, `FeatureAndGeometry` when it is off.
+    #[default]
+    Auto,
+    /// [relu(f), g]: the paper's head.
+    FeatureAndGeometry,
+    /// relu(f) alone, so classes follow the rendered features, which feature supervision ties
+    /// to the image's codes, and not the shading g carries for the colour head. Measured with
+    /// scribbles on two frames of the demo scene (issue 3's note): mean IoU 0.64-0.87 over three
+    /// seeds with g, 0.81-0.82 without; YCB 0.46 with, 0.54 without. Without feature supervision
+    /// f holds nothing the codes put there, and this head generalized worse than the paper's
+    /// (`tests/gpu_trainer.rs`: 0.29 against 0.67 accuracy on an unscribbled frame), hence `Auto`.
+    Feature,
+}
+
 /// Weights of the four loss terms (DESIGN §5).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -136,13 +154,8 @@ pub struct FieldConfig {
     /// field (the feature MLP, the density MLP and the encoding): 1 is the paper's model, 0 trains
     /// the head alone on features shaped by colour, depth and feature codes.
     pub semantic_trunk_gradient: f32,
-    /// Whether the semantic head sees the geometry feature g beside relu(f) (the paper's
-    /// [relu(f), g]). Off by default: the head then sees relu(f) alone, so classes follow the
-    /// rendered features, which feature supervision ties to the image's codes, and not the
-    /// shading g carries for the colour head. Measured with scribbles on two frames of the demo
-    /// scene (issue 3's note): mean IoU 0.64-0.87 over three seeds with g, 0.81-0.82 without;
-    /// YCB 0.46 with, 0.54 without.
-    pub semantic_geometry_input: bool,
+    /// What the semantic head sees (see `SemanticInput`).
+    pub semantic_input: SemanticInput,
 }
 
 impl Default for FieldConfig {
@@ -172,7 +185,7 @@ impl Default for FieldConfig {
             adam: AdamConfig::default(),
             batch_rays: 4096,
             semantic_trunk_gradient: 1.0,
-            semantic_geometry_input: false,
+            semantic_input: SemanticInput::Auto,
         }
     }
 }
@@ -265,14 +278,15 @@ impl FieldConfig {
 
     /// Columns of the geometry feature in the semantic head's input (0 or `geometry_dim`).
     pub fn semantic_geometry_dim(&self) -> usize {
-        if self.semantic_geometry_input {
-            self.geometry_dim as usize
-        } else {
-            0
-        }
+        let with_geometry = match self.semantic_input {
+            SemanticInput::Auto => !self.feature_supervision,
+            SemanticInput::FeatureAndGeometry => true,
+            SemanticInput::Feature => false,
+        };
+        if with_geometry { self.geometry_dim as usize } else { 0 }
     }
 
-    /// Semantic head: [relu(f), geometry feature (if `semantic_geometry_input`)] → width → classes.
+    /// Semantic head: [relu(f), geometry feature (see `semantic_input`)] → width → classes.
     pub fn semantic_dims(&self) -> Vec<usize> {
         mlp_dims(
             self.feature_dim as usize + self.semantic_geometry_dim(),
@@ -408,10 +422,19 @@ mod tests {
         assert_eq!(c.feature_dims(), vec![15, 64, 64, 64]);
         assert_eq!(c.semantic_dims(), vec![64, 64, 2]);
         let papers = FieldConfig {
-            semantic_geometry_input: true,
+            semantic_input: SemanticInput::FeatureAndGeometry,
             ..FieldConfig::default()
         };
         assert_eq!(papers.semantic_dims(), vec![79, 64, 2]);
+        let unsupervised = FieldConfig {
+            feature_supervision: false,
+            ..FieldConfig::default()
+        };
+        assert_eq!(
+            unsupervised.semantic_dims(),
+            vec![79, 64, 2],
+            "Auto keeps g without codes"
+        );
         FieldConfig::small().validate().unwrap();
     }
 

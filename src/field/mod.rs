@@ -12,6 +12,6 @@ pub mod params;
 pub mod reference;
 pub mod rng;
 
-pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LossWeights};
+pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LossWeights, SemanticInput};
 pub use params::{MlpLayout, ParamLayout};
 pub mod gpu;

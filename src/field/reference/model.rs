@@ -6,7 +6,7 @@
 //! [h₀, g] = density_mlp(e)                                  σ = exp(h₀), g: geometry feature
 //! rgb = sigmoid(color_mlp([sh4(d), g]))
 //! f   = feature_mlp(g)                                      (linear)
-//! s   = semantic_mlp([relu(f), g]) or semantic_mlp(relu(f))  (C logits; `semantic_geometry_input`)
+//! s   = semantic_mlp([relu(f), g]) or semantic_mlp(relu(f))  (C logits; `semantic_input`)
 //! value = [rgb, z-depth of the sample, s, f]                (render::Channels order)
 //! ```
 //! then all values are rendered with one set of weights (`render`), and `loss::ray_loss`

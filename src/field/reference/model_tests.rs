@@ -7,7 +7,7 @@ use super::loss::RayTarget;
 use super::model::{FieldModel, SampledRay, TrainingRay};
 use super::sampling::ray_through_pixel;
 use super::{Adam, sh};
-use crate::field::config::{Encoding, FieldConfig};
+use crate::field::config::{Encoding, FieldConfig, SemanticInput};
 use crate::field::rng::SplitMix64;
 use crate::scene::{Bounds, Intrinsics, Pose};
 
@@ -95,7 +95,7 @@ fn whole_model_gradient_matches_finite_differences() {
 #[test]
 fn whole_model_gradient_with_geometry_in_the_semantic_head() {
     check_whole_model_gradient(FieldConfig {
-        semantic_geometry_input: true,
+        semantic_input: SemanticInput::FeatureAndGeometry,
         ..tiny_config()
     });
 }
