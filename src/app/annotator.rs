@@ -223,6 +223,10 @@ impl Annotator {
             split_steps: option("split").is_some_and(|v| v != "0"),
             ..TrainingOptions::default()
         };
+        // `#refine=N`: rounds of edge-aware refinement of the shown and exported masks.
+        if let Some(n) = option("refine").and_then(|v| v.parse::<u32>().ok()) {
+            options.refine.iterations = n.min(16);
+        }
         // `#coarse=N`: the quick first render of a stale mask at 1/N, even where it is not
         // quicker than the full one (1: none).
         if let Some(n) = option("coarse").and_then(|v| v.parse::<u32>().ok()) {

@@ -25,6 +25,7 @@ use crate::export::MaskSet;
 use crate::field::FieldConfig;
 use crate::field::gpu::trainer::{DepthGuide, RenderedFrame, StepLosses, Trainer, ViewCamera};
 use crate::field::gpu::view::frame_depth_at;
+use crate::field::refine::{Guide, RefineOptions};
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
 use crate::labels::scale::scale_labels;
@@ -320,6 +321,10 @@ pub struct TrainingOptions {
     pub split_steps: bool,
     /// Measure where a step's time goes before training (`#profile`), see [`TrainingTask::profile`].
     pub profile: bool,
+    /// Edge-aware refinement of the full renders and the export with each frame's colour and
+    /// depth (`#refine=N` rounds, 0: the field's own class map); the quick coarse render stays
+    /// unrefined.
+    pub refine: RefineOptions,
 }
 
 struct TrainingTask {
@@ -522,11 +527,22 @@ impl TrainingTask {
     /// Renders `frame` at the training resolution, noting how long it took.
     async fn render_full(&self, trainer: &mut Trainer, frame: u32) -> Result<RenderedFrame, String> {
         let start = now_ms();
-        let image = trainer
+        let image = self.render_refined(trainer, frame).await?;
+        self.shared.borrow_mut().render_ms = now_ms() - start;
+        Ok(image)
+    }
+
+    /// Renders `frame` at the training resolution and refines its class map (`options.refine`).
+    async fn render_refined(&self, trainer: &mut Trainer, frame: u32) -> Result<RenderedFrame, String> {
+        let mut image = trainer
             .render_frame(frame, self.scene.width, self.scene.height)
             .await
             .map_err(|e| format!("rendering frame {frame} failed: {e}"))?;
-        self.shared.borrow_mut().render_ms = now_ms() - start;
+        if let Some(guide) = Guide::of_frame(&self.scene, frame as usize) {
+            image
+                .refine(guide, &self.options.refine)
+                .map_err(|e| format!("frame {frame}: {e}"))?;
+        }
         Ok(image)
     }
 
@@ -614,10 +630,7 @@ impl TrainingTask {
             }
             self.egui_ctx.request_repaint();
             self.fault()?;
-            let rendered = trainer
-                .render_frame(frame, scene.width, scene.height)
-                .await
-                .map_err(|e| format!("rendering frame {frame} failed: {e}"))?;
+            let rendered = self.render_refined(trainer, frame).await?;
             let mask = GrayImage::from_raw(scene.width, scene.height, rendered.classes)
                 .ok_or_else(|| format!("frame {frame}: the rendered class map has the wrong size"))?;
             masks.push(upscale_mask(mask, self.full_size.0, self.full_size.1));

@@ -4,6 +4,7 @@ use clap::Args;
 use scribblefield::eval::headless::{render_and_score, train_schedule};
 use scribblefield::export::MaskSet;
 use scribblefield::field::gpu::trainer::Trainer;
+use scribblefield::field::refine::RefineOptions;
 use scribblefield::gpu::{GpuContext, GpuOptions};
 use scribblefield::labels::LabelSet;
 use scribblefield::scene::read_archive_path;
@@ -31,6 +32,10 @@ pub struct SegmentArgs {
     field: FieldConfigArgs,
     #[arg(long, default_value_t = 0)]
     seed: u32,
+    /// Rounds of edge-aware refinement of each mask with its frame's colour and depth (0: the
+    /// field's own argmax); see `field::refine`.
+    #[arg(long, default_value_t = RefineOptions::default().iterations)]
+    refine_iterations: u32,
 }
 
 pub fn run(args: SegmentArgs) -> CliResult {
@@ -55,6 +60,11 @@ pub fn run(args: SegmentArgs) -> CliResult {
         .resolve(labels.classes.len() as u32, scene.features.as_ref())?;
     without_missing_codes(&mut cfg, &scene, &args.archive);
     cfg.validate()?;
+    let refine = RefineOptions {
+        iterations: args.refine_iterations,
+        ..RefineOptions::default()
+    };
+    refine.validate()?;
 
     let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
     eprintln!("training on {}", ctx.describe());
@@ -87,7 +97,8 @@ pub fn run(args: SegmentArgs) -> CliResult {
     let names: Vec<String> = labels.classes.iter().map(|c| c.name.clone()).collect();
     let mut masks = Vec::with_capacity(scene.frames.len());
     let mut bad_size = false;
-    let report = render_and_score(&mut trainer, &scene, &names, 0..scene.frames.len(), |_, rendered| {
+    let frames = 0..scene.frames.len();
+    let report = render_and_score(&mut trainer, &scene, &names, frames, &refine, |_, rendered| {
         match image::GrayImage::from_raw(scene.width, scene.height, rendered.classes) {
             Some(mask) => masks.push(mask),
             None => bad_size = true,

@@ -4,6 +4,7 @@
 //! Schedule: `warmup` steps without labels (colour, depth and features only), then the labels
 //! join and `steps` more steps train with them.
 use crate::field::gpu::trainer::{RenderedFrame, Trainer};
+use crate::field::refine::{Guide, RefineOptions};
 use crate::field::{AdamConfig, FieldConfig};
 use crate::gpu::GpuError;
 use crate::labels::LabelSet;
@@ -63,19 +64,38 @@ pub fn train_schedule(
     Ok(())
 }
 
-/// Renders `frames` and scores their class maps against the scene's ground truth (frames
-/// without ground truth are rendered but not scored). `each(frame, rendered)` sees every render.
+/// Renders frame `frame` of `scene` at its resolution and refines its class map with the
+/// frame's image and depth as the guide (`refine` off: the field's own argmax).
+pub fn render_scene_frame(
+    trainer: &mut Trainer,
+    scene: &Scene,
+    frame: usize,
+    refine: &RefineOptions,
+) -> Result<RenderedFrame, GpuError> {
+    let mut rendered = pollster::block_on(trainer.render_frame(frame as u32, scene.width, scene.height))?;
+    if let Some(guide) = Guide::of_frame(scene, frame) {
+        rendered
+            .refine(guide, refine)
+            .map_err(|e| GpuError::invalid_argument("refine", e))?;
+    }
+    Ok(rendered)
+}
+
+/// Renders `frames` (refined as `render_scene_frame` does) and scores their class maps against
+/// the scene's ground truth (frames without ground truth are rendered but not scored).
+/// `each(frame, rendered)` sees every render.
 pub fn render_and_score(
     trainer: &mut Trainer,
     scene: &Scene,
     class_names: &[String],
     frames: impl IntoIterator<Item = usize>,
+    refine: &RefineOptions,
     mut each: impl FnMut(usize, RenderedFrame),
 ) -> Result<EvalReport, GpuError> {
     let mut confusion = Confusion::new(class_names.len());
     let mut scored = 0;
     for i in frames {
-        let rendered = pollster::block_on(trainer.render_frame(i as u32, scene.width, scene.height))?;
+        let rendered = render_scene_frame(trainer, scene, i, refine)?;
         if let Some(gt) = scene.frames.get(i).and_then(|f| f.gt.as_ref()) {
             confusion.add(gt.as_raw(), &rendered.classes);
             scored += 1;

@@ -26,6 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::field::FieldConfig;
 use crate::field::gpu::trainer::{Trainer, TrainerState};
+use crate::field::refine::RefineOptions;
 use crate::field::rng::SplitMix64;
 use crate::gpu::{GpuContext, GpuError};
 use crate::labels::{LabelSet, Stroke, UNLABELLED, rasterize_frame};
@@ -559,7 +560,9 @@ fn train(trainer: &mut Trainer, steps: u32, events: &mut dyn FnMut(SimEvent<'_>)
 fn evaluate(trainer: &mut Trainer, scene: &Scene, state: &SimulateState) -> Result<CurvePoint, GpuError> {
     let names: Vec<String> = scene.classes.iter().map(|c| c.name.clone()).collect();
     let frames = state.settings.frames.held_out.iter().map(|&f| f as usize);
-    let report = render_and_score(trainer, scene, &names, frames, |_, _| {})?;
+    // The paper's protocol scores the field's own class map, so the refinement stays off here
+    // (and in the clicks above): these curves measure the field and its encodings.
+    let report = render_and_score(trainer, scene, &names, frames, &RefineOptions::OFF, |_, _| {})?;
     Ok(CurvePoint {
         round: state.rounds,
         clicks: state.clicks,

@@ -10,6 +10,7 @@
 pub mod config;
 pub mod params;
 pub mod reference;
+pub mod refine;
 pub mod rng;
 
 pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LossWeights, SemanticInput};

@@ -6,6 +6,7 @@
 //! is rendered twice: first with every sample spread over the ray, which gives a rough depth, then
 //! with that depth as the guide (NeRF's coarse-to-fine idea with the renderer's own estimate).
 use crate::field::reference::sampling::{clip_to_bounds, ray_through_pixel};
+use crate::field::refine::{Guide, RefineOptions, argmax_and_confidence, refine_probabilities};
 use crate::scene::{Bounds, Intrinsics, Pca, Pose, Scene};
 
 use super::rays::{RAY_HITS_BOX, RayGeometry};
@@ -97,10 +98,16 @@ pub fn view_rays(
 pub struct RenderedFrame {
     pub width: u32,
     pub height: u32,
-    /// Argmax of the rendered semantic logits.
+    /// Argmax of the class probabilities.
     pub classes: Vec<u8>,
-    /// The largest softmax probability of the rendered logits.
+    /// The largest class probability.
     pub confidence: Vec<f32>,
+    /// Softmax of the rendered semantic logits, `C` per pixel; refined in place by
+    /// [`RenderedFrame::refine`].
+    pub probabilities: Vec<f32>,
+    /// Whether `refine` has been applied (classes and confidence then follow the refined
+    /// probabilities).
+    pub refined: bool,
     pub rgb: Vec<[f32; 3]>,
     /// Rendered z-depth in metres.
     pub depth: Vec<f32>,
@@ -108,6 +115,30 @@ pub struct RenderedFrame {
     /// of its codes when it has one (so rendered and stored features look alike), else a PCA
     /// fitted to this view's own rendered features.
     pub features_pca: Vec<[f32; 3]>,
+}
+
+impl RenderedFrame {
+    /// Snaps the class map to the edges of `guide` (the frame this was rendered for, at this
+    /// resolution): see [`crate::field::refine`]. Errors name a guide of another size.
+    pub fn refine(&mut self, guide: Guide<'_>, options: &RefineOptions) -> Result<(), String> {
+        if options.is_off() {
+            return Ok(());
+        }
+        if guide.rgb.dimensions() != (self.width, self.height) {
+            return Err(format!(
+                "refine: the guide is {} x {}, the rendered frame {} x {}",
+                guide.rgb.width(),
+                guide.rgb.height(),
+                self.width,
+                self.height
+            ));
+        }
+        let count = self.probabilities.len() / self.classes.len().max(1);
+        refine_probabilities(&mut self.probabilities, count, guide, options)?;
+        (self.classes, self.confidence) = argmax_and_confidence(&self.probabilities, count);
+        self.refined = true;
+        Ok(())
+    }
 }
 
 /// Accumulates rendered ray rows (the rendered channels of `composite`'s output rows:
@@ -128,6 +159,8 @@ impl FrameAssembler {
                 height,
                 classes: Vec::with_capacity(pixels),
                 confidence: Vec::with_capacity(pixels),
+                probabilities: Vec::with_capacity(pixels * classes),
+                refined: false,
                 rgb: Vec::with_capacity(pixels),
                 depth: Vec::with_capacity(pixels),
                 features_pca: Vec::new(),
@@ -154,6 +187,7 @@ impl FrameAssembler {
         let sum: f32 = logits.iter().map(|&x| (x - top).exp()).sum();
         f.classes.push(best as u8);
         f.confidence.push(1.0 / sum);
+        f.probabilities.extend(logits.iter().map(|&x| (x - top).exp() / sum));
         self.features
             .extend_from_slice(&rendered[4 + self.classes..4 + self.classes + self.feature_dim]);
     }
@@ -241,5 +275,35 @@ mod tests {
         assert!((f.confidence[0] - 1.0 / (1.0 + (-2.0f32).exp())).abs() < 1e-6);
         assert_eq!(f.features_pca.len(), 2);
         assert!(f.features_pca.iter().flatten().all(|v| (0.0..=1.0).contains(v)));
+        assert_eq!(f.probabilities.len(), 4);
+        assert!((f.probabilities[1] - f.confidence[0]).abs() < 1e-6);
+        assert!((f.probabilities[0] + f.probabilities[1] - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn refining_follows_the_guide_and_names_a_guide_of_another_size() {
+        // Two pixels, the first a confident class 1, the second a weak class 0 of the same
+        // colour and depth right next to it: refinement gives the second the first's class.
+        let mut a = FrameAssembler::new(2, 1, 2, 0);
+        a.push(&[0.0, 0.0, 0.0, 1.0, 0.0, 3.0]);
+        a.push(&[0.0, 0.0, 0.0, 1.0, 0.2, 0.0]);
+        let mut f = a.finish(None);
+        assert_eq!(f.classes, vec![1, 0]);
+        let rgb = image::RgbImage::from_pixel(2, 1, image::Rgb([90, 90, 90]));
+        f.refine(Guide { rgb: &rgb, depth: None }, &RefineOptions::default())
+            .unwrap();
+        assert_eq!(f.classes, vec![1, 1]);
+        assert!(f.refined);
+        let wrong = image::RgbImage::new(3, 1);
+        let err = f
+            .refine(
+                Guide {
+                    rgb: &wrong,
+                    depth: None,
+                },
+                &RefineOptions::default(),
+            )
+            .unwrap_err();
+        assert!(err.contains("3 x 1") && err.contains("2 x 1"), "{err}");
     }
 }

@@ -1,0 +1,396 @@
+//! Edge-aware refinement of a rendered class map, guided by the frame's own colour and depth.
+//!
+//! The field's class boundaries are as soft as its features: codes come from image windows a few
+//! pixels wide and a grid cell per code, so a rendered object carries a ring of its class a pixel
+//! or two into the table around it, and small unlabelled patches (a shadow, a shaded edge) can
+//! flip to a wrong class. The frame image has those boundaries sharp. A few rounds of a joint
+//! bilateral filter on the class probabilities (each pixel takes the average of its neighbours'
+//! probabilities, weighted by how close they are in the image, in colour and in depth) let a
+//! region agree with itself and stop at edges, so the halo goes to the table it looks like.
+//!
+//! Measured on the demo scene (scribbles on frames 0 and 12, budget preset with feature
+//! supervision, seeds 0/1/2; issue 3's note): mean IoU 0.813/0.817/0.815 → see the note for the
+//! refined figures. Without the depth term the gain is about a third smaller, since colour alone
+//! lets a red ball and a red box leak into each other where they touch in the image.
+use image::RgbImage;
+
+use crate::scene::{DepthImage, Scene};
+use serde::{Deserialize, Serialize};
+
+/// How the class probabilities are refined. `iterations: 0` turns refinement off.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RefineOptions {
+    /// Rounds of filtering; each spreads agreement about one window further.
+    pub iterations: u32,
+    /// Colour distance (sRGB in [0, 1], Euclidean over the three channels) at which a
+    /// neighbour's weight falls to e^-1/2.
+    pub colour_sigma: f32,
+    /// Relative depth difference, |ln(d / d')|, at which the weight falls to e^-1/2; pixels
+    /// without depth skip this term.
+    pub depth_sigma: f32,
+    /// Spatial reach as a fraction of the image diagonal (2 pixels at 80 x 60), so the same
+    /// setting suits every resolution: the field's blur scales with the image.
+    pub spatial_sigma: f32,
+}
+
+impl Default for RefineOptions {
+    fn default() -> Self {
+        RefineOptions {
+            iterations: 3,
+            colour_sigma: 0.1,
+            depth_sigma: 0.05,
+            spatial_sigma: 0.02,
+        }
+    }
+}
+
+impl RefineOptions {
+    pub const OFF: RefineOptions = RefineOptions {
+        iterations: 0,
+        colour_sigma: 0.1,
+        depth_sigma: 0.05,
+        spatial_sigma: 0.02,
+    };
+
+    pub fn is_off(&self) -> bool {
+        self.iterations == 0
+    }
+
+    /// A value that cannot work, named by its field.
+    pub fn validate(&self) -> Result<(), String> {
+        for (name, v) in [
+            ("colour_sigma", self.colour_sigma),
+            ("depth_sigma", self.depth_sigma),
+            ("spatial_sigma", self.spatial_sigma),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("refine: `{name}` = {v}: must be a positive number"));
+            }
+        }
+        if self.iterations > MAX_ITERATIONS {
+            return Err(format!(
+                "refine: `iterations` = {}: at most {MAX_ITERATIONS}",
+                self.iterations
+            ));
+        }
+        Ok(())
+    }
+}
+
+const MAX_ITERATIONS: u32 = 64;
+
+/// Taps on each side of the centre: a 7 x 7 window whatever the resolution; larger reaches
+/// space the taps out instead of adding more.
+const HALF_TAPS: i64 = 3;
+
+/// What the filter follows: the frame the class map was rendered for, at the same resolution.
+#[derive(Clone, Copy, Debug)]
+pub struct Guide<'a> {
+    pub rgb: &'a RgbImage,
+    /// Raw depth values (any unit; only ratios are used), 0 = no reading.
+    pub depth: Option<&'a DepthImage>,
+}
+
+impl<'a> Guide<'a> {
+    /// Frame `frame` of `scene`: its image and measured depth.
+    pub fn of_frame(scene: &'a Scene, frame: usize) -> Option<Guide<'a>> {
+        let f = scene.frames.get(frame)?;
+        Some(Guide {
+            rgb: &f.rgb,
+            depth: f.depth.as_ref(),
+        })
+    }
+}
+
+/// Refines per-pixel class probabilities (`classes` values per pixel, row-major, each pixel's
+/// summing to 1) in place. Errors name a size that does not match the guide.
+pub fn refine_probabilities(
+    probabilities: &mut Vec<f32>,
+    classes: usize,
+    guide: Guide<'_>,
+    options: &RefineOptions,
+) -> Result<(), String> {
+    options.validate()?;
+    let (width, height) = guide.rgb.dimensions();
+    let pixels = width as usize * height as usize;
+    if classes == 0 || probabilities.len() != pixels * classes {
+        return Err(format!(
+            "refine: {} probabilities for {classes} classes do not fit a {width} x {height} guide",
+            probabilities.len()
+        ));
+    }
+    if let Some(depth) = guide.depth
+        && depth.dimensions() != (width, height)
+    {
+        return Err(format!(
+            "refine: the depth guide is {} x {}, the colour guide {width} x {height}",
+            depth.width(),
+            depth.height()
+        ));
+    }
+    if options.is_off() || pixels == 0 {
+        return Ok(());
+    }
+    let taps = TapWeights::new(guide, options);
+    let mut next = vec![0f32; probabilities.len()];
+    for _ in 0..options.iterations {
+        taps.filter(probabilities, &mut next, classes);
+        std::mem::swap(probabilities, &mut next);
+    }
+    Ok(())
+}
+
+/// The guide in the form the weights need: colour in [0, 1] and log depth (NaN: no reading).
+struct TapWeights {
+    width: i64,
+    height: i64,
+    step: i64,
+    colour: Vec<[f32; 3]>,
+    log_depth: Vec<f32>,
+    spatial_scale: f32,
+    colour_scale: f32,
+    depth_scale: f32,
+}
+
+impl TapWeights {
+    fn new(guide: Guide<'_>, options: &RefineOptions) -> TapWeights {
+        let (width, height) = guide.rgb.dimensions();
+        let colour = guide.rgb.pixels().map(|p| p.0.map(|c| f32::from(c) / 255.0)).collect();
+        let log_depth = match guide.depth {
+            Some(depth) => depth
+                .pixels()
+                .map(|d| if d.0[0] == 0 { f32::NAN } else { f32::from(d.0[0]).ln() })
+                .collect(),
+            None => vec![f32::NAN; width as usize * height as usize],
+        };
+        let diagonal = (f64::from(width).powi(2) + f64::from(height).powi(2)).sqrt() as f32;
+        let sigma_px = (options.spatial_sigma * diagonal).max(0.5);
+        TapWeights {
+            width: i64::from(width),
+            height: i64::from(height),
+            step: ((sigma_px / 2.0).round() as i64).max(1),
+            colour,
+            log_depth,
+            spatial_scale: 1.0 / (2.0 * sigma_px * sigma_px),
+            colour_scale: 1.0 / (2.0 * options.colour_sigma * options.colour_sigma),
+            depth_scale: 1.0 / (2.0 * options.depth_sigma * options.depth_sigma),
+        }
+    }
+
+    fn weight(&self, centre: usize, other: usize, offset2: f32) -> f32 {
+        let (a, b) = (self.colour[centre], self.colour[other]);
+        let colour2 = (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2);
+        let depth_diff = self.log_depth[centre] - self.log_depth[other];
+        // NaN (a pixel without depth) compares false: the depth term is left out.
+        let depth2 = if depth_diff.is_nan() {
+            0.0
+        } else {
+            depth_diff * depth_diff
+        };
+        (-(offset2 * self.spatial_scale + colour2 * self.colour_scale + depth2 * self.depth_scale)).exp()
+    }
+
+    /// One round: `out` = the weighted mean of `input` over each pixel's in-image taps.
+    fn filter(&self, input: &[f32], out: &mut [f32], classes: usize) {
+        for y in 0..self.height {
+            for x in 0..self.width {
+                let centre = (y * self.width + x) as usize;
+                let acc = &mut out[centre * classes..(centre + 1) * classes];
+                acc.fill(0.0);
+                let mut total = 0.0;
+                for ty in -HALF_TAPS..=HALF_TAPS {
+                    let sy = y + ty * self.step;
+                    if sy < 0 || sy >= self.height {
+                        continue;
+                    }
+                    for tx in -HALF_TAPS..=HALF_TAPS {
+                        let sx = x + tx * self.step;
+                        if sx < 0 || sx >= self.width {
+                            continue;
+                        }
+                        let other = (sy * self.width + sx) as usize;
+                        let offset2 = ((ty * ty + tx * tx) * self.step * self.step) as f32;
+                        let w = self.weight(centre, other, offset2);
+                        total += w;
+                        for (a, &p) in acc.iter_mut().zip(&input[other * classes..(other + 1) * classes]) {
+                            *a += w * p;
+                        }
+                    }
+                }
+                // The centre tap has weight 1, so `total` >= 1.
+                acc.iter_mut().for_each(|a| *a /= total);
+            }
+        }
+    }
+}
+
+/// The argmax class and its probability for each pixel.
+pub fn argmax_and_confidence(probabilities: &[f32], classes: usize) -> (Vec<u8>, Vec<f32>) {
+    probabilities
+        .chunks_exact(classes)
+        .map(|p| {
+            let (best, top) =
+                p.iter().enumerate().fold(
+                    (0usize, f32::NEG_INFINITY),
+                    |(bi, bv), (i, &x)| if x > bv { (i, x) } else { (bi, bv) },
+                );
+            (best as u8, top)
+        })
+        .unzip()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use image::{ImageBuffer, Luma};
+
+    fn one_hot(classes: &[u8], count: usize, softness: f32) -> Vec<f32> {
+        classes
+            .iter()
+            .flat_map(|&c| {
+                (0..count).map(move |k| {
+                    if k == c as usize {
+                        1.0 - softness
+                    } else {
+                        softness / (count - 1) as f32
+                    }
+                })
+            })
+            .collect()
+    }
+
+    /// The default rounds and sigmas with a reach of about 2.3 pixels on these 20 x 12 images (the
+    /// default, 2 % of the diagonal, is under half a pixel here).
+    fn options() -> RefineOptions {
+        RefineOptions {
+            spatial_sigma: 0.1,
+            ..RefineOptions::default()
+        }
+    }
+
+    /// A 20 x 12 image: left half dark red, right half light grey, the boundary at x = 10.
+    fn two_region_guide() -> RgbImage {
+        RgbImage::from_fn(20, 12, |x, _| {
+            if x < 10 {
+                image::Rgb([120, 20, 20])
+            } else {
+                image::Rgb([200, 200, 200])
+            }
+        })
+    }
+
+    #[test]
+    fn a_halo_across_an_image_edge_goes_back_to_the_side_it_looks_like() {
+        let rgb = two_region_guide();
+        // The field's map: class 1 reaches a pixel past the edge, and the grey side has a stray
+        // pixel of class 1 too.
+        let mut map: Vec<u8> = (0..12 * 20).map(|i| u8::from(i % 20 < 11)).collect();
+        map[5 * 20 + 16] = 1;
+        let mut p = one_hot(&map, 2, 0.3);
+        refine_probabilities(&mut p, 2, Guide { rgb: &rgb, depth: None }, &options()).unwrap();
+        let (classes, confidence) = argmax_and_confidence(&p, 2);
+        let want: Vec<u8> = (0..12 * 20).map(|i| u8::from(i % 20 < 10)).collect();
+        assert_eq!(classes, want);
+        assert!(confidence.iter().all(|&c| (0.5..=1.0).contains(&c)));
+        let sums = p.chunks_exact(2).map(|q| q[0] + q[1]);
+        assert!(sums.into_iter().all(|s| (s - 1.0).abs() < 1e-5));
+    }
+
+    #[test]
+    fn depth_separates_regions_of_the_same_colour() {
+        // One colour everywhere; the left half is 1 m away, the right half 2 m.
+        let rgb = RgbImage::from_pixel(20, 12, image::Rgb([150, 40, 40]));
+        let depth = ImageBuffer::from_fn(20, 12, |x, _| Luma([if x < 10 { 1000u16 } else { 2000 }]));
+        let map: Vec<u8> = (0..12 * 20).map(|i| u8::from(i % 20 < 11)).collect();
+        let refined = |depth| {
+            let mut p = one_hot(&map, 2, 0.3);
+            refine_probabilities(&mut p, 2, Guide { rgb: &rgb, depth }, &options()).unwrap();
+            argmax_and_confidence(&p, 2).0
+        };
+        let want: Vec<u8> = (0..12 * 20).map(|i| u8::from(i % 20 < 10)).collect();
+        assert_eq!(refined(Some(&depth)), want);
+        // Without depth nothing in the guide marks the edge: the halo stays.
+        assert_ne!(refined(None), want);
+    }
+
+    #[test]
+    fn missing_depth_readings_leave_the_colour_term_in_charge() {
+        let rgb = two_region_guide();
+        let depth = ImageBuffer::from_fn(20, 12, |x, y| Luma([if (x + y) % 3 == 0 { 0u16 } else { 1500 }]));
+        let map: Vec<u8> = (0..12 * 20).map(|i| u8::from(i % 20 < 11)).collect();
+        let mut p = one_hot(&map, 2, 0.3);
+        refine_probabilities(
+            &mut p,
+            2,
+            Guide {
+                rgb: &rgb,
+                depth: Some(&depth),
+            },
+            &options(),
+        )
+        .unwrap();
+        let want: Vec<u8> = (0..12 * 20).map(|i| u8::from(i % 20 < 10)).collect();
+        assert_eq!(argmax_and_confidence(&p, 2).0, want);
+        assert!(p.iter().all(|v| v.is_finite()));
+    }
+
+    /// `cargo test --release --lib refine::tests::bench -- --ignored --nocapture`
+    #[test]
+    #[ignore = "benchmark: prints the time per frame"]
+    fn bench() {
+        for (w, h) in [(80u32, 60u32), (160, 120), (640, 480)] {
+            let rgb = RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 7 % 256) as u8, (y * 5 % 256) as u8, 90]));
+            let depth = ImageBuffer::from_fn(w, h, |x, y| Luma([1000 + (x + y) as u16]));
+            let classes = 6;
+            let base: Vec<f32> = (0..w as usize * h as usize * classes)
+                .map(|i| ((i * 2654435761) % 1000) as f32 / 1000.0 + 0.01)
+                .collect();
+            let mut p = base.clone();
+            let guide = Guide {
+                rgb: &rgb,
+                depth: Some(&depth),
+            };
+            let clock = std::time::Instant::now();
+            let runs = 3;
+            for _ in 0..runs {
+                p.copy_from_slice(&base);
+                refine_probabilities(&mut p, classes, guide, &RefineOptions::default()).unwrap();
+            }
+            let ms = clock.elapsed().as_secs_f64() * 1e3 / runs as f64;
+            println!("refine {w} x {h}, {classes} classes, 3 rounds of 7 x 7 taps: {ms:.1} ms per frame");
+        }
+    }
+
+    #[test]
+    fn off_changes_nothing_and_bad_input_is_named() {
+        let rgb = two_region_guide();
+        let map: Vec<u8> = (0..12 * 20).map(|i| u8::from(i % 20 < 12)).collect();
+        let before = one_hot(&map, 2, 0.3);
+        let mut p = before.clone();
+        refine_probabilities(&mut p, 2, Guide { rgb: &rgb, depth: None }, &RefineOptions::OFF).unwrap();
+        assert_eq!(p, before);
+
+        let err =
+            refine_probabilities(&mut p, 3, Guide { rgb: &rgb, depth: None }, &RefineOptions::default()).unwrap_err();
+        assert!(err.contains("3 classes") && err.contains("20 x 12"), "{err}");
+        let bad = RefineOptions {
+            colour_sigma: 0.0,
+            ..RefineOptions::default()
+        };
+        let err = refine_probabilities(&mut p, 2, Guide { rgb: &rgb, depth: None }, &bad).unwrap_err();
+        assert!(err.contains("colour_sigma"), "{err}");
+        let small_depth = ImageBuffer::from_pixel(4, 4, Luma([1000u16]));
+        let err = refine_probabilities(
+            &mut p,
+            2,
+            Guide {
+                rgb: &rgb,
+                depth: Some(&small_depth),
+            },
+            &RefineOptions::default(),
+        )
+        .unwrap_err();
+        assert!(err.contains("4 x 4"), "{err}");
+    }
+}
