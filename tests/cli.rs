@@ -207,6 +207,7 @@ fn scribble_segment_eval_round() {
     let t = text(&o);
     assert!(o.status.success(), "{t}");
     assert!(t.contains("wrote 24 masks") && t.contains("mean IoU"), "{t}");
+    assert!(t.contains("refined with each frame's colour and depth (3 rounds;"), "{t}");
     assert!(d.join("masks/00023.png").is_file() && d.join("masks/preview/00000.png").is_file());
     let o = run(&["eval", &path("d.scene.zip"), &path("masks"), "--json"]);
     let t = text(&o);
@@ -229,6 +230,9 @@ fn scribble_segment_eval_round() {
         !d.join("m3").exists(),
         "a refused run must not create its output folder"
     );
+    let o = segment("l.json", "m4", &["--refine-iterations", "100"]);
+    assert_clean_failure(&o, &["refine", "iterations", "100"]);
+    assert!(!d.join("m4").exists());
     let o = run(&["eval", &path("d.scene.zip"), &path("nowhere")]);
     assert_clean_failure(&o, &["nowhere"]);
 }

@@ -115,6 +115,14 @@ pub fn run(args: SegmentArgs) -> CliResult {
     };
     set.write_dir(&args.output, Some(&labels))?;
     println!("wrote {} masks to {}", scene.frames.len(), args.output.display());
+    if refine.is_off() {
+        println!("masks: the field's own class maps (--refine-iterations 0)");
+    } else {
+        println!(
+            "masks: refined with each frame's colour and depth ({} rounds; --refine-iterations 0 for the field's own)",
+            refine.iterations
+        );
+    }
     if scene.has_gt() {
         print!("{}", report.table());
     }
