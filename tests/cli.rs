@@ -207,7 +207,10 @@ fn scribble_segment_eval_round() {
     let t = text(&o);
     assert!(o.status.success(), "{t}");
     assert!(t.contains("wrote 24 masks") && t.contains("mean IoU"), "{t}");
-    assert!(t.contains("refined with each frame's colour and depth (3 rounds;"), "{t}");
+    assert!(
+        t.contains("refined with each frame's colour and depth (3 rounds;"),
+        "{t}"
+    );
     assert!(d.join("masks/00023.png").is_file() && d.join("masks/preview/00000.png").is_file());
     let o = run(&["eval", &path("d.scene.zip"), &path("masks"), "--json"]);
     let t = text(&o);
