@@ -93,7 +93,8 @@ pub struct Annotator {
     inbox: Inbox,
     restart_pending: bool,
     /// The scene the field trains on and its downscale factor (kept for restarts).
-    train_scene: Option<(u32, Rc<Scene>)>,
+    /// The scene at training resolution, for (downscale factor, whether it keeps the codes).
+    train_scene: Option<((u32, bool), Rc<Scene>)>,
     arrow_key_widgets: Vec<egui::Id>,
     image_rect: egui::Rect,
     /// Where the side panel drew the rendered features (for the page status).
@@ -193,11 +194,12 @@ impl Annotator {
             .and_then(|v| v.parse::<u32>().ok())
             .filter(|f| (1..=16).contains(f))
             .unwrap_or_else(|| auto_factor(self.scene.width, self.scene.height, self.model == ModelSize::Tiny));
+        let key = (factor, self.model.trains_on_feature_codes());
         let train_scene = match &self.train_scene {
-            Some((f, s)) if *f == factor => s.clone(),
+            Some((k, s)) if *k == key => s.clone(),
             _ => {
-                let s = Rc::new(downscale(&self.scene, factor));
-                self.train_scene = Some((factor, s.clone()));
+                let s = Rc::new(downscale(&self.scene, factor, key.1));
+                self.train_scene = Some((key, s.clone()));
                 s
             }
         };
@@ -402,7 +404,7 @@ impl Annotator {
                         frame: self.frame as u32,
                         labelled_pixels: self.summary.labelled_pixels,
                         factor: self.training.as_ref().map_or(1, |t| t.factor),
-                        has_codes: self.scene.features.is_some(),
+                        has_codes: self.scene.features.is_some() && self.model.trains_on_feature_codes(),
                         animate: !self.gpu.as_ref().is_some_and(|g| g.is_software()),
                     },
                 );

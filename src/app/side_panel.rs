@@ -22,8 +22,8 @@ pub struct SideFacts {
     pub labelled_pixels: u64,
     /// The field trains on frames this many times smaller.
     pub factor: u32,
-    /// The scene carries feature codes (with their PCA); else the features are shown through a
-    /// PCA fitted to each render.
+    /// The field trains on the scene's feature codes (and shows them through their PCA); else
+    /// the features are shown through a PCA fitted to each render.
     pub has_codes: bool,
     /// Spinners may animate (not on a CPU rasterizer, where every repaint costs the training
     /// about a second).
@@ -166,8 +166,9 @@ pub fn show(
             } else {
                 (
                     "rendered features, PCA of this view",
-                    "This scene carries no feature codes, so the feature branch is trained only \
-                     through the semantic head; its rendered vectors are shown through a PCA \
+                    "The field trains on no feature codes here (the scene has none, or the tiny \
+                     model of software rasterizers leaves them out), so the feature branch is \
+                     trained only through the semantic head; its rendered vectors are shown through a PCA \
                      fitted to this render (the colours change from render to render).",
                 )
             };

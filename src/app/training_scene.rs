@@ -29,8 +29,9 @@ pub fn auto_factor(width: u32, height: u32, software: bool) -> u32 {
 
 /// `scene` with frames `factor` times smaller on each axis (at least 1 x 1). Colour is
 /// averaged; depth and ground truth take the nearest pixel, since averaging depth across an
-/// edge or class ids makes values that exist nowhere.
-pub fn downscale(scene: &Scene, factor: u32) -> Scene {
+/// edge or class ids makes values that exist nowhere. The feature codes stay (they are looked
+/// up by position in the frame, whatever its size) unless `keep_codes` is false.
+pub fn downscale(scene: &Scene, factor: u32, keep_codes: bool) -> Scene {
     if factor <= 1 {
         let mut s = scene.clone();
         s.labels = None;
@@ -55,7 +56,7 @@ pub fn downscale(scene: &Scene, factor: u32) -> Scene {
         depth_scale: scene.depth_scale,
         bounds: scene.bounds,
         classes: scene.classes.clone(),
-        features: scene.features.clone(),
+        features: if keep_codes { scene.features.clone() } else { None },
         labels: None,
         provenance: scene.provenance.clone(),
     }
