@@ -23,6 +23,7 @@ use super::browser::{now_ms, sleep_ms};
 use super::training_scene::upscale_mask;
 use crate::export::MaskSet;
 use crate::field::FieldConfig;
+use crate::field::gpu::refine::RefinePass;
 use crate::field::gpu::trainer::{DepthGuide, RenderedFrame, StepLosses, Trainer, ViewCamera};
 use crate::field::gpu::view::frame_depth_at;
 use crate::field::refine::{Guide, RefineOptions};
@@ -207,6 +208,7 @@ impl Training {
             faults,
             full_size,
             options,
+            refine_pass: None,
         };
         wasm_bindgen_futures::spawn_local(task.run());
         Training {
@@ -336,10 +338,13 @@ struct TrainingTask {
     egui_ctx: egui::Context,
     faults: GpuFaults,
     full_size: (u32, u32),
+    /// The refinement kernel, built when training starts (refinement runs on the GPU here so a
+    /// large frame's filter does not hold up the page's thread).
+    refine_pass: Option<RefinePass>,
 }
 
 impl TrainingTask {
-    async fn run(self) {
+    async fn run(mut self) {
         // The scene carries no labels (see `training_scene::downscale`): the app decides which
         // to start from and hands them over like any later edit.
         let trainer = Trainer::new(&self.ctx, &self.scene, &self.config, 0).await;
@@ -347,6 +352,12 @@ impl TrainingTask {
             Ok(t) => t,
             Err(e) => return self.fail(format!("cannot start training: {e}")),
         };
+        if !self.options.refine.is_off() {
+            match RefinePass::new(&self.ctx).await {
+                Ok(pass) => self.refine_pass = Some(pass),
+                Err(e) => return self.fail(format!("cannot build the mask refinement: {e}")),
+            }
+        }
         if self.options.profile {
             match self.profile(&mut trainer).await {
                 Ok(text) => {
@@ -538,10 +549,11 @@ impl TrainingTask {
             .render_frame(frame, self.scene.width, self.scene.height)
             .await
             .map_err(|e| format!("rendering frame {frame} failed: {e}"))?;
-        if let Some(guide) = Guide::of_frame(&self.scene, frame as usize) {
+        if let (Some(guide), Some(pass)) = (Guide::of_frame(&self.scene, frame as usize), &self.refine_pass) {
             image
-                .refine(guide, &self.options.refine)
-                .map_err(|e| format!("frame {frame}: {e}"))?;
+                .refine_on_gpu(&self.ctx, pass, guide, &self.options.refine)
+                .await
+                .map_err(|e| format!("refining frame {frame} failed: {e}"))?;
         }
         Ok(image)
     }

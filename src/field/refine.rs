@@ -13,7 +13,8 @@
 //! 0.932/0.922/0.900 refined; YCB 0.536 → 0.594 (README, Quality). Without the depth term the
 //! gain is about a third smaller: colour alone lets the red ball and the red box of the demo leak
 //! into each other where they touch in the image. Cost: one pass over 7 x 7 taps per round, 7 ms
-//! per 80 x 60 frame and 0.44 s per 640 x 480 frame on one core (`tests::bench`).
+//! per 80 x 60 frame and 0.44 s per 640 x 480 frame on one core (`tests::bench`). The page runs
+//! the GPU twin (`field::gpu::refine`, `shaders/refine.wgsl`); the CLI runs this one.
 use image::RgbImage;
 
 use crate::scene::{DepthImage, Scene};
@@ -84,7 +85,7 @@ const MAX_ITERATIONS: u32 = 64;
 
 /// Taps on each side of the centre: a 7 x 7 window whatever the resolution; larger reaches
 /// space the taps out instead of adding more.
-const HALF_TAPS: i64 = 3;
+pub(crate) const HALF_TAPS: i64 = 3;
 
 /// What the filter follows: the frame the class map was rendered for, at the same resolution.
 #[derive(Clone, Copy, Debug)]
@@ -106,32 +107,16 @@ impl<'a> Guide<'a> {
 }
 
 /// Refines per-pixel class probabilities (`classes` values per pixel, row-major, each pixel's
-/// summing to 1) in place. Errors name a size that does not match the guide.
+/// summing to 1) in place on the CPU (`gpu::refine` is the GPU twin). Errors name a size that
+/// does not match the guide, or a bad option.
 pub fn refine_probabilities(
     probabilities: &mut Vec<f32>,
     classes: usize,
     guide: Guide<'_>,
     options: &RefineOptions,
 ) -> Result<(), String> {
-    options.validate()?;
-    let (width, height) = guide.rgb.dimensions();
-    let pixels = width as usize * height as usize;
-    if classes == 0 || probabilities.len() != pixels * classes {
-        return Err(format!(
-            "refine: {} probabilities for {classes} classes do not fit a {width} x {height} guide",
-            probabilities.len()
-        ));
-    }
-    if let Some(depth) = guide.depth
-        && depth.dimensions() != (width, height)
-    {
-        return Err(format!(
-            "refine: the depth guide is {} x {}, the colour guide {width} x {height}",
-            depth.width(),
-            depth.height()
-        ));
-    }
-    if options.is_off() || pixels == 0 {
+    check_inputs(probabilities.len(), classes, guide, options)?;
+    if options.is_off() || probabilities.is_empty() {
         return Ok(());
     }
     let taps = TapWeights::new(guide, options);
@@ -143,58 +128,106 @@ pub fn refine_probabilities(
     Ok(())
 }
 
-/// The guide in the form the weights need: colour in [0, 1] and log depth (NaN: no reading).
+/// Checks that `values` probabilities of `classes` classes fit `guide`, and the options.
+pub(crate) fn check_inputs(
+    values: usize,
+    classes: usize,
+    guide: Guide<'_>,
+    options: &RefineOptions,
+) -> Result<(), String> {
+    options.validate()?;
+    let (width, height) = guide.rgb.dimensions();
+    let pixels = width as usize * height as usize;
+    if classes == 0 || values != pixels * classes {
+        return Err(format!(
+            "refine: {values} probabilities for {classes} classes do not fit a {width} x {height} guide"
+        ));
+    }
+    if let Some(depth) = guide.depth
+        && depth.dimensions() != (width, height)
+    {
+        return Err(format!(
+            "refine: the depth guide is {} x {}, the colour guide {width} x {height}",
+            depth.width(),
+            depth.height()
+        ));
+    }
+    Ok(())
+}
+
+/// Log depth at or below this marks a pixel without depth (`NO_DEPTH` in shaders/refine.wgsl).
+pub(crate) const NO_DEPTH: f32 = -1.0e30;
+
+/// The guide's log depth per pixel, [`NO_DEPTH`] where there is no reading.
+pub(crate) fn log_depth(guide: Guide<'_>) -> Vec<f32> {
+    match guide.depth {
+        Some(depth) => depth
+            .pixels()
+            .map(|d| if d.0[0] == 0 { NO_DEPTH } else { f32::from(d.0[0]).ln() })
+            .collect(),
+        None => vec![NO_DEPTH; guide.rgb.width() as usize * guide.rgb.height() as usize],
+    }
+}
+
+/// Tap spacing and the 1 / (2 sigma^2) of each weight term, for a guide of `width x height`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct TapScales {
+    pub step: u32,
+    pub spatial: f32,
+    pub colour: f32,
+    pub depth: f32,
+}
+
+impl TapScales {
+    pub(crate) fn new(width: u32, height: u32, options: &RefineOptions) -> TapScales {
+        let diagonal = (f64::from(width).powi(2) + f64::from(height).powi(2)).sqrt() as f32;
+        let sigma_px = (options.spatial_sigma * diagonal).max(0.5);
+        TapScales {
+            step: ((sigma_px / 2.0).round() as u32).max(1),
+            spatial: 1.0 / (2.0 * sigma_px * sigma_px),
+            colour: 1.0 / (2.0 * options.colour_sigma * options.colour_sigma),
+            depth: 1.0 / (2.0 * options.depth_sigma * options.depth_sigma),
+        }
+    }
+}
+
+/// The guide in the form the weights need: colour in [0, 1] and log depth.
 struct TapWeights {
     width: i64,
     height: i64,
-    step: i64,
     colour: Vec<[f32; 3]>,
     log_depth: Vec<f32>,
-    spatial_scale: f32,
-    colour_scale: f32,
-    depth_scale: f32,
+    scales: TapScales,
 }
 
 impl TapWeights {
     fn new(guide: Guide<'_>, options: &RefineOptions) -> TapWeights {
         let (width, height) = guide.rgb.dimensions();
-        let colour = guide.rgb.pixels().map(|p| p.0.map(|c| f32::from(c) / 255.0)).collect();
-        let log_depth = match guide.depth {
-            Some(depth) => depth
-                .pixels()
-                .map(|d| if d.0[0] == 0 { f32::NAN } else { f32::from(d.0[0]).ln() })
-                .collect(),
-            None => vec![f32::NAN; width as usize * height as usize],
-        };
-        let diagonal = (f64::from(width).powi(2) + f64::from(height).powi(2)).sqrt() as f32;
-        let sigma_px = (options.spatial_sigma * diagonal).max(0.5);
         TapWeights {
             width: i64::from(width),
             height: i64::from(height),
-            step: ((sigma_px / 2.0).round() as i64).max(1),
-            colour,
-            log_depth,
-            spatial_scale: 1.0 / (2.0 * sigma_px * sigma_px),
-            colour_scale: 1.0 / (2.0 * options.colour_sigma * options.colour_sigma),
-            depth_scale: 1.0 / (2.0 * options.depth_sigma * options.depth_sigma),
+            colour: guide.rgb.pixels().map(|p| p.0.map(|c| f32::from(c) / 255.0)).collect(),
+            log_depth: log_depth(guide),
+            scales: TapScales::new(width, height, options),
         }
     }
 
     fn weight(&self, centre: usize, other: usize, offset2: f32) -> f32 {
         let (a, b) = (self.colour[centre], self.colour[other]);
         let colour2 = (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2);
-        let depth_diff = self.log_depth[centre] - self.log_depth[other];
-        // NaN (a pixel without depth) compares false: the depth term is left out.
-        let depth2 = if depth_diff.is_nan() {
-            0.0
+        let (d0, d1) = (self.log_depth[centre], self.log_depth[other]);
+        let depth2 = if d0 > NO_DEPTH && d1 > NO_DEPTH {
+            (d0 - d1) * (d0 - d1)
         } else {
-            depth_diff * depth_diff
+            0.0
         };
-        (-(offset2 * self.spatial_scale + colour2 * self.colour_scale + depth2 * self.depth_scale)).exp()
+        let s = &self.scales;
+        (-(offset2 * s.spatial + colour2 * s.colour + depth2 * s.depth)).exp()
     }
 
     /// One round: `out` = the weighted mean of `input` over each pixel's in-image taps.
     fn filter(&self, input: &[f32], out: &mut [f32], classes: usize) {
+        let step = i64::from(self.scales.step);
         for y in 0..self.height {
             for x in 0..self.width {
                 let centre = (y * self.width + x) as usize;
@@ -202,17 +235,17 @@ impl TapWeights {
                 acc.fill(0.0);
                 let mut total = 0.0;
                 for ty in -HALF_TAPS..=HALF_TAPS {
-                    let sy = y + ty * self.step;
+                    let sy = y + ty * step;
                     if sy < 0 || sy >= self.height {
                         continue;
                     }
                     for tx in -HALF_TAPS..=HALF_TAPS {
-                        let sx = x + tx * self.step;
+                        let sx = x + tx * step;
                         if sx < 0 || sx >= self.width {
                             continue;
                         }
                         let other = (sy * self.width + sx) as usize;
-                        let offset2 = ((ty * ty + tx * tx) * self.step * self.step) as f32;
+                        let offset2 = ((ty * ty + tx * tx) * step * step) as f32;
                         let w = self.weight(centre, other, offset2);
                         total += w;
                         for (a, &p) in acc.iter_mut().zip(&input[other * classes..(other + 1) * classes]) {

@@ -11,6 +11,7 @@ pub mod dense;
 pub mod encoding;
 pub mod head_glue;
 pub mod rays;
+pub mod refine;
 pub mod scene_buffers;
 pub mod trainer;
 pub mod view;

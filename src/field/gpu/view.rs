@@ -7,6 +7,9 @@
 //! with that depth as the guide (NeRF's coarse-to-fine idea with the renderer's own estimate).
 use crate::field::reference::sampling::{clip_to_bounds, ray_through_pixel};
 use crate::field::refine::{Guide, RefineOptions, argmax_and_confidence, refine_probabilities};
+use crate::gpu::{GpuContext, GpuError};
+
+use super::refine::RefinePass;
 use crate::scene::{Bounds, Intrinsics, Pca, Pose, Scene};
 
 use super::rays::{RAY_HITS_BOX, RayGeometry};
@@ -119,25 +122,59 @@ pub struct RenderedFrame {
 
 impl RenderedFrame {
     /// Snaps the class map to the edges of `guide` (the frame this was rendered for, at this
-    /// resolution): see [`crate::field::refine`]. Errors name a guide of another size.
+    /// resolution), on the CPU: see [`crate::field::refine`]. Errors name a guide of another size.
     pub fn refine(&mut self, guide: Guide<'_>, options: &RefineOptions) -> Result<(), String> {
         if options.is_off() {
             return Ok(());
         }
-        if guide.rgb.dimensions() != (self.width, self.height) {
-            return Err(format!(
-                "refine: the guide is {} x {}, the rendered frame {} x {}",
-                guide.rgb.width(),
-                guide.rgb.height(),
-                self.width,
-                self.height
-            ));
-        }
-        let count = self.probabilities.len() / self.classes.len().max(1);
+        self.check_guide(guide)?;
+        let count = self.class_count();
         refine_probabilities(&mut self.probabilities, count, guide, options)?;
-        (self.classes, self.confidence) = argmax_and_confidence(&self.probabilities, count);
-        self.refined = true;
+        self.take_refined();
         Ok(())
+    }
+
+    /// As [`RenderedFrame::refine`], on the GPU (`pass` from [`RefinePass::new`]); the page
+    /// uses it so the filter does not hold up its thread.
+    pub async fn refine_on_gpu(
+        &mut self,
+        ctx: &GpuContext,
+        pass: &RefinePass,
+        guide: Guide<'_>,
+        options: &RefineOptions,
+    ) -> Result<(), GpuError> {
+        if options.is_off() {
+            return Ok(());
+        }
+        self.check_guide(guide)
+            .map_err(|e| GpuError::invalid_argument("refine", e))?;
+        let count = self.class_count();
+        pass.refine(ctx, &mut self.probabilities, count, guide, options).await?;
+        self.take_refined();
+        Ok(())
+    }
+
+    fn class_count(&self) -> usize {
+        self.probabilities.len() / self.classes.len().max(1)
+    }
+
+    fn check_guide(&self, guide: Guide<'_>) -> Result<(), String> {
+        if guide.rgb.dimensions() == (self.width, self.height) {
+            return Ok(());
+        }
+        Err(format!(
+            "refine: the guide is {} x {}, the rendered frame {} x {}",
+            guide.rgb.width(),
+            guide.rgb.height(),
+            self.width,
+            self.height
+        ))
+    }
+
+    /// Classes and confidence from the (refined) probabilities.
+    fn take_refined(&mut self) {
+        (self.classes, self.confidence) = argmax_and_confidence(&self.probabilities, self.class_count());
+        self.refined = true;
     }
 }
 
