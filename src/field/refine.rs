@@ -39,21 +39,21 @@ pub struct RefineOptions {
 
 impl Default for RefineOptions {
     fn default() -> Self {
-        RefineOptions {
-            iterations: 3,
-            colour_sigma: 0.1,
-            depth_sigma: 0.05,
-            spatial_sigma: 0.02,
-        }
+        RefineOptions::DEFAULT
     }
 }
 
 impl RefineOptions {
-    pub const OFF: RefineOptions = RefineOptions {
-        iterations: 0,
+    pub const DEFAULT: RefineOptions = RefineOptions {
+        iterations: 3,
         colour_sigma: 0.1,
         depth_sigma: 0.05,
         spatial_sigma: 0.02,
+    };
+    /// The field's own class map.
+    pub const OFF: RefineOptions = RefineOptions {
+        iterations: 0,
+        ..RefineOptions::DEFAULT
     };
 
     pub fn is_off(&self) -> bool {
@@ -263,7 +263,7 @@ impl TapWeights {
 /// The argmax class and its probability for each pixel.
 pub fn argmax_and_confidence(probabilities: &[f32], classes: usize) -> (Vec<u8>, Vec<f32>) {
     probabilities
-        .chunks_exact(classes)
+        .chunks_exact(classes.max(1))
         .map(|p| {
             let (best, top) =
                 p.iter().enumerate().fold(

@@ -194,8 +194,8 @@ impl FrameAssembler {
             frame: RenderedFrame {
                 width,
                 height,
-                classes: Vec::with_capacity(pixels),
-                confidence: Vec::with_capacity(pixels),
+                classes: Vec::new(),
+                confidence: Vec::new(),
                 probabilities: Vec::with_capacity(pixels * classes),
                 refined: false,
                 rgb: Vec::with_capacity(pixels),
@@ -214,16 +214,8 @@ impl FrameAssembler {
         f.rgb.push([rendered[0], rendered[1], rendered[2]]);
         f.depth.push(rendered[3]);
         let logits = &rendered[4..4 + self.classes];
-        let (best, top) =
-            logits.iter().enumerate().fold(
-                (0usize, f32::NEG_INFINITY),
-                |(bi, bv), (i, &x)| {
-                    if x > bv { (i, x) } else { (bi, bv) }
-                },
-            );
+        let top = logits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
         let sum: f32 = logits.iter().map(|&x| (x - top).exp()).sum();
-        f.classes.push(best as u8);
-        f.confidence.push(1.0 / sum);
         f.probabilities.extend(logits.iter().map(|&x| (x - top).exp() / sum));
         self.features
             .extend_from_slice(&rendered[4 + self.classes..4 + self.classes + self.feature_dim]);
@@ -233,8 +225,10 @@ impl FrameAssembler {
         &self.frame.depth
     }
 
-    /// The finished frame, its features shown through `pca` (or a PCA fitted to them).
+    /// The finished frame (classes and confidence from the probabilities), its features shown
+    /// through `pca` (or a PCA fitted to them).
     pub fn finish(mut self, pca: Option<&Pca>) -> RenderedFrame {
+        (self.frame.classes, self.frame.confidence) = argmax_and_confidence(&self.frame.probabilities, self.classes);
         let fitted;
         let pca = match pca.filter(|p| p.mean.len() == self.feature_dim) {
             Some(p) => Some(p),
