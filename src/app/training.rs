@@ -423,7 +423,7 @@ impl TrainingTask {
             }
             if let Some((version, labels)) = labels {
                 trainer
-                    .set_labels(Some(&labels), w, h, frames)
+                    .set_labels(Some(&labels), scene)
                     .map_err(|e| format!("cannot upload the labels: {e}"))?;
                 trained_version = version;
                 self.shared.borrow_mut().labels_version = version;

@@ -50,7 +50,7 @@ pub fn train_schedule(
     let mut loss = None;
     while done < total {
         if done == warmup {
-            trainer.set_labels(Some(labels), scene.width, scene.height, scene.frames.len() as u32)?;
+            trainer.set_labels(Some(labels), scene)?;
         }
         let until = if done < warmup { warmup } else { total };
         let n = CHUNK.min(until - done);

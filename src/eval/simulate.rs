@@ -340,7 +340,6 @@ pub fn run(
     scene_only.labels = None;
     let scene = &scene_only;
     let mut trainer = pollster::block_on(Trainer::new(ctx, scene, &settings.config, settings.seed))?;
-    let frames = scene.frames.len() as u32;
 
     let previous = if options.restart {
         None
@@ -350,7 +349,7 @@ pub fn run(
     let (mut state, mut labels) = match previous {
         Some((state, labels, trainer_state)) => {
             trainer.restore_state(&trainer_state)?;
-            trainer.set_labels(Some(&labels), scene.width, scene.height, frames)?;
+            trainer.set_labels(Some(&labels), scene)?;
             events(SimEvent::Resumed {
                 rounds: state.rounds,
                 clicks: state.clicks,
@@ -444,7 +443,7 @@ pub fn run(
                 },
             );
         }
-        trainer.set_labels(Some(&labels), scene.width, scene.height, frames)?;
+        trainer.set_labels(Some(&labels), scene)?;
         train(&mut trainer, settings.steps_per_round, events)?;
         state.rounds = round;
         state.clicks += clicks.len() as u32;

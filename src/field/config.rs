@@ -6,6 +6,8 @@
 //! it changes and a typo fails loudly; `validate` then checks every value.
 use serde::{Deserialize, Serialize};
 
+use crate::field::propagate::PropagationOptions;
+
 /// How a normalized position p ∈ [0,1]³ is encoded before the density MLP.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
@@ -156,6 +158,8 @@ pub struct FieldConfig {
     pub semantic_trunk_gradient: f32,
     /// What the semantic head sees (see `SemanticInput`).
     pub semantic_input: SemanticInput,
+    /// How strokes spread inside their own frame before training (`field::propagate`).
+    pub scribble_propagation: PropagationOptions,
 }
 
 impl Default for FieldConfig {
@@ -186,6 +190,7 @@ impl Default for FieldConfig {
             batch_rays: 4096,
             semantic_trunk_gradient: 1.0,
             semantic_input: SemanticInput::Auto,
+            scribble_propagation: PropagationOptions::default(),
         }
     }
 }
@@ -382,6 +387,11 @@ impl FieldConfig {
             }
         }
         in_range("batch_rays", c.batch_rays, 1, 1 << 22)?;
+        c.scribble_propagation.validate().map_err(|problem| ConfigError {
+            field: "scribble_propagation",
+            value: format!("{:?}", c.scribble_propagation),
+            problem,
+        })?;
         Ok(())
     }
 }

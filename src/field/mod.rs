@@ -9,6 +9,7 @@
 //! buffers of that length (parameters, gradient, Adam m and v).
 pub mod config;
 pub mod params;
+pub mod propagate;
 pub mod reference;
 pub mod refine;
 pub mod rng;

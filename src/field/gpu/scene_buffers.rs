@@ -57,22 +57,29 @@ impl LabelIndex {
     /// clear) of a scene of `frame_count` frames of `width` x `height`. Class ids at or above
     /// `num_classes`, and frames beyond the scene, are left out: the model has no logit for them.
     pub fn from_labels(labels: Option<&LabelSet>, frame_count: u32, width: u32, height: u32, num_classes: u32) -> Self {
+        let maps: Vec<(u32, Vec<u16>)> = labels
+            .map(|labels| {
+                labels
+                    .frames
+                    .iter()
+                    .map(|f| (f.frame, rasterize_frame(labels.frame(f.frame), width, height)))
+                    .collect()
+            })
+            .unwrap_or_default();
+        Self::from_maps(&maps, frame_count, width, height, num_classes)
+    }
+
+    /// The index of per-frame label maps (`frame`, one class id per pixel of a `width x height`
+    /// frame, `UNLABELLED` elsewhere), such as `field::propagate` makes. Class ids at or above
+    /// `num_classes`, and frames at or beyond `frame_count`, are left out.
+    pub fn from_maps(maps: &[(u32, Vec<u16>)], frame_count: u32, width: u32, height: u32, num_classes: u32) -> Self {
         let mut pixels_by_class = vec![Vec::new(); num_classes as usize];
-        let Some(labels) = labels else {
-            return LabelIndex { pixels_by_class };
-        };
-        let mut frames: Vec<u32> = labels
-            .frames
-            .iter()
-            .map(|f| f.frame)
-            .filter(|f| *f < frame_count)
-            .collect();
-        frames.sort_unstable();
-        frames.dedup();
+        let mut sorted: Vec<&(u32, Vec<u16>)> = maps.iter().filter(|(f, _)| *f < frame_count).collect();
+        sorted.sort_by_key(|(f, _)| *f);
+        sorted.dedup_by_key(|(f, _)| *f);
         let pixels_per_frame = width * height;
-        for frame in frames {
-            let map = rasterize_frame(labels.frame(frame), width, height);
-            for (index, class) in map.iter().enumerate() {
+        for (frame, map) in sorted {
+            for (index, class) in map.iter().take(pixels_per_frame as usize).enumerate() {
                 if let Some(list) = pixels_by_class.get_mut(*class as usize) {
                     list.push(frame * pixels_per_frame + index as u32);
                 }

@@ -10,6 +10,7 @@
 //! The same code runs natively and in the browser: nothing here blocks.
 use crate::field::config::FieldConfig;
 use crate::field::params::ParamLayout;
+use crate::field::propagate::propagate_labels;
 use crate::field::reference::LossTerms;
 use crate::gpu::buffers::{
     PendingRead, read_buffer_async, read_elements_async, storage_buffer_padded, storage_buffer_zeroed,
@@ -409,24 +410,30 @@ impl Trainer {
             pending_losses: None,
             last_losses: None,
         };
-        trainer.set_labels(
-            scene.labels.as_ref(),
-            scene.width,
-            scene.height,
-            scene.frames.len() as u32,
-        )?;
+        trainer.set_labels(scene.labels.as_ref(), scene)?;
         Ok(trainer)
     }
 
-    /// Replaces the labels training draws from (after the user draws, erases or undoes).
-    pub fn set_labels(
-        &mut self,
-        labels: Option<&LabelSet>,
-        width: u32,
-        height: u32,
-        frames: u32,
-    ) -> Result<(), GpuError> {
-        let index = LabelIndex::from_labels(labels, frames, width, height, self.cfg.num_classes);
+    /// Replaces the labels training draws from (after the user draws, erases or undoes): each
+    /// annotated frame of `scene` (the scene this trainer was made for) with its strokes spread
+    /// as `FieldConfig::scribble_propagation` says (`field::propagate`).
+    pub fn set_labels(&mut self, labels: Option<&LabelSet>, scene: &Scene) -> Result<(), GpuError> {
+        let maps = match labels {
+            Some(labels) => propagate_labels(
+                scene,
+                labels,
+                self.cfg.num_classes as usize,
+                &self.cfg.scribble_propagation,
+            ),
+            None => Vec::new(),
+        };
+        let index = LabelIndex::from_maps(
+            &maps,
+            scene.frames.len() as u32,
+            scene.width,
+            scene.height,
+            self.cfg.num_classes,
+        );
         self.has_labels = index.labelled_pixel_count() > 0;
         self.scene.upload_labels(&self.ctx, &index)?;
         self.ray_batch.follow_labels(&self.ctx, &self.scene);

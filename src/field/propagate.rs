@@ -1,0 +1,445 @@
+//! Scribble propagation inside each annotated frame: a random walker (Grady 2006) on the frame's
+//! pixel grid turns a few strokes into confident pseudo-labels over most of the frame, and the
+//! field trains on those as well as on the strokes (docs/quality.md explains why and what it
+//! measured).
+//!
+//! The field's semantic head sees only what the rendered features carry; scribbles cover a few
+//! percent of a frame, and on a real capture several objects share their colour (three red
+//! objects in the YCB clip), so a head trained on strokes alone generalizes by colour and paints
+//! one red object with another's class. The image itself knows better where each object ends:
+//! a random walk from each unlabelled pixel, whose steps prefer neighbours of similar colour and
+//! depth, reaches the strokes of its own object first. Its probabilities are the solution of one
+//! sparse linear system per class (the graph Laplacian restricted to unlabelled pixels); only
+//! pixels whose most likely class wins by a clear margin become labels, so a weak edge that the
+//! walk crosses gives an uncertain pixel, not a wrong label.
+//!
+//! A frame with strokes of a single class is left as drawn: with one class the walk is certain
+//! everywhere, and a user who marks one object on a frame has not said that the rest of the frame
+//! is that object.
+use serde::{Deserialize, Serialize};
+
+use crate::field::refine::Guide;
+use crate::labels::{LabelSet, UNLABELLED, rasterize_frame};
+use crate::scene::Scene;
+
+/// How strokes spread inside their frame before training. `enabled: false` trains on the
+/// strokes alone.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PropagationOptions {
+    pub enabled: bool,
+    /// CIE L*a*b* distance between neighbouring pixels at which the walk's step weight falls to
+    /// e^-1/2 (a just-noticeable difference is about 2.3).
+    pub colour_sigma: f32,
+    /// Relative depth difference, |ln(d / d')|, between neighbours at which the step weight falls
+    /// to e^-1/2; neighbours without a depth reading skip the term.
+    pub depth_sigma: f32,
+    /// Factor on the step weight between a pixel with a depth reading and one without, in a
+    /// frame where most pixels have one: dense depth sensors lose depth at occlusion boundaries,
+    /// so a hole in dense depth marks where one object ends. Sparse depth (a reconstruction's
+    /// keypoints) has holes everywhere and skips this.
+    pub depth_hole_factor: f32,
+    /// A pixel becomes a label only where its most likely class leads the next by this much.
+    pub min_margin: f32,
+}
+
+impl Default for PropagationOptions {
+    fn default() -> Self {
+        PropagationOptions {
+            enabled: true,
+            colour_sigma: 8.0,
+            depth_sigma: 0.02,
+            depth_hole_factor: 3e-4,
+            min_margin: 0.5,
+        }
+    }
+}
+
+impl PropagationOptions {
+    /// A value that cannot work, named by its field.
+    pub fn validate(&self) -> Result<(), String> {
+        for (name, v) in [("colour_sigma", self.colour_sigma), ("depth_sigma", self.depth_sigma)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!(
+                    "scribble_propagation: `{name}` = {v}: must be a positive number"
+                ));
+            }
+        }
+        if !(self.depth_hole_factor.is_finite() && self.depth_hole_factor > 0.0 && self.depth_hole_factor <= 1.0) {
+            return Err(format!(
+                "scribble_propagation: `depth_hole_factor` = {}: must be in (0, 1]",
+                self.depth_hole_factor
+            ));
+        }
+        if !(self.min_margin.is_finite() && (0.0..=1.0).contains(&self.min_margin)) {
+            return Err(format!(
+                "scribble_propagation: `min_margin` = {}: must be in [0, 1]",
+                self.min_margin
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Smallest step weight: keeps every pixel connected to the strokes, so each system has one
+/// solution, while a pixel behind a strong edge still ends up uncertain.
+const MIN_WEIGHT: f32 = 1e-6;
+/// Conjugate-gradient stopping point: residual relative to the right-hand side.
+const TOLERANCE: f64 = 1e-4;
+
+/// The label map a frame trains on: the strokes, plus (when `options` are enabled and the strokes
+/// hold at least two classes) the pixels the walk assigns with confidence. Class ids at or above
+/// `classes` are dropped (the model has no logit for them). `strokes` is the frame's rasterized
+/// strokes (`labels::rasterize_frame`) at the guide's size.
+pub fn propagate_frame(strokes: &[u16], classes: usize, guide: Guide<'_>, options: &PropagationOptions) -> Vec<u16> {
+    let mut seeds: Vec<u16> = strokes
+        .iter()
+        .map(|&c| if (c as usize) < classes { c } else { UNLABELLED })
+        .collect();
+    let present: Vec<u16> = (0..classes as u16).filter(|c| seeds.contains(c)).collect();
+    if !options.enabled || present.len() < 2 || seeds.len() != pixel_count(guide) {
+        return seeds;
+    }
+    let graph = Graph::new(guide, options);
+    let probabilities: Vec<Vec<f32>> = present.iter().map(|&class| graph.walk(&seeds, class)).collect();
+    for (pixel, label) in seeds.iter_mut().enumerate() {
+        if *label != UNLABELLED {
+            continue;
+        }
+        let (mut best, mut first, mut second) = (0, f32::MIN, f32::MIN);
+        for (k, p) in probabilities.iter().enumerate() {
+            let p = p[pixel];
+            if p > first {
+                second = first;
+                first = p;
+                best = k;
+            } else if p > second {
+                second = p;
+            }
+        }
+        if first - second >= options.min_margin {
+            *label = present[best];
+        }
+    }
+    seeds
+}
+
+/// Every annotated frame's training label map (see [`propagate_frame`]), by frame index, for the
+/// frames of `scene` that `labels` annotates.
+pub fn propagate_labels(
+    scene: &Scene,
+    labels: &LabelSet,
+    classes: usize,
+    options: &PropagationOptions,
+) -> Vec<(u32, Vec<u16>)> {
+    let mut frames: Vec<u32> = labels
+        .frames
+        .iter()
+        .map(|f| f.frame)
+        .filter(|f| (*f as usize) < scene.frames.len())
+        .collect();
+    frames.sort_unstable();
+    frames.dedup();
+    frames
+        .into_iter()
+        .filter_map(|frame| {
+            let guide = Guide::of_frame(scene, frame as usize)?;
+            let strokes = rasterize_frame(labels.frame(frame), scene.width, scene.height);
+            Some((frame, propagate_frame(&strokes, classes, guide, options)))
+        })
+        .collect()
+}
+
+fn pixel_count(guide: Guide<'_>) -> usize {
+    guide.rgb.width() as usize * guide.rgb.height() as usize
+}
+
+/// The pixel grid with a step weight on each 4-neighbour edge.
+struct Graph {
+    width: usize,
+    height: usize,
+    /// Weight of the edge from pixel i to i + 1 (0 in the last column).
+    right: Vec<f32>,
+    /// Weight of the edge from pixel i to i + width (0 in the last row).
+    down: Vec<f32>,
+}
+
+impl Graph {
+    fn new(guide: Guide<'_>, options: &PropagationOptions) -> Graph {
+        let (width, height) = (guide.rgb.width() as usize, guide.rgb.height() as usize);
+        let lab: Vec<[f32; 3]> = guide.rgb.pixels().map(|p| srgb_to_lab(p.0)).collect();
+        let log_depth: Vec<Option<f32>> = match guide.depth {
+            Some(d) if d.len() == width * height => d
+                .pixels()
+                .map(|d| (d.0[0] > 0).then(|| f32::from(d.0[0]).ln()))
+                .collect(),
+            _ => vec![None; width * height],
+        };
+        let colour_scale = 0.5 / (options.colour_sigma * options.colour_sigma);
+        let depth_scale = 0.5 / (options.depth_sigma * options.depth_sigma);
+        let dense_depth = log_depth.iter().filter(|d| d.is_some()).count() * 2 > log_depth.len();
+        let hole_factor = if dense_depth { options.depth_hole_factor } else { 1.0 };
+        let weight = |a: usize, b: usize| {
+            let dc: f32 = (0..3).map(|k| (lab[a][k] - lab[b][k]).powi(2)).sum();
+            let (dd, factor) = match (log_depth[a], log_depth[b]) {
+                (Some(x), Some(y)) => ((x - y).powi(2), 1.0),
+                (None, None) => (0.0, 1.0),
+                _ => (0.0, hole_factor),
+            };
+            ((-(dc * colour_scale + dd * depth_scale)).exp() * factor).max(MIN_WEIGHT)
+        };
+        let mut right = vec![0f32; width * height];
+        let mut down = vec![0f32; width * height];
+        for y in 0..height {
+            for x in 0..width {
+                let i = y * width + x;
+                if x + 1 < width {
+                    right[i] = weight(i, i + 1);
+                }
+                if y + 1 < height {
+                    down[i] = weight(i, i + width);
+                }
+            }
+        }
+        Graph {
+            width,
+            height,
+            right,
+            down,
+        }
+    }
+
+    /// Calls `f(neighbour, weight)` for each 4-neighbour of `i`.
+    fn for_neighbours(&self, i: usize, mut f: impl FnMut(usize, f32)) {
+        let (x, y) = (i % self.width, i / self.width);
+        if x + 1 < self.width {
+            f(i + 1, self.right[i]);
+        }
+        if x > 0 {
+            f(i - 1, self.right[i - 1]);
+        }
+        if y + 1 < self.height {
+            f(i + self.width, self.down[i]);
+        }
+        if y > 0 {
+            f(i - self.width, self.down[i - self.width]);
+        }
+    }
+
+    /// The probability that a walk from each pixel reaches a stroke of `class` before a stroke of
+    /// another class: strokes are fixed at 1 or 0, and every other pixel solves
+    /// `degree·x_i − Σ w_ij·x_j = 0`, here by Jacobi-preconditioned conjugate gradients over the
+    /// unlabelled pixels.
+    fn walk(&self, seeds: &[u16], class: u16) -> Vec<f32> {
+        let n = seeds.len();
+        let free: Vec<usize> = (0..n).filter(|&i| seeds[i] == UNLABELLED).collect();
+        let mut slot = vec![usize::MAX; n];
+        for (k, &i) in free.iter().enumerate() {
+            slot[i] = k;
+        }
+        let mut degree = vec![0f64; free.len()];
+        let mut rhs = vec![0f64; free.len()];
+        for (k, &i) in free.iter().enumerate() {
+            self.for_neighbours(i, |j, w| {
+                degree[k] += f64::from(w);
+                if seeds[j] == class {
+                    rhs[k] += f64::from(w);
+                }
+            });
+        }
+        let apply = |x: &[f64], out: &mut [f64]| {
+            for (k, &i) in free.iter().enumerate() {
+                let mut sum = degree[k] * x[k];
+                self.for_neighbours(i, |j, w| {
+                    if slot[j] != usize::MAX {
+                        sum -= f64::from(w) * x[slot[j]];
+                    }
+                });
+                out[k] = sum;
+            }
+        };
+        let x = conjugate_gradient(apply, &rhs, &degree, 4 * (self.width + self.height) + 200);
+        let mut p: Vec<f32> = seeds.iter().map(|&s| if s == class { 1.0 } else { 0.0 }).collect();
+        for (k, &i) in free.iter().enumerate() {
+            p[i] = x[k].clamp(0.0, 1.0) as f32;
+        }
+        p
+    }
+}
+
+/// Solves `A x = b` for a symmetric positive definite `A` given as `apply(x, out)`, with the
+/// Jacobi preconditioner `diagonal`, from x = 0, for at most `max_iterations` iterations.
+fn conjugate_gradient(
+    apply: impl Fn(&[f64], &mut [f64]),
+    b: &[f64],
+    diagonal: &[f64],
+    max_iterations: usize,
+) -> Vec<f64> {
+    let n = b.len();
+    let mut x = vec![0f64; n];
+    let mut r = b.to_vec();
+    let b_norm = b.iter().map(|v| v * v).sum::<f64>().sqrt();
+    if b_norm == 0.0 {
+        return x;
+    }
+    let precondition = |r: &[f64]| -> Vec<f64> { r.iter().zip(diagonal).map(|(r, d)| r / d.max(1e-30)).collect() };
+    let mut z = precondition(&r);
+    let mut p = z.clone();
+    let mut rz: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
+    let mut ap = vec![0f64; n];
+    for _ in 0..max_iterations {
+        apply(&p, &mut ap);
+        let pap: f64 = p.iter().zip(&ap).map(|(a, b)| a * b).sum();
+        if pap <= 0.0 {
+            break;
+        }
+        let alpha = rz / pap;
+        for k in 0..n {
+            x[k] += alpha * p[k];
+            r[k] -= alpha * ap[k];
+        }
+        if r.iter().map(|v| v * v).sum::<f64>().sqrt() <= TOLERANCE * b_norm {
+            break;
+        }
+        z = precondition(&r);
+        let rz_next: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
+        let beta = rz_next / rz;
+        rz = rz_next;
+        for k in 0..n {
+            p[k] = z[k] + beta * p[k];
+        }
+    }
+    x
+}
+
+/// CIE L*a*b* (D65) of an 8-bit sRGB pixel.
+fn srgb_to_lab(rgb: [u8; 3]) -> [f32; 3] {
+    let linear = |c: u8| {
+        let c = f32::from(c) / 255.0;
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    let (r, g, b) = (linear(rgb[0]), linear(rgb[1]), linear(rgb[2]));
+    let x = (0.4124 * r + 0.3576 * g + 0.1805 * b) / 0.95047;
+    let y = 0.2126 * r + 0.7152 * g + 0.0722 * b;
+    let z = (0.0193 * r + 0.1192 * g + 0.9505 * b) / 1.08883;
+    let f = |t: f32| {
+        if t > 216.0 / 24389.0 {
+            t.cbrt()
+        } else {
+            (24389.0 / 27.0 * t + 16.0) / 116.0
+        }
+    };
+    let (fx, fy, fz) = (f(x), f(y), f(z));
+    [116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)]
+}
+
+#[cfg(test)]
+mod tests {
+    use image::{ImageBuffer, Luma, Rgb, RgbImage};
+
+    use super::*;
+
+    /// Left half dark red, right half light grey, 24 x 16.
+    fn two_regions() -> RgbImage {
+        RgbImage::from_fn(24, 16, |x, _| {
+            if x < 12 {
+                Rgb([120, 20, 20])
+            } else {
+                Rgb([200, 200, 200])
+            }
+        })
+    }
+
+    fn strokes_at(width: u32, height: u32, marks: &[(u32, u32, u16)]) -> Vec<u16> {
+        let mut map = vec![UNLABELLED; (width * height) as usize];
+        for &(x, y, c) in marks {
+            map[(y * width + x) as usize] = c;
+        }
+        map
+    }
+
+    #[test]
+    fn two_strokes_fill_their_regions_and_stop_at_the_edge() {
+        let rgb = two_regions();
+        let strokes = strokes_at(24, 16, &[(3, 8, 0), (20, 8, 1)]);
+        let guide = Guide { rgb: &rgb, depth: None };
+        let map = propagate_frame(&strokes, 2, guide, &PropagationOptions::default());
+        for y in 0..16 {
+            for x in 0..24 {
+                let want = if x < 12 { 0 } else { 1 };
+                assert_eq!(map[y * 24 + x], want, "pixel ({x}, {y})");
+            }
+        }
+    }
+
+    #[test]
+    fn depth_separates_regions_of_one_colour_and_without_it_the_walk_is_unsure() {
+        let rgb = RgbImage::from_pixel(24, 16, Rgb([150, 150, 150]));
+        let depth: ImageBuffer<Luma<u16>, Vec<u16>> =
+            ImageBuffer::from_fn(24, 16, |x, _| Luma([if x < 12 { 1000 } else { 2000 }]));
+        let strokes = strokes_at(24, 16, &[(3, 8, 0), (20, 8, 1)]);
+        let options = PropagationOptions::default();
+        let with_depth = propagate_frame(
+            &strokes,
+            2,
+            Guide {
+                rgb: &rgb,
+                depth: Some(&depth),
+            },
+            &options,
+        );
+        assert_eq!(with_depth[8 * 24 + 10], 0);
+        assert_eq!(with_depth[8 * 24 + 13], 1);
+        let labelled = |m: &[u16]| m.iter().filter(|&&c| c != UNLABELLED).count();
+        assert_eq!(labelled(&with_depth), 24 * 16);
+        let without = propagate_frame(&strokes, 2, Guide { rgb: &rgb, depth: None }, &options);
+        assert!(
+            labelled(&without) < 24 * 16 / 2,
+            "a uniform image gives no confident labels far from the strokes: {}",
+            labelled(&without)
+        );
+    }
+
+    #[test]
+    fn one_class_or_disabled_keeps_the_strokes_and_unknown_classes_are_dropped() {
+        let rgb = two_regions();
+        let guide = Guide { rgb: &rgb, depth: None };
+        let one = strokes_at(24, 16, &[(3, 8, 0), (4, 8, 0)]);
+        assert_eq!(propagate_frame(&one, 2, guide, &PropagationOptions::default()), one);
+        let two = strokes_at(24, 16, &[(3, 8, 0), (20, 8, 1), (5, 5, 7)]);
+        let off = PropagationOptions {
+            enabled: false,
+            ..PropagationOptions::default()
+        };
+        let kept = propagate_frame(&two, 2, guide, &off);
+        assert_eq!(kept[5 * 24 + 5], UNLABELLED, "class 7 has no logit with 2 classes");
+        assert_eq!(kept.iter().filter(|&&c| c != UNLABELLED).count(), 2);
+    }
+
+    #[test]
+    fn bad_options_are_named() {
+        let bad = PropagationOptions {
+            min_margin: 1.5,
+            ..PropagationOptions::default()
+        };
+        assert!(bad.validate().unwrap_err().contains("min_margin"));
+        let bad = PropagationOptions {
+            colour_sigma: 0.0,
+            ..PropagationOptions::default()
+        };
+        assert!(bad.validate().unwrap_err().contains("colour_sigma"));
+        PropagationOptions::default().validate().unwrap();
+    }
+
+    #[test]
+    fn lab_of_white_black_and_red() {
+        let close = |a: [f32; 3], b: [f32; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 0.5);
+        assert!(close(srgb_to_lab([255, 255, 255]), [100.0, 0.0, 0.0]));
+        assert!(close(srgb_to_lab([0, 0, 0]), [0.0, 0.0, 0.0]));
+        assert!(close(srgb_to_lab([255, 0, 0]), [53.24, 80.09, 67.20]));
+    }
+}
