@@ -19,7 +19,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::field::refine::Guide;
-use crate::labels::{LabelSet, UNLABELLED, rasterize_frame};
+use std::collections::HashMap;
+
+use crate::labels::{FrameLabels, LabelSet, UNLABELLED, rasterize_frame};
 use crate::scene::Scene;
 
 /// How strokes spread inside their frame before training. `enabled: false` trains on the
@@ -132,22 +134,58 @@ pub fn propagate_labels(
     classes: usize,
     options: &PropagationOptions,
 ) -> Vec<(u32, Vec<u16>)> {
-    let mut frames: Vec<u32> = labels
-        .frames
-        .iter()
-        .map(|f| f.frame)
-        .filter(|f| (*f as usize) < scene.frames.len())
-        .collect();
-    frames.sort_unstable();
-    frames.dedup();
-    frames
-        .into_iter()
-        .filter_map(|frame| {
-            let guide = Guide::of_frame(scene, frame as usize)?;
-            let strokes = rasterize_frame(labels.frame(frame), scene.width, scene.height);
-            Some((frame, propagate_frame(&strokes, classes, guide, options)))
-        })
-        .collect()
+    PropagationCache::default().maps(scene, labels, classes, options)
+}
+
+/// Keeps each frame's propagated map until that frame's strokes change, so an edit on one frame
+/// (the page sends the whole label set after every stroke) walks that frame alone.
+#[derive(Default)]
+pub struct PropagationCache {
+    settings: Option<(usize, PropagationOptions)>,
+    frames: HashMap<u32, (FrameLabels, Vec<u16>)>,
+}
+
+impl PropagationCache {
+    /// As [`propagate_labels`], reusing the maps of frames whose strokes are unchanged.
+    pub fn maps(
+        &mut self,
+        scene: &Scene,
+        labels: &LabelSet,
+        classes: usize,
+        options: &PropagationOptions,
+    ) -> Vec<(u32, Vec<u16>)> {
+        if self.settings != Some((classes, *options)) {
+            self.frames.clear();
+            self.settings = Some((classes, *options));
+        }
+        let mut frames: Vec<u32> = labels
+            .frames
+            .iter()
+            .map(|f| f.frame)
+            .filter(|f| (*f as usize) < scene.frames.len())
+            .collect();
+        frames.sort_unstable();
+        frames.dedup();
+        self.frames.retain(|frame, _| frames.contains(frame));
+        let mut maps = Vec::with_capacity(frames.len());
+        for frame in frames {
+            let (Some(strokes), Some(guide)) = (labels.frame(frame), Guide::of_frame(scene, frame as usize)) else {
+                continue;
+            };
+            let cached = self.frames.get(&frame).filter(|(seen, _)| seen == strokes);
+            let map = match cached {
+                Some((_, map)) => map.clone(),
+                None => {
+                    let raster = rasterize_frame(Some(strokes), scene.width, scene.height);
+                    let map = propagate_frame(&raster, classes, guide, options);
+                    self.frames.insert(frame, (strokes.clone(), map.clone()));
+                    map
+                }
+            };
+            maps.push((frame, map));
+        }
+        maps
+    }
 }
 
 fn pixel_count(guide: Guide<'_>) -> usize {
@@ -418,6 +456,43 @@ mod tests {
         let kept = propagate_frame(&two, 2, guide, &off);
         assert_eq!(kept[5 * 24 + 5], UNLABELLED, "class 7 has no logit with 2 classes");
         assert_eq!(kept.iter().filter(|&&c| c != UNLABELLED).count(), 2);
+    }
+
+    #[test]
+    fn the_cache_walks_again_only_a_frame_whose_strokes_changed() {
+        use crate::labels::{ClassInfo, Stroke};
+        use crate::scene::demo::{DemoOptions, demo_scene};
+        let scene = demo_scene(&DemoOptions {
+            width: 32,
+            height: 24,
+            frames: 24,
+            ..DemoOptions::default()
+        })
+        .unwrap();
+        let class = |name: &str| ClassInfo {
+            name: name.into(),
+            color: [0, 0, 0],
+        };
+        let mut labels = LabelSet::new(vec![class("a"), class("b")]);
+        let dot = |class: u16, x: f32, y: f32| Stroke {
+            class: Some(class),
+            radius: 1.0,
+            points: vec![[x, y]],
+        };
+        for frame in [0, 2] {
+            labels.push_stroke(frame, dot(0, 4.5, 20.5));
+            labels.push_stroke(frame, dot(1, 16.5, 4.5));
+        }
+        let options = PropagationOptions::default();
+        let mut cache = PropagationCache::default();
+        let first = cache.maps(&scene, &labels, 2, &options);
+        assert_eq!(first, propagate_labels(&scene, &labels, 2, &options));
+        assert_eq!(first.iter().map(|(f, _)| *f).collect::<Vec<_>>(), vec![0, 2]);
+        labels.push_stroke(2, dot(0, 28.5, 20.5));
+        let second = cache.maps(&scene, &labels, 2, &options);
+        assert_eq!(second[0], first[0], "frame 0 did not change");
+        assert_ne!(second[1], first[1], "frame 2 gained a stroke");
+        assert_eq!(second, propagate_labels(&scene, &labels, 2, &options));
     }
 
     #[test]

@@ -10,7 +10,7 @@
 //! The same code runs natively and in the browser: nothing here blocks.
 use crate::field::config::FieldConfig;
 use crate::field::params::ParamLayout;
-use crate::field::propagate::propagate_labels;
+use crate::field::propagate::PropagationCache;
 use crate::field::reference::LossTerms;
 use crate::gpu::buffers::{
     PendingRead, read_buffer_async, read_elements_async, storage_buffer_padded, storage_buffer_zeroed,
@@ -132,6 +132,7 @@ pub struct Trainer {
     step: u32,
     seed: u32,
     has_labels: bool,
+    propagation: PropagationCache,
     pending_losses: Option<(u32, PendingRead<f32>)>,
     last_losses: Option<StepLosses>,
 }
@@ -407,6 +408,7 @@ impl Trainer {
             step: 0,
             seed,
             has_labels: false,
+            propagation: PropagationCache::default(),
             pending_losses: None,
             last_losses: None,
         };
@@ -419,7 +421,7 @@ impl Trainer {
     /// as `FieldConfig::scribble_propagation` says (`field::propagate`).
     pub fn set_labels(&mut self, labels: Option<&LabelSet>, scene: &Scene) -> Result<(), GpuError> {
         let maps = match labels {
-            Some(labels) => propagate_labels(
+            Some(labels) => self.propagation.maps(
                 scene,
                 labels,
                 self.cfg.num_classes as usize,
