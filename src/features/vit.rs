@@ -22,8 +22,9 @@ use image::RgbImage;
 const LN_EPS: f32 = 1e-6;
 const IMAGENET_MEAN: [f32; 3] = [0.485, 0.456, 0.406];
 const IMAGENET_STD: [f32; 3] = [0.229, 0.224, 0.225];
-/// Query rows per attention chunk (bounds the score matrix to `CHUNK x tokens`).
-const CHUNK: usize = 1024;
+/// Query rows per attention block: a `BLOCK x tokens` score matrix (1.2 MB at 4800 tokens)
+/// stays in cache between the scores, the softmax and the weighted sum.
+const BLOCK: usize = 64;
 
 /// The network input for an RGB frame: ImageNet-normalised, channels last, padded by repeating
 /// the last row and column up to a multiple of `patch` pixels.
@@ -359,49 +360,51 @@ impl DinoVit {
 
     /// Multi-head softmax attention of `qkv` (`tokens x 3 dim`: q, k, v, each heads side by side).
     fn attention(&self, qkv: &[f32], tokens: usize) -> Vec<f32> {
-        let (d, hd, t) = (self.dim, self.dim / self.heads, self.threads);
+        let (d, hd) = (self.dim, self.dim / self.heads);
         let scale = (hd as f32).powf(-0.5);
-        let zeros_t = vec![0.0; tokens];
-        let zeros_hd = vec![0.0; hd];
-        let mut out = vec![0.0; tokens * d];
-        for head in 0..self.heads {
-            let column = |part: usize, row: &[f32]| row[part * d + head * hd..][..hd].to_vec();
-            let q: Vec<f32> = qkv
-                .chunks_exact(3 * d)
-                .flat_map(|r| column(0, r))
-                .map(|v| v * scale)
-                .collect();
-            let k: Vec<f32> = qkv.chunks_exact(3 * d).flat_map(|r| column(1, r)).collect();
-            let mut vt = vec![0.0; hd * tokens];
-            for (i, r) in qkv.chunks_exact(3 * d).enumerate() {
-                for (j, &v) in r[2 * d + head * hd..][..hd].iter().enumerate() {
-                    vt[j * tokens + i] = v;
-                }
-            }
-            // Scores are `q . k_j` for every key j: a dense layer whose weight rows are the keys.
-            let keys = Dense::new(hd, tokens, &k, &zeros_t);
-            let values = Dense::new(tokens, hd, &vt, &zeros_hd);
-            for (c, qc) in q.chunks(CHUNK * hd).enumerate() {
-                let mut scores = keys.forward(qc, Activation::None, None, t);
-                ops::parallel_rows(&mut scores, tokens, t, 8, |_, rows| {
-                    for row in rows.chunks_exact_mut(tokens) {
-                        let max = row.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
-                        let mut sum = 0.0;
-                        for v in row.iter_mut() {
-                            *v = (*v - max).exp();
-                            sum += *v;
-                        }
-                        let inv = 1.0 / sum;
-                        row.iter_mut().for_each(|v| *v *= inv);
+        // Per head, the scores `q . k_j` are a dense layer whose weight rows are the keys, and the
+        // output `p . v` one whose weight rows are the values' columns.
+        let layers: Vec<(Dense, Dense)> = (0..self.heads)
+            .map(|head| {
+                let mut k = Vec::with_capacity(tokens * hd);
+                let mut vt = vec![0.0; hd * tokens];
+                for (i, r) in qkv.chunks_exact(3 * d).enumerate() {
+                    k.extend_from_slice(&r[d + head * hd..][..hd]);
+                    for (j, &v) in r[2 * d + head * hd..][..hd].iter().enumerate() {
+                        vt[j * tokens + i] = v;
                     }
-                });
-                let o = values.forward(&scores, Activation::None, None, t);
-                for (r, orow) in o.chunks_exact(hd).enumerate() {
-                    let token = c * CHUNK + r;
-                    out[token * d + head * hd..][..hd].copy_from_slice(orow);
+                }
+                (
+                    Dense::new(hd, tokens, &k, &vec![0.0; tokens]),
+                    Dense::new(tokens, hd, &vt, &vec![0.0; hd]),
+                )
+            })
+            .collect();
+        let mut out = vec![0.0; tokens * d];
+        // Each thread takes whole blocks of query rows, and for each block and head computes the
+        // scores, their softmax and the weighted values while the `BLOCK x tokens` scores are
+        // still in cache: one pass over them instead of three through memory.
+        ops::parallel_rows(&mut out, d, self.threads, BLOCK, |row0, chunk| {
+            let mut q = Vec::with_capacity(BLOCK * hd);
+            let mut scores = vec![0.0; BLOCK * tokens];
+            let mut o = vec![0.0; BLOCK * hd];
+            for (b, oblock) in chunk.chunks_mut(BLOCK * d).enumerate() {
+                let (first, rows) = (row0 + b * BLOCK, oblock.len() / d);
+                for (head, (keys, values)) in layers.iter().enumerate() {
+                    q.clear();
+                    for r in qkv[first * 3 * d..(first + rows) * 3 * d].chunks_exact(3 * d) {
+                        q.extend(r[head * hd..][..hd].iter().map(|v| v * scale));
+                    }
+                    let (scores, o) = (&mut scores[..rows * tokens], &mut o[..rows * hd]);
+                    keys.forward_into(&q, Activation::None, None, 1, scores);
+                    ops::softmax_rows(scores, tokens);
+                    values.forward_into(scores, Activation::None, None, 1, o);
+                    for (orow, dst) in o.chunks_exact(hd).zip(oblock.chunks_exact_mut(d)) {
+                        dst[head * hd..][..hd].copy_from_slice(orow);
+                    }
                 }
             }
-        }
+        });
         out
     }
 }

@@ -437,3 +437,33 @@ fn missing_or_wrong_weights_are_explained() {
         .to_string();
     assert!(err.contains("LayerScale") && err.contains("`blocks.1`"), "{err}");
 }
+
+/// Time per 640x480 frame of both extractors with full-size random weights (ViT-S, 12 blocks):
+/// `cargo test --release --lib bench_dino_640x480 -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn bench_dino_640x480() {
+    let rgb = RgbImage::from_fn(640, 480, |x, y| {
+        image::Rgb([(x * 7 % 256) as u8, (y * 3 % 256) as u8, ((x + y) % 256) as u8])
+    });
+    let threads = ops::default_threads();
+    for (model, side) in [(DinoModel::DinoVits8, 28), (DinoModel::Dinov2Vits14, 37)] {
+        let layer_scale = model == DinoModel::Dinov2Vits14;
+        let wt = Weights::random_with(384, 6, 12, 1536, model.patch(), side, layer_scale);
+        let vit = model.from_checkpoint(&wt.safetensors()).unwrap();
+        let ex = DinoExtractor {
+            vit,
+            output: DinoOutput::Keys,
+        };
+        let started = std::time::Instant::now();
+        let m = ex.extract(&rgb).unwrap();
+        eprintln!(
+            "{}: 640x480 -> {}x{}x{} keys in {:.2} s ({threads} threads)",
+            model.name(),
+            m.height,
+            m.width,
+            m.dim,
+            started.elapsed().as_secs_f64()
+        );
+    }
+}
