@@ -18,6 +18,7 @@ pub mod pth;
 #[cfg(test)]
 mod pth_writer;
 pub mod safetensors;
+pub mod softmax;
 mod upscale;
 pub mod vit;
 mod weights;

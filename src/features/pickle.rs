@@ -347,25 +347,18 @@ impl Machine<'_> {
                     };
                     self.stack.push(Value::Global(Rc::new((module, name))));
                 }
-                b'q' => {
-                    let k = self.u8()? as u32;
+                // BINPUT, LONG_BINPUT, and MEMOIZE (protocol 4: the next free key).
+                b'q' | b'r' | 0x94 => {
+                    let k = match op {
+                        b'q' => self.u8()? as u32,
+                        b'r' => self.u32()?,
+                        _ => self.memo.len() as u32,
+                    };
                     self.memo_put(k)?;
                 }
-                b'r' => {
-                    let k = self.u32()?;
-                    self.memo_put(k)?;
-                }
-                // MEMOIZE (protocol 4): the next free memo key.
-                0x94 => {
-                    let k = self.memo.len() as u32;
-                    self.memo_put(k)?;
-                }
-                b'h' => {
-                    let k = self.u8()? as u32;
-                    self.memo_get(k)?;
-                }
-                b'j' => {
-                    let k = self.u32()?;
+                // BINGET, LONG_BINGET.
+                b'h' | b'j' => {
+                    let k = if op == b'h' { self.u8()? as u32 } else { self.u32()? };
                     self.memo_get(k)?;
                 }
                 b'}' => {

@@ -16,6 +16,7 @@
 //! on random weights (`dino_vectors.rs`), never run on the real weights here.
 use super::checkpoint::Checkpoint;
 use super::ops::{self, Activation, Dense};
+use super::softmax::softmax_rows;
 use super::{FeatureError, FeatureMap};
 use image::RgbImage;
 
@@ -397,7 +398,7 @@ impl DinoVit {
                     }
                     let (scores, o) = (&mut scores[..rows * tokens], &mut o[..rows * hd]);
                     keys.forward_into(&q, Activation::None, None, 1, scores);
-                    ops::softmax_rows(scores, tokens);
+                    softmax_rows(scores, tokens);
                     values.forward_into(scores, Activation::None, None, 1, o);
                     for (orow, dst) in o.chunks_exact(hd).zip(oblock.chunks_exact_mut(d)) {
                         dst[head * hd..][..hd].copy_from_slice(orow);
