@@ -6,8 +6,8 @@
 //! (eps 1e-3, folded into the convolutions at load time), ReLU6, no squeeze-and-excitation; a 3x3
 //! stride-2 stem 3 -> 32, 16 MBConv blocks in 7 groups, a 1x1 head 320 -> 1280 and a 1000-way
 //! classifier. Tensors are channels-last [`FeatureMap`]s.
-use super::ops::{self, Activation, Dense, Depthwise};
 use super::checkpoint::Checkpoint;
+use super::ops::{self, Activation, Dense, Depthwise};
 use super::{Extractor, FeatureError, FeatureMap};
 use image::RgbImage;
 use std::ffi::OsString;

@@ -217,7 +217,8 @@ impl DinoVit {
         let mut blocks = Vec::new();
         while st.shape(&format!("blocks.{}.norm1.weight", blocks.len())).is_some() {
             let p = format!("blocks.{}", blocks.len());
-            let mlp = shape(&format!("{p}.mlp.fc1.weight"))?[0];
+            // A malformed (0-d) shape leaves 0, which the shape check of `fc1` then reports.
+            let mlp = shape(&format!("{p}.mlp.fc1.weight"))?.first().copied().unwrap_or(0);
             let (ls1, ls2) = (format!("{p}.ls1.gamma"), format!("{p}.ls2.gamma"));
             // Every block has both gammas or none does: a missing one is a broken file, not
             // a gamma of 1.
@@ -226,14 +227,14 @@ impl DinoVit {
                     "LayerScale (`ls1.gamma`, `ls2.gamma`) in some blocks but not in `{p}`"
                 )));
             }
-            let gamma = |name: &str| layer_scale.then(|| name.to_string());
+            let gamma = |name| layer_scale.then_some(name);
             blocks.push(VitBlock {
                 norm1: LayerNorm::load(st, &format!("{p}.norm1"), dim)?,
                 qkv: linear(st, &format!("{p}.attn.qkv"), dim, 3 * dim)?,
-                proj: scaled_linear(st, &format!("{p}.attn.proj"), gamma(&ls1).as_deref(), dim, dim)?,
+                proj: scaled_linear(st, &format!("{p}.attn.proj"), gamma(ls1.as_str()), dim, dim)?,
                 norm2: LayerNorm::load(st, &format!("{p}.norm2"), dim)?,
                 fc1: linear(st, &format!("{p}.mlp.fc1"), dim, mlp)?,
-                fc2: scaled_linear(st, &format!("{p}.mlp.fc2"), gamma(&ls2).as_deref(), mlp, dim)?,
+                fc2: scaled_linear(st, &format!("{p}.mlp.fc2"), gamma(ls2.as_str()), mlp, dim)?,
             });
         }
         if blocks.is_empty() {
