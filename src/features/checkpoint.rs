@@ -13,19 +13,23 @@ pub enum Checkpoint {
 }
 
 impl Checkpoint {
-    /// Opens `path`: a zip archive (or a legacy pickle, which [`Pth`] explains it cannot read) is
-    /// a PyTorch checkpoint whatever its name; anything else is read as safetensors, whose own
-    /// checks name the file when it is neither.
+    /// Opens `path`, by content: a zip archive (or a legacy pickle, which [`Pth`] explains it
+    /// cannot read) is a PyTorch checkpoint and a JSON header after 8 bytes is safetensors, whatever
+    /// the names. Anything else goes to the reader its extension suggests (`.pth`, `.pt`, `.tar`:
+    /// PyTorch), whose checks say what is wrong.
     pub fn open(path: &Path) -> Result<Self, FeatureError> {
-        let mut magic = [0u8; 4];
-        let mut f = std::fs::File::open(path).map_err(|e| FeatureError::io(path, e))?;
-        let n = f.read(&mut magic).map_err(|e| FeatureError::io(path, e))?;
+        let mut head = Vec::with_capacity(9);
+        let f = std::fs::File::open(path).map_err(|e| FeatureError::io(path, e))?;
+        f.take(9)
+            .read_to_end(&mut head)
+            .map_err(|e| FeatureError::io(path, e))?;
+        let zip_or_pickle = head.starts_with(b"PK\x03\x04") || head.starts_with(&[0x80, 0x02]);
+        let safetensors = head.get(8) == Some(&b'{');
         let pytorch_ext = path
             .extension()
             .and_then(|e| e.to_str())
             .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "pth" | "pt" | "tar"));
-        let zip_or_pickle = (n == 4 && &magic == b"PK\x03\x04") || (n >= 2 && magic[..2] == [0x80, 0x02]);
-        if zip_or_pickle || pytorch_ext {
+        if zip_or_pickle || (pytorch_ext && !safetensors) {
             Ok(Checkpoint::Pth(Pth::open(path)?))
         } else {
             Ok(Checkpoint::SafeTensors(SafeTensors::open(path)?))

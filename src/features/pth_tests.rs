@@ -174,12 +174,15 @@ fn the_checkpoint_reader_tells_the_formats_apart_by_content() {
     use super::super::checkpoint::Checkpoint;
     let dir = tempfile::tempdir().unwrap();
     let tensors: [(&str, &[usize], &[f32]); 1] = [("a", &[2], &[1.0, 2.0])];
-    // A .pth named .safetensors and a safetensors file named .bin both open.
+    // A .pth named .safetensors and safetensors files named .bin or .pth all open.
     let pth = dir.path().join("weights.safetensors");
     std::fs::write(&pth, to_pth_bytes(&tensors)).unwrap();
     let st = dir.path().join("weights.bin");
     std::fs::write(&st, super::super::safetensors::to_bytes(&tensors)).unwrap();
-    for path in [&pth, &st] {
+    let st_pth = dir.path().join("converted.pth");
+    std::fs::write(&st_pth, super::super::safetensors::to_bytes(&tensors)).unwrap();
+    assert!(matches!(Checkpoint::open(&st_pth).unwrap(), Checkpoint::SafeTensors(_)));
+    for path in [&pth, &st, &st_pth] {
         let ck = Checkpoint::open(path).unwrap();
         assert_eq!(ck.f32("a", &[2]).unwrap(), [1.0, 2.0]);
     }
