@@ -46,12 +46,7 @@ fn idx(v: &serde_json::Value, key: &str) -> usize {
 /// full `.npy` map, the samples and the channel means.
 fn compare(dir: &Path, got: &FeatureMap, expected: &serde_json::Value) -> f64 {
     let want = read_npy_map(&dir.join(expected["npy"].as_str().unwrap()), NpyLayout::Hwc).unwrap();
-    let shape: Vec<usize> = expected["shape"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|d| d.as_u64().unwrap() as usize)
-        .collect();
+    let shape: Vec<usize> = serde_json::from_value(expected["shape"].clone()).unwrap();
     assert_eq!(
         [got.height, got.width, got.dim].map(|v| v as usize).to_vec(),
         shape,
