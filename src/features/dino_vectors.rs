@@ -146,7 +146,8 @@ fn dinov2_vits14_matches_the_official_code_on_random_weights() {
 }
 
 /// The same weights saved as `torch.save` would (a zip with `archive/data.pkl` and one entry per
-/// storage) load to the same tensors and give the same outputs as the safetensors file.
+/// storage) load to the same tensors and give the same outputs as the safetensors file, also when
+/// nested in a training checkpoint as DINO's are.
 #[test]
 fn a_pth_of_the_dinov2_vector_loads_the_same_tensors_and_outputs() {
     let test = "a_pth_of_the_dinov2_vector_loads_the_same_tensors_and_outputs";
@@ -177,4 +178,25 @@ fn a_pth_of_the_dinov2_vector_loads_the_same_tensors_and_outputs() {
     // The whole chain from the .pth, compared with the reference as the safetensors run is.
     let report = check_vector(DinoModel::Dinov2Vits14, &dir, &pth_path);
     assert_eq!(report.len(), 9);
+
+    // The same backbone inside a training checkpoint (`teacher`, `backbone.` names, a head).
+    let mut entries: Vec<pth_writer::Entry> = list
+        .iter()
+        .map(|(n, s, v)| pth_writer::f32_entry(&format!("backbone.{n}"), s, v))
+        .collect();
+    entries.push(pth_writer::f32_entry("head.last_layer.weight", &[2, 384], &[0.5; 768]));
+    let pickle = pth_writer::pickle_checkpoint(&entries, Some("teacher"));
+    let wrapped_path = tmp.path().join("checkpoint.pth");
+    std::fs::write(
+        &wrapped_path,
+        pth_writer::zip_checkpoint("checkpoint", &pickle, &entries),
+    )
+    .unwrap();
+    let wrapped = DinoModel::Dinov2Vits14.load(&wrapped_path).unwrap();
+    let plain = DinoModel::Dinov2Vits14.load(&st_path).unwrap();
+    let rgb = image::open(dir.join("input-100x60.png")).unwrap().to_rgb8();
+    let input = input_from_rgb(&rgb, 14);
+    for output in [DinoOutput::Tokens, DinoOutput::Keys] {
+        assert_eq!(wrapped.forward(&input, output).data, plain.forward(&input, output).data);
+    }
 }
