@@ -357,5 +357,62 @@ fn feature_flags_that_cannot_work_are_refused_before_any_work() {
             "docs/features.md",
         ],
     );
+    let o = run(&[
+        "demo-scene",
+        "-o",
+        out_s,
+        "--features",
+        "dinov2-vits14",
+        "--weights",
+        "/no/dinov2.pth",
+    ]);
+    assert_clean_failure(
+        &o,
+        &[
+            "DINOv2 ViT-S/14 weights (given) not found at /no/dinov2.pth",
+            "dinov2_vits14_pretrain.pth",
+            "SCRIBBLEFIELD_DINOV2",
+        ],
+    );
     assert!(!out.exists());
+}
+
+/// `--features dinov2-vits14` end to end, with the random-weight reference model (2 blocks) in
+/// place of the real checkpoint: the wiring, not the features, is under test.
+#[test]
+fn demo_scene_bakes_dinov2_features_from_given_weights() {
+    let weights = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/models/dinov2-vits14-random/dinov2-vits14-random.safetensors");
+    if !weights.is_file() {
+        eprintln!(
+            "\n!!! SKIPPING demo_scene_bakes_dinov2_features_from_given_weights: {} is absent; this \
+             test checks nothing here !!!\n",
+            weights.display()
+        );
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("d.scene.zip");
+    let out_s = out.to_str().unwrap();
+    let o = run(&[
+        "demo-scene",
+        "-o",
+        out_s,
+        "--size",
+        "64x48",
+        "--frames",
+        "4",
+        "--features",
+        "dinov2-vits14",
+        "--weights",
+        weights.to_str().unwrap(),
+        "--autoencoder-steps",
+        "50",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let t = text(&run(&["info", out_s]));
+    assert!(
+        t.contains("features:    yes") && t.contains("dinov2-vits14 dim 384 patch 14 keys"),
+        "{t}"
+    );
 }

@@ -2,10 +2,10 @@
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
-use scribblefield::features::dino::{DinoExtractor, DinoOutput, DinoVit};
+use scribblefield::features::dino::{DinoExtractor, DinoModel, DinoOutput};
 use scribblefield::features::{
     BakeOptions, BakeProgress, Baked, Baseline, EfficientNetConfig, EfficientNetExtractor, Extractor, FeatureError,
-    NpyLayout, Upscaled, bake, dino, efficientnet, npy_path_of_frame, read_npy_map, upscale_factor,
+    NpyLayout, Upscaled, bake, efficientnet, npy_path_of_frame, read_npy_map, upscale_factor,
 };
 use scribblefield::scene::Scene;
 
@@ -17,9 +17,12 @@ pub enum FeatureKind {
     Baseline,
     /// ImageNet EfficientNet-Lite0 group outputs (weights: `--weights`, $SCRIBBLEFIELD_EFFICIENTNET or ../shared/models).
     EfficientnetLite0,
-    /// DINO ViT-S/8 last-block keys at stride 8, from a checkpoint you supply (`--weights`,
-    /// $SCRIBBLEFIELD_DINO); never run on real weights here, see docs/features.md.
+    /// DINO ViT-S/8 last-block keys at stride 8, from the official checkpoint you supply (.pth or
+    /// safetensors: `--weights`, $SCRIBBLEFIELD_DINO); never run on real weights here, see docs/features.md.
     DinoVits8,
+    /// DINOv2 ViT-S/14 last-block keys at stride 14, from the official checkpoint you supply (.pth or
+    /// safetensors: `--weights`, $SCRIBBLEFIELD_DINOV2); never run on real weights here, see docs/features.md.
+    Dinov2Vits14,
     /// Precomputed per-frame maps from `--features-from DIR` (.npy, any dimension and size).
     Import,
 }
@@ -44,7 +47,8 @@ pub struct FeatureArgs {
     /// Pixels per feature cell of the computed extractors.
     #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=64))]
     feature_stride: u32,
-    /// EfficientNet-Lite0 weights (safetensors); see docs/features.md for where to get them.
+    /// Weights of the network: EfficientNet-Lite0 (safetensors) or DINO / DINOv2 (the official .pth or
+    /// safetensors); see docs/features.md for where to get them.
     #[arg(long)]
     weights: Option<PathBuf>,
     /// EfficientNet-Lite0 groups (0-6, strides 2,4,8,16,16,32,32) whose outputs make the features.
@@ -74,8 +78,8 @@ impl FeatureArgs {
                 efficientnet::resolve_weights(self.weights.as_deref())?;
                 Ok(())
             }
-            (Some(FeatureKind::DinoVits8), _) => {
-                dino::resolve_weights(self.weights.as_deref())?;
+            (Some(kind @ (FeatureKind::DinoVits8 | FeatureKind::Dinov2Vits14)), _) => {
+                dino_model(kind).resolve_weights(self.weights.as_deref())?;
                 Ok(())
             }
             (k, Some(_)) if k != Some(FeatureKind::Import) => {
@@ -130,12 +134,13 @@ impl FeatureArgs {
                 };
                 bake_frames(scene, &ex, &opts, on_progress)?
             }
-            FeatureKind::DinoVits8 => {
-                let path = dino::resolve_weights(self.weights.as_deref())?;
+            FeatureKind::DinoVits8 | FeatureKind::Dinov2Vits14 => {
+                let model = dino_model(kind);
+                let path = model.resolve_weights(self.weights.as_deref())?;
                 let k = upscale_factor(scene.width, scene.height, self.network_min_side);
                 let ex = Upscaled {
                     inner: DinoExtractor {
-                        vit: DinoVit::load_vits8(&path)?,
+                        vit: model.load(&path)?,
                         output: DinoOutput::Keys,
                     },
                     factor: k,
@@ -178,6 +183,14 @@ impl FeatureArgs {
         );
         scene.features = Some(baked.codes);
         Ok(())
+    }
+}
+
+/// The backbone behind a DINO `--features` choice.
+fn dino_model(kind: FeatureKind) -> DinoModel {
+    match kind {
+        FeatureKind::Dinov2Vits14 => DinoModel::Dinov2Vits14,
+        _ => DinoModel::DinoVits8,
     }
 }
 

@@ -6,8 +6,8 @@
 //! (eps 1e-3, folded into the convolutions at load time), ReLU6, no squeeze-and-excitation; a 3x3
 //! stride-2 stem 3 -> 32, 16 MBConv blocks in 7 groups, a 1x1 head 320 -> 1280 and a 1000-way
 //! classifier. Tensors are channels-last [`FeatureMap`]s.
+use super::checkpoint::Checkpoint;
 use super::ops::{self, Activation, Dense, Depthwise};
-use super::safetensors::SafeTensors;
 use super::{Extractor, FeatureError, FeatureMap};
 use image::RgbImage;
 use std::ffi::OsString;
@@ -99,7 +99,7 @@ pub struct EfficientNetLite0 {
 }
 
 /// BatchNorm `prefix` as a per-channel `(scale, shift)`.
-fn batch_norm(st: &SafeTensors, prefix: &str, c: usize) -> Result<(Vec<f32>, Vec<f32>), FeatureError> {
+fn batch_norm(st: &Checkpoint, prefix: &str, c: usize) -> Result<(Vec<f32>, Vec<f32>), FeatureError> {
     let gamma = st.f32(&format!("{prefix}.weight"), &[c])?;
     let beta = st.f32(&format!("{prefix}.bias"), &[c])?;
     let mean = st.f32(&format!("{prefix}.running_mean"), &[c])?;
@@ -116,7 +116,7 @@ fn batch_norm(st: &SafeTensors, prefix: &str, c: usize) -> Result<(Vec<f32>, Vec
 
 /// Convolution `conv` (`[cout, cin, k, k]`, no bias) followed by BatchNorm `bn`, folded:
 /// the scaled weight (same layout) and the bias.
-fn folded(st: &SafeTensors, conv: &str, bn: &str, shape: [usize; 4]) -> Result<(Vec<f32>, Vec<f32>), FeatureError> {
+fn folded(st: &Checkpoint, conv: &str, bn: &str, shape: [usize; 4]) -> Result<(Vec<f32>, Vec<f32>), FeatureError> {
     let mut w = st.f32(&format!("{conv}.weight"), &shape)?;
     let (scale, shift) = batch_norm(st, bn, shape[0])?;
     let per_out = shape[1] * shape[2] * shape[3];
@@ -127,14 +127,15 @@ fn folded(st: &SafeTensors, conv: &str, bn: &str, shape: [usize; 4]) -> Result<(
 }
 
 impl EfficientNetLite0 {
-    /// Loads the weights file `path` (names of the PyTorch checkpoint: `_conv_stem.weight`,
-    /// `_blocks.N._expand_conv.weight`, ...). Uses all cores by default ([`Self::with_threads`]).
+    /// Loads the weights file `path`, safetensors or the PyTorch checkpoint itself (names of the
+    /// checkpoint: `_conv_stem.weight`, `_blocks.N._expand_conv.weight`, ...). Uses all cores by
+    /// default ([`Self::with_threads`]).
     pub fn load(path: &Path) -> Result<Self, FeatureError> {
         let path = resolve_weights_from(Some(path), None)?;
-        Self::from_safetensors(&SafeTensors::open(&path)?)
+        Self::from_checkpoint(&Checkpoint::open(&path)?)
     }
 
-    pub fn from_safetensors(st: &SafeTensors) -> Result<Self, FeatureError> {
+    pub fn from_checkpoint(st: &Checkpoint) -> Result<Self, FeatureError> {
         let (w, b) = folded(st, "_conv_stem", "_bn0", [STEM_CHANNELS, 3, 3, 3])?;
         let stem = Dense::new(
             27,

@@ -4,14 +4,23 @@
 mod autoencoder;
 mod bake;
 mod baseline;
+pub mod checkpoint;
 pub mod dino;
+#[cfg(test)]
+mod dino_vectors;
 pub mod efficientnet;
 mod error;
 mod map;
 mod npy;
 pub mod ops;
+mod pickle;
+pub mod pth;
+#[cfg(test)]
+mod pth_writer;
 pub mod safetensors;
+pub mod softmax;
 mod upscale;
+pub mod vit;
 mod weights;
 
 pub use autoencoder::{Autoencoder, AutoencoderConfig, FitReport};

@@ -93,7 +93,7 @@ fn madd<const FMA: bool>(a: f32, b: f32, c: f32) -> f32 {
 }
 
 #[cfg(target_arch = "x86_64")]
-fn has_avx2_fma() -> bool {
+pub(super) fn has_avx2_fma() -> bool {
     std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
 }
 
@@ -137,13 +137,21 @@ impl Dense {
 
     /// `act(x W^T + b + residual)` for `x` of `rows x cin` values; `rows x cout` values out.
     pub fn forward(&self, x: &[f32], act: Activation, residual: Option<&[f32]>, threads: usize) -> Vec<f32> {
+        let mut out = vec![0.0; x.len() / self.cin * self.cout];
+        self.forward_into(x, act, residual, threads, &mut out);
+        out
+    }
+
+    /// [`Dense::forward`] into `out` (`rows x cout` values, overwritten): lets a caller that
+    /// runs many small layers reuse one buffer instead of allocating each time.
+    pub fn forward_into(&self, x: &[f32], act: Activation, residual: Option<&[f32]>, threads: usize, out: &mut [f32]) {
         assert_eq!(x.len() % self.cin, 0, "input not a whole number of rows");
         let rows = x.len() / self.cin;
         if let Some(r) = residual {
             assert_eq!(r.len(), rows * self.cout, "residual size");
         }
-        let mut out = vec![0.0; rows * self.cout];
-        parallel_rows(&mut out, self.cout, threads, MR, |row0, chunk| {
+        assert_eq!(out.len(), rows * self.cout, "output size");
+        parallel_rows(out, self.cout, threads, MR, |row0, chunk| {
             let job = DenseJob {
                 layer: self,
                 x,
@@ -159,7 +167,6 @@ impl Dense {
             }
             dense_rows::<false>(&job, chunk);
         });
-        out
     }
 
     /// Multiply-adds per input row.
