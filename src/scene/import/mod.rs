@@ -130,7 +130,11 @@ pub fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize
     {
         return Err(SceneError::invalid(
             shown(masks),
-            format!("--masks is for COLMAP captures; {} is a {} capture", shown(input), layout.name()),
+            format!(
+                "--masks is for COLMAP captures; {} is a {} capture",
+                shown(input),
+                layout.name()
+            ),
         ));
     }
     let built = match layout {

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use glam::{DVec2, DVec3};
 
-use super::model::{At, Camera, Image, MODELS, Model, Point3D, SUPPORTED, camera, duplicate, rotation};
+use super::model::{At, Camera, Image, MODELS, Model, Point3D, SUPPORTED, camera, duplicate, param_count, rotation};
 use super::read_model_file;
 use crate::scene::error::{Result, SceneError};
 
@@ -150,12 +150,13 @@ fn read_cameras(r: &mut Reader) -> Result<BTreeMap<u32, Camera>> {
         r.at = At::Record(i + 1);
         let id = r.u32("CAMERA_ID")?;
         let model_id = r.u32("MODEL_ID")?;
-        let Some(&(model, count)) = MODELS.get(model_id as usize) else {
+        let Some(&(model, _)) = MODELS.get(model_id as usize) else {
             return Err(r.err(format!(
                 "camera {id} has unknown model id {} (supported: {SUPPORTED})",
                 model_id as i32
             )));
         };
+        let count = param_count(model, id, r.file, r.at)?;
         let mut size = [0; 2];
         for (v, field) in size.iter_mut().zip(["WIDTH", "HEIGHT"]) {
             let s = r.u64(field)?;

@@ -68,7 +68,9 @@ fn model_dir(input: &Path) -> Option<PathBuf> {
 }
 
 fn has_model_file(dir: &Path, stem: &str) -> bool {
-    ["txt", "bin"].iter().any(|ext| dir.join(format!("{stem}.{ext}")).is_file())
+    ["txt", "bin"]
+        .iter()
+        .any(|ext| dir.join(format!("{stem}.{ext}")).is_file())
 }
 
 /// Whether `input` is a COLMAP capture: photos in images/ and a model beside them.
@@ -96,7 +98,10 @@ fn read_model_file(path: &Path) -> Result<Vec<u8>> {
 fn read_model(dir: &Path, notes: &mut Vec<String>) -> Result<Model> {
     let binary = dir.join("cameras.bin").is_file();
     if binary && dir.join("cameras.txt").is_file() {
-        notes.push(format!("{}: both .bin and .txt model files; read the .bin ones", shown(dir)));
+        notes.push(format!(
+            "{}: both .bin and .txt model files; read the .bin ones",
+            shown(dir)
+        ));
     }
     let model = if binary { binary::read(dir)? } else { text::read(dir)? };
     model.check()?;
@@ -105,7 +110,10 @@ fn read_model(dir: &Path, notes: &mut Vec<String>) -> Result<Model> {
 
 pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Built> {
     let dir = model_dir(input).ok_or_else(|| {
-        SceneError::missing(shown(&input.join(MODEL_DIRS[0])), "the COLMAP sparse model (cameras, images, points3D)")
+        SceneError::missing(
+            shown(&input.join(MODEL_DIRS[0])),
+            "the COLMAP sparse model (cameras, images, points3D)",
+        )
     })?;
     let mut notes = vec![format!("model: {}", shown(&dir))];
     let mut warnings = Vec::new();
@@ -119,7 +127,10 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
     let mut registered: Vec<&Image> = model.images.iter().collect();
     registered.sort_by(|a, b| a.name.cmp(&b.name));
     let names: BTreeSet<&str> = registered.iter().map(|i| i.name.as_str()).collect();
-    let unregistered = photos_under(&images_dir)?.iter().filter(|p| !names.contains(p.as_str())).count();
+    let unregistered = photos_under(&images_dir)?
+        .iter()
+        .filter(|p| !names.contains(p.as_str()))
+        .count();
     if unregistered > 0 {
         warnings.push(format!(
             "{}: skipped {unregistered} photos that the model does not register (no pose)",
@@ -182,11 +193,17 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
     let (bounds, bounds_note) = match points_bounds(&model) {
         Some(b) => b,
         None => {
-            warnings.push(format!("{}: no 3D points; bounds estimated from the cameras", model.files[2]));
+            warnings.push(format!(
+                "{}: no 3D points; bounds estimated from the cameras",
+                model.files[2]
+            ));
             let poses: Vec<Pose> = loaded.frames.iter().map(|f| f.pose).collect();
             let b = from_cameras(&poses, &intrinsics, loaded.size)
                 .ok_or_else(|| SceneError::invalid(shown(input), "no cameras to estimate the bounds from"))?;
-            (b, "bounds: from camera positions and view frustums (no 3D points)".into())
+            (
+                b,
+                "bounds: from camera positions and view frustums (no 3D points)".into(),
+            )
         }
     };
     notes.push(bounds_note);
@@ -222,7 +239,9 @@ fn photos_under(dir: &Path) -> Result<Vec<String>> {
         let entries = std::fs::read_dir(&folder).map_err(|e| SceneError::io(&folder, e))?;
         for entry in entries {
             let path = entry.map_err(|e| SceneError::io(&folder, e))?.path();
-            let Some(name) = path.file_name().and_then(|n| n.to_str()) else { continue };
+            let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
+                continue;
+            };
             let rel = format!("{prefix}{name}");
             if path.is_dir() && depth < MAX_IMAGE_DEPTH {
                 stack.push((path.clone(), format!("{rel}/"), depth + 1));
@@ -242,7 +261,12 @@ fn is_photo(name: &str) -> bool {
 /// Each kept photo's mask: `<stem>.png` or COLMAP's own `<name>.png`, in --masks or masks/.
 /// None when there is no mask folder, or when it has no mask for any kept photo; some but not
 /// all missing is an error, since the ground truth would silently cover only part of the scene.
-fn find_masks(input: &Path, opts: &ImportOptions, kept: &[&Image], warnings: &mut Vec<String>) -> Result<Option<Vec<PathBuf>>> {
+fn find_masks(
+    input: &Path,
+    opts: &ImportOptions,
+    kept: &[&Image],
+    warnings: &mut Vec<String>,
+) -> Result<Option<Vec<PathBuf>>> {
     let dir = match &opts.masks {
         Some(d) if d.is_dir() => d.clone(),
         Some(d) => return Err(SceneError::missing(shown(d), "the mask folder given with --masks")),
@@ -258,7 +282,12 @@ fn find_masks(input: &Path, opts: &ImportOptions, kept: &[&Image], warnings: &mu
                 .find(|p| p.is_file())
         })
         .collect();
-    let missing: Vec<&Image> = kept.iter().zip(&found).filter(|(_, f)| f.is_none()).map(|(i, _)| *i).collect();
+    let missing: Vec<&Image> = kept
+        .iter()
+        .zip(&found)
+        .filter(|(_, f)| f.is_none())
+        .map(|(i, _)| *i)
+        .collect();
     if missing.len() == kept.len() {
         warnings.push(format!(
             "{}: no mask for any imported photo (expected e.g. {}); no ground truth",
@@ -295,8 +324,16 @@ fn output_camera(model: &Model, kept: &[&Image]) -> Result<(Lens, Vec<Lens>)> {
                 format!(
                     "camera {} ({}x{}, image {} {}) and camera {} ({}x{}, image {} {}) differ in size; \
                      a scene holds one image size",
-                    kept[0].camera_id, first.width, first.height, kept[0].id, kept[0].name,
-                    image.camera_id, c.width, c.height, image.id, image.name
+                    kept[0].camera_id,
+                    first.width,
+                    first.height,
+                    kept[0].id,
+                    kept[0].name,
+                    image.camera_id,
+                    c.width,
+                    c.height,
+                    image.id,
+                    image.name
                 ),
             ));
         }
@@ -321,7 +358,11 @@ fn undistortion_note(model: &Model, kept: &[&Image], prepare: &Undistort) -> Str
         .iter()
         .map(|i| (i.camera_id, model.cameras[&i.camera_id].model.as_str()))
         .collect();
-    let list = used.iter().map(|(id, m)| format!("{id} {m}")).collect::<Vec<_>>().join(", ");
+    let list = used
+        .iter()
+        .map(|(id, m)| format!("{id} {m}"))
+        .collect::<Vec<_>>()
+        .join(", ");
     format!(
         "cameras ({list}) undistorted onto one pinhole camera (bilinear); {} pixels over all frames fell outside their photo (black, void)",
         prepare.outside.get()
@@ -378,7 +419,9 @@ impl Prepare for Undistort {
             check_resamplable(mask.dimensions(), native, &shown(path), "mask")?;
         }
         let mut classes = resize_nearest(&mask, native);
-        classes.pixels_mut().for_each(|p| p.0[0] = u8::from(p.0[0] >= MASK_THRESHOLD));
+        classes
+            .pixels_mut()
+            .for_each(|p| p.0[0] = u8::from(p.0[0] >= MASK_THRESHOLD));
         Ok(undistort_nearest(&classes, &self.lenses[frame], &self.out, GT_VOID))
     }
 }
@@ -391,9 +434,15 @@ fn trusted(p: &Point3D) -> bool {
 fn points_bounds(model: &Model) -> Option<(crate::scene::camera::Bounds, String)> {
     let good: Vec<DVec3> = model.points.values().filter(|p| trusted(p)).map(|p| p.xyz).collect();
     let (points, which) = if good.len() >= MIN_BOUNDS_POINTS {
-        (good, format!("seen by >= {MIN_TRACK} photos with error <= {MAX_POINT_ERROR} px"))
+        (
+            good,
+            format!("seen by >= {MIN_TRACK} photos with error <= {MAX_POINT_ERROR} px"),
+        )
     } else {
-        (model.points.values().map(|p| p.xyz).collect(), "all of them: too few trusted".into())
+        (
+            model.points.values().map(|p| p.xyz).collect(),
+            "all of them: too few trusted".into(),
+        )
     };
     let n = points.len();
     let b = from_points(points, BOUNDS_CUT, BOUNDS_PAD)?;
@@ -412,12 +461,16 @@ fn points_bounds(model: &Model) -> Option<(crate::scene::camera::Bounds, String)
 fn sparse_depth(image: &Image, lens: &Lens, model: &Model, k: &Intrinsics, size: (u32, u32)) -> Vec<(u32, f64)> {
     let mut readings: Vec<(u32, f64)> = Vec::new();
     for (keypoint, id) in &image.points2d {
-        let Some(point) = id.and_then(|id| model.points.get(&id)) else { continue };
+        let Some(point) = id.and_then(|id| model.points.get(&id)) else {
+            continue;
+        };
         if !trusted(point) {
             continue;
         }
         let z = (image.rotation * point.xyz + image.translation).z;
-        let Some(n) = undistort_pixel(lens, *keypoint) else { continue };
+        let Some(n) = undistort_pixel(lens, *keypoint) else {
+            continue;
+        };
         let (u, v) = ((k.fx * n.x + k.cx).round(), (k.fy * n.y + k.cy).round());
         if z > 0.0 && u >= 0.0 && v >= 0.0 && u < size.0 as f64 && v < size.1 as f64 {
             readings.push((v as u32 * size.0 + u as u32, z));

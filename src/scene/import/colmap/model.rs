@@ -150,9 +150,7 @@ pub(super) fn rotation(q: [f64; 4], file: &str, at: At, id: u32) -> Result<DMat3
     if !norm.is_finite() || (norm - 1.0).abs() > UNIT_TOLERANCE {
         return Err(SceneError::invalid(
             file,
-            format!(
-                "{at}: image {id}: quaternion (QW QX QY QZ) = {q:?} has norm {norm}, not a unit rotation"
-            ),
+            format!("{at}: image {id}: quaternion (QW QX QY QZ) = {q:?} has norm {norm}, not a unit rotation"),
         ));
     }
     let [w, x, y, z] = q.map(|v| v / norm);
@@ -161,14 +159,7 @@ pub(super) fn rotation(q: [f64; 4], file: &str, at: At, id: u32) -> Result<DMat3
 
 /// The camera of `model` with `params`: checks the parameter count and that the model is one
 /// the importer can undistort.
-pub(super) fn camera(
-    model: &str,
-    id: u32,
-    size: (u32, u32),
-    params: &[f64],
-    file: &str,
-    at: At,
-) -> Result<Camera> {
+pub(super) fn camera(model: &str, id: u32, size: (u32, u32), params: &[f64], file: &str, at: At) -> Result<Camera> {
     let Some(lens) = Lens::of_model(model, params) else {
         return Err(SceneError::invalid(
             file,
@@ -178,13 +169,19 @@ pub(super) fn camera(
     if !(lens.fx > 0.0 && lens.fy > 0.0) {
         return Err(SceneError::invalid(
             file,
-            format!("{at}: camera {id}: focal length must be positive, got fx = {}, fy = {}", lens.fx, lens.fy),
+            format!(
+                "{at}: camera {id}: focal length must be positive, got fx = {}, fy = {}",
+                lens.fx, lens.fy
+            ),
         ));
     }
     if size.0 == 0 || size.1 == 0 {
         return Err(SceneError::invalid(
             file,
-            format!("{at}: camera {id}: WIDTH and HEIGHT must be positive, got {}x{}", size.0, size.1),
+            format!(
+                "{at}: camera {id}: WIDTH and HEIGHT must be positive, got {}x{}",
+                size.0, size.1
+            ),
         ));
     }
     Ok(Camera {
@@ -195,18 +192,22 @@ pub(super) fn camera(
     })
 }
 
-/// The parameter count of a named model, or an error naming the camera.
+/// The parameter count of a named model, refusing (before its parameters are read, which an
+/// unknown model's count would get wrong) any model the importer cannot undistort.
 pub(super) fn param_count(model: &str, id: u32, file: &str, at: At) -> Result<usize> {
-    MODELS
-        .iter()
-        .find(|(name, _)| *name == model)
-        .map(|(_, n)| *n)
-        .ok_or_else(|| {
-            SceneError::invalid(
-                file,
-                format!("{at}: camera {id} has unknown model {model:?} (supported: {SUPPORTED})"),
-            )
-        })
+    let Some(&(_, count)) = MODELS.iter().find(|(name, _)| *name == model) else {
+        return Err(SceneError::invalid(
+            file,
+            format!("{at}: camera {id} has unknown model {model:?} (supported: {SUPPORTED})"),
+        ));
+    };
+    if Lens::of_model(model, &vec![0.0; count]).is_none() {
+        return Err(SceneError::invalid(
+            file,
+            format!("{at}: camera {id} has model {model}, which is not supported (supported: {SUPPORTED})"),
+        ));
+    }
+    Ok(count)
 }
 
 impl Model {
@@ -255,7 +256,10 @@ impl Model {
                 let Some(image) = by_id.get(&image_id) else {
                     return Err(SceneError::invalid(
                         points,
-                        format!("{}: point {id}: its track names image {image_id}, which {images} does not have", point.at),
+                        format!(
+                            "{}: point {id}: its track names image {image_id}, which {images} does not have",
+                            point.at
+                        ),
                     ));
                 };
                 if index as usize >= image.points2d.len() {

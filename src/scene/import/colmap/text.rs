@@ -147,7 +147,10 @@ fn read_images(text: &str, file: &str) -> Result<Vec<Image>> {
         let at = f.at;
         let name = f.rest().join(" ");
         if name.is_empty() {
-            return Err(SceneError::invalid(file, format!("{at}: image {id}: the line ends before NAME")));
+            return Err(SceneError::invalid(
+                file,
+                format!("{at}: image {id}: the line ends before NAME"),
+            ));
         }
         // The keypoints line always follows its image line, even when it is empty.
         let (kp_line, kp) = lines.next().unwrap_or((line + 1, ""));

@@ -60,10 +60,7 @@ pub(super) fn undistort_pixel(lens: &Lens, pixel: DVec2) -> Option<DVec2> {
 fn source_map(src: Lens, out: Lens, size: (u32, u32)) -> impl Iterator<Item = DVec2> {
     (0..size.1).flat_map(move |y| {
         (0..size.0).map(move |x| {
-            let n = DVec2::new(
-                (x as f64 + 0.5 - out.cx) / out.fx,
-                (y as f64 + 0.5 - out.cy) / out.fy,
-            );
+            let n = DVec2::new((x as f64 + 0.5 - out.cx) / out.fx, (y as f64 + 0.5 - out.cy) / out.fy);
             let d = distort(&src, n);
             DVec2::new(src.fx * d.x + src.cx, src.fy * d.y + src.cy)
         })
