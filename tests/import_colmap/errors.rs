@@ -47,110 +47,74 @@ fn bad_text_fields_name_line_and_field() {
     let camera = line_of(&tmp, "cameras.txt", "1 ");
     let image = line_of(&tmp, "images.txt", "12 ");
     let point = line_of(&tmp, "points3D.txt", "4 ");
-    let cases: Vec<(&str, String, String, Vec<&str>)> = vec![
-        (
-            "cameras.txt",
-            camera.clone(),
-            camera.replace(" 96 ", " wide "),
-            vec!["line 2", "WIDTH", "\"wide\""],
-        ),
-        (
-            "cameras.txt",
-            camera.clone(),
-            format!("{camera} 0.1"),
-            vec!["line 2", "camera 1", "PINHOLE takes 4 parameters, found 5"],
-        ),
-        (
-            "cameras.txt",
-            camera.clone(),
-            camera.replace("PINHOLE", "OPENCV_FISHEYE"),
-            vec!["camera 1", "OPENCV_FISHEYE", "not supported"],
-        ),
-        (
-            "cameras.txt",
-            camera.clone(),
-            camera.replace("PINHOLE", "WEIRD"),
-            vec!["camera 1", "unknown model \"WEIRD\""],
-        ),
-        (
-            "cameras.txt",
-            camera.clone(),
-            camera.replace(" 82.0 ", " -82.0 "),
-            vec!["camera 1", "focal length"],
-        ),
-        (
-            "images.txt",
-            image.clone(),
-            with_word(&image, 1, "nan"),
-            vec!["line 4", "QW", "NaN"],
-        ),
-        (
-            "images.txt",
-            image.clone(),
-            with_word(&image, 1, "2.0"),
-            vec!["line 4", "image 12", "quaternion", "norm"],
-        ),
-        (
-            "images.txt",
-            image.clone(),
-            with_word(&image, 6, "1e999"),
-            vec!["line 4", "TY", "inf"],
-        ),
-        (
-            "images.txt",
-            image.clone(),
-            image.replace(" 1 photo_01", " 9 photo_01"),
-            vec!["line 4", "image 12", "camera 9"],
-        ),
-        (
-            "images.txt",
-            image.clone(),
-            image.replace(" 1 photo_01.png", " 1"),
-            vec!["line 4", "NAME"],
-        ),
-        (
-            "images.txt",
-            image.clone(),
-            image.replace("12 ", "10 "),
-            vec!["line 4", "image id 10", "twice"],
-        ),
-        (
-            "points3D.txt",
-            point.clone(),
-            point.replace(" 128 128 128 ", " 128 300 128 "),
-            vec!["line 3", "G", "\"300\""],
-        ),
-        (
-            "points3D.txt",
-            point.clone(),
-            format!("{point} 10"),
-            vec!["line 3", "point 4", "TRACK must be pairs"],
-        ),
-        (
-            "points3D.txt",
-            point.clone(),
-            format!("{point} 99 0"),
-            vec!["line 3", "point 4", "image 99"],
-        ),
-        (
-            "points3D.txt",
-            point.clone(),
-            format!("{point} 10 500"),
-            vec!["point 4", "keypoint 500 of image 10"],
-        ),
-        (
-            "points3D.txt",
-            point.clone(),
-            format!("{point}\n{point}"),
-            vec!["3D point id 4", "twice"],
-        ),
-    ];
-    for (file, from, to, needles) in cases {
-        let tmp = text_edited(file, &from, &to);
-        let mut all = needles.clone();
-        all.push(file);
-        expect_err(run(tmp.path()), &all);
-    }
+    let check = |file: &str, to: String, needles: &[&str]| {
+        let from = match file {
+            "cameras.txt" => &camera,
+            "images.txt" => &image,
+            _ => &point,
+        };
+        let tmp = text_edited(file, from, &to);
+        expect_err(run(tmp.path()), &[needles, &[file]].concat());
+    };
+    let cameras = "cameras.txt";
+    check(
+        cameras,
+        camera.replace(" 96 ", " wide "),
+        &["line 2", "WIDTH", "\"wide\""],
+    );
+    check(
+        cameras,
+        format!("{camera} 0.1"),
+        &["line 2", "camera 1", "PINHOLE takes 4 parameters, found 5"],
+    );
+    check(
+        cameras,
+        camera.replace("PINHOLE", "OPENCV_FISHEYE"),
+        &["camera 1", "OPENCV_FISHEYE", "not supported"],
+    );
+    check(
+        cameras,
+        camera.replace("PINHOLE", "WEIRD"),
+        &["camera 1", "unknown model \"WEIRD\""],
+    );
+    check(
+        cameras,
+        camera.replace(" 82.0 ", " -82.0 "),
+        &["camera 1", "focal length"],
+    );
+    let images = "images.txt";
+    check(images, with_word(&image, 1, "nan"), &["line 4", "QW", "NaN"]);
+    check(
+        images,
+        with_word(&image, 1, "2.0"),
+        &["line 4", "image 12", "quaternion", "norm"],
+    );
+    check(images, with_word(&image, 6, "1e999"), &["line 4", "TY", "inf"]);
+    check(
+        images,
+        image.replace(" 1 photo_01", " 9 photo_01"),
+        &["line 4", "image 12", "camera 9"],
+    );
+    check(images, image.replace(" 1 photo_01.png", " 1"), &["line 4", "NAME"]);
+    check(images, image.replace("12 ", "10 "), &["line 4", "image id 10", "twice"]);
+    let points = "points3D.txt";
+    check(
+        points,
+        point.replace(" 128 128 128 ", " 128 300 128 "),
+        &["line 3", "G", "\"300\""],
+    );
+    check(
+        points,
+        format!("{point} 10"),
+        &["line 3", "point 4", "TRACK must be pairs"],
+    );
+    check(points, format!("{point} 99 0"), &["line 3", "point 4", "image 99"]);
+    check(
+        points,
+        format!("{point} 10 500"),
+        &["point 4", "keypoint 500 of image 10"],
+    );
+    check(points, format!("{point}\n{point}"), &["3D point id 4", "twice"]);
 }
 
 #[test]

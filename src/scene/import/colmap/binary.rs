@@ -85,6 +85,15 @@ impl<'a> Reader<'a> {
         Ok(u64::from_le_bytes(self.array(field)?))
     }
 
+    /// Consecutive numbers named `fields`, each named `{prefix}{field}` in messages.
+    fn reals<const N: usize>(&mut self, prefix: &str, fields: [&str; N]) -> Result<[f64; N]> {
+        let mut out = [0.0; N];
+        for (v, field) in out.iter_mut().zip(fields) {
+            *v = self.real(&format!("{prefix}{field}"))?;
+        }
+        Ok(out)
+    }
+
     fn real(&mut self, field: &str) -> Result<f64> {
         let v = f64::from_le_bytes(self.array(field)?);
         if v.is_finite() {
@@ -182,14 +191,8 @@ fn read_images(r: &mut Reader) -> Result<Vec<Image>> {
     for i in 0..n {
         r.at = At::Record(i + 1);
         let id = r.u32("IMAGE_ID")?;
-        let mut q = [0.0; 4];
-        for (v, field) in q.iter_mut().zip(["QW", "QX", "QY", "QZ"]) {
-            *v = r.real(&format!("image {id}: {field}"))?;
-        }
-        let mut t = [0.0; 3];
-        for (v, field) in t.iter_mut().zip(["TX", "TY", "TZ"]) {
-            *v = r.real(&format!("image {id}: {field}"))?;
-        }
+        let q = r.reals(&format!("image {id}: "), ["QW", "QX", "QY", "QZ"])?;
+        let t = r.reals(&format!("image {id}: "), ["TX", "TY", "TZ"])?;
         let camera_id = r.u32("CAMERA_ID")?;
         let name = r.name()?;
         let keypoints = r.count(&format!("keypoints of image {id} ({name})"), KEYPOINT_BYTES)?;
@@ -221,10 +224,7 @@ fn read_points(r: &mut Reader) -> Result<HashMap<u64, Point3D>> {
     for i in 0..n {
         r.at = At::Record(i + 1);
         let id = r.u64("POINT3D_ID")?;
-        let mut xyz = [0.0; 3];
-        for (v, field) in xyz.iter_mut().zip(["X", "Y", "Z"]) {
-            *v = r.real(&format!("point {id}: {field}"))?;
-        }
+        let xyz = r.reals(&format!("point {id}: "), ["X", "Y", "Z"])?;
         r.take(3, "RGB")?;
         let error = r.real(&format!("point {id}: ERROR"))?;
         let len = r.count(&format!("track elements of point {id}"), TRACK_BYTES)?;

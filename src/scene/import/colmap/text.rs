@@ -85,6 +85,15 @@ impl<'a> Fields<'a> {
         }
     }
 
+    /// Consecutive numbers named `fields`.
+    fn reals<const N: usize>(&mut self, fields: [&str; N]) -> Result<[f64; N]> {
+        let mut out = [0.0; N];
+        for (v, field) in out.iter_mut().zip(fields) {
+            *v = self.real(field)?;
+        }
+        Ok(out)
+    }
+
     fn rest(self) -> Vec<&'a str> {
         self.words.collect()
     }
@@ -135,14 +144,8 @@ fn read_images(text: &str, file: &str) -> Result<Vec<Image>> {
         }
         let mut f = Fields::new(file, line, l);
         let id: u32 = f.id("IMAGE_ID")?;
-        let mut q = [0.0; 4];
-        for (v, name) in q.iter_mut().zip(["QW", "QX", "QY", "QZ"]) {
-            *v = f.real(name)?;
-        }
-        let mut t = [0.0; 3];
-        for (v, name) in t.iter_mut().zip(["TX", "TY", "TZ"]) {
-            *v = f.real(name)?;
-        }
+        let q = f.reals(["QW", "QX", "QY", "QZ"])?;
+        let t = f.reals(["TX", "TY", "TZ"])?;
         let camera_id: u32 = f.id("CAMERA_ID")?;
         let at = f.at;
         let name = f.rest().join(" ");
@@ -171,7 +174,7 @@ fn read_images(text: &str, file: &str) -> Result<Vec<Image>> {
 fn read_keypoints(text: &str, file: &str, line: usize, image: u32) -> Result<Vec<(DVec2, Option<u64>)>> {
     let mut f = Fields::new(file, line, text);
     let words = f.remaining();
-    if words % 3 != 0 {
+    if !words.is_multiple_of(3) {
         return Err(f.err(format!(
             "image {image}: POINTS2D must be triples (X Y POINT3D_ID), found {words} numbers"
         )));
@@ -197,17 +200,14 @@ fn read_points(text: &str, file: &str) -> Result<HashMap<u64, Point3D>> {
     for (line, l) in data_lines(text) {
         let mut f = Fields::new(file, line, l);
         let id: u64 = f.id("POINT3D_ID")?;
-        let mut xyz = [0.0; 3];
-        for (v, name) in xyz.iter_mut().zip(["X", "Y", "Z"]) {
-            *v = f.real(name)?;
-        }
+        let xyz = f.reals(["X", "Y", "Z"])?;
         for name in ["R", "G", "B"] {
             f.parse::<u8>(name, "a colour value (0-255)")?;
         }
         let error = f.real("ERROR")?;
         let at = f.at;
         let words = f.remaining();
-        if words % 2 != 0 {
+        if !words.is_multiple_of(2) {
             return Err(SceneError::invalid(
                 file,
                 format!("{at}: point {id}: TRACK must be pairs (IMAGE_ID POINT2D_IDX), found {words} numbers"),
