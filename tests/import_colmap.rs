@@ -202,7 +202,39 @@ fn undistortion_moves_a_distorted_point_to_its_pinhole_position() {
             assert!(s.depth_m(i, px.x.round() as u32, px.y.round() as u32).is_some());
         }
     }
-    assert!(noted(s, &["1 OPENCV", "pinhole"]));
+    assert!(noted(s, &["1 OPENCV", "pinhole", "; 0 pixels"]));
+}
+
+#[test]
+fn pincushion_distortion_leaves_black_void_corners() {
+    let mut params = OPENCV.to_vec();
+    params[4] = 0.4;
+    let synth = Synth::new("OPENCV", params);
+    let s = run(capture(&synth, Format::Binary, true).path()).unwrap().scene;
+    for f in &s.frames {
+        assert_eq!(f.rgb.get_pixel(0, 0).0, [0, 0, 0]);
+        assert_eq!(f.gt.as_ref().unwrap().get_pixel(W - 1, H - 1).0[0], 255);
+        assert_eq!(f.gt.as_ref().unwrap().get_pixel(W / 2, 2).0[0], 0);
+    }
+    assert!(!noted(&s, &["; 0 pixels"]) && noted(&s, &["fell outside"]));
+}
+
+#[test]
+fn a_model_without_points_has_camera_bounds_and_no_depth() {
+    let mut synth = pinhole();
+    synth.points.clear();
+    for image in &mut synth.images {
+        image.keypoints.iter_mut().for_each(|k| k.1 = -1);
+    }
+    let imported = run(capture(&synth, Format::Text, false).path()).unwrap();
+    assert!(
+        imported.warnings.iter().any(|w| w.contains("no 3D points")),
+        "{:?}",
+        imported.warnings
+    );
+    let s = imported.scene;
+    assert!(s.frames.iter().all(|f| f.depth.is_none()));
+    assert!((0..PHOTOS).all(|i| (0..3).all(|a| s.bounds.min[a] < eye(i)[a] && eye(i)[a] < s.bounds.max[a])));
 }
 
 #[test]

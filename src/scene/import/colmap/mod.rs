@@ -17,7 +17,7 @@ use super::frames::{FrameFiles, InvalidDepth, Prepare, check_resamplable, load_f
 use super::images::decode;
 use super::resize::resize_nearest;
 use super::{Built, ImportOptions, Layout, shown};
-use crate::scene::camera::{Intrinsics, Pose};
+use crate::scene::camera::{Bounds, Intrinsics, Pose};
 use crate::scene::error::{Result, SceneError};
 use crate::scene::scene::{DepthImage, GT_VOID, Scene};
 
@@ -159,7 +159,7 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
     notes.extend(selection);
     let kept: Vec<&Image> = keep.iter().map(|&i| present[i]).collect();
     let masks = find_masks(input, opts, &kept, &mut warnings)?;
-    let (out, lenses) = output_camera(&model, &kept)?;
+    let (out, size, lenses) = output_camera(&model, &kept)?;
 
     let mut files = Vec::with_capacity(kept.len());
     for (i, image) in kept.iter().enumerate() {
@@ -174,7 +174,7 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
     let prepare = Undistort {
         lenses: lenses.clone(),
         out,
-        size: out_size(&model, &kept),
+        size,
         names: kept.iter().map(|i| i.name.clone()).collect(),
         outside: Cell::new(0),
     };
@@ -312,8 +312,9 @@ fn find_masks(
 }
 
 /// The pinhole camera all frames are resampled onto (the first kept photo's camera without its
-/// distortion) and each kept photo's own lens. Photos of other cameras must have its size.
-fn output_camera(model: &Model, kept: &[&Image]) -> Result<(Lens, Vec<Lens>)> {
+/// distortion), its image size, and each kept photo's own lens. Photos of other cameras must have
+/// its size.
+fn output_camera(model: &Model, kept: &[&Image]) -> Result<(Lens, (u32, u32), Vec<Lens>)> {
     let camera = |image: &Image| &model.cameras[&image.camera_id];
     let first = camera(kept[0]);
     for image in kept {
@@ -345,12 +346,8 @@ fn output_camera(model: &Model, kept: &[&Image]) -> Result<(Lens, Vec<Lens>)> {
         p2: 0.0,
         ..first.lens
     };
-    Ok((out, kept.iter().map(|i| camera(i).lens).collect()))
-}
-
-fn out_size(model: &Model, kept: &[&Image]) -> (u32, u32) {
-    let c = &model.cameras[&kept[0].camera_id];
-    (c.width, c.height)
+    let lenses = kept.iter().map(|i| camera(i).lens).collect();
+    Ok((out, (first.width, first.height), lenses))
 }
 
 fn undistortion_note(model: &Model, kept: &[&Image], prepare: &Undistort) -> String {
@@ -364,7 +361,7 @@ fn undistortion_note(model: &Model, kept: &[&Image], prepare: &Undistort) -> Str
         .collect::<Vec<_>>()
         .join(", ");
     format!(
-        "cameras ({list}) undistorted onto one pinhole camera (bilinear); {} pixels over all frames fell outside their photo (black, void)",
+        "cameras ({list}) resampled onto one pinhole camera where they differ from it (bilinear); {} pixels over all frames fell outside their photo (black, void)",
         prepare.outside.get()
     )
 }
@@ -431,7 +428,7 @@ fn trusted(p: &Point3D) -> bool {
 }
 
 /// Bounds from the 3D points (trusted ones, or all when too few are), with a note saying how.
-fn points_bounds(model: &Model) -> Option<(crate::scene::camera::Bounds, String)> {
+fn points_bounds(model: &Model) -> Option<(Bounds, String)> {
     let good: Vec<DVec3> = model.points.values().filter(|p| trusted(p)).map(|p| p.xyz).collect();
     let (points, which) = if good.len() >= MIN_BOUNDS_POINTS {
         (
