@@ -88,6 +88,30 @@ fn pack_real_autolabel_scene() {
 }
 
 #[test]
+fn pack_real_colmap_capture() {
+    let Some(src) = shared_data("alexander-colmap") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("alex.scene.zip");
+    let (src, out_s) = (src.to_str().unwrap(), out.to_str().unwrap());
+    let pack =
+        |extra: &[&str]| run(&[&["pack", src, "-o", out_s, "--max-size", "64", "--every", "13"], extra].concat());
+    let o = pack(&["--mask-classes", "room,head"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("Colmap layout"), "{}", text(&o));
+    let t = text(&run(&["info", out_s]));
+    assert!(t.contains("frames:      4") && t.contains("64 x 64"), "{t}");
+    assert!(t.contains("0:room, 1:head") && t.contains("depth:       yes"), "{t}");
+    std::fs::remove_file(&out).unwrap();
+    assert_clean_failure(&pack(&["--mask-classes", "just-one"]), &["--mask-classes", "two"]);
+    assert_clean_failure(
+        &pack(&["--masks", "/nonexistent/masks"]),
+        &["/nonexistent/masks", "missing"],
+    );
+}
+
+#[test]
 fn pack_real_seven_scenes_subset() {
     let Some(src) = shared_data("7scenes-subset") else {
         return;

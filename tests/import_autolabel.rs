@@ -126,6 +126,8 @@ fn max_size_scales_images_intrinsics_and_keeps_class_ids() {
         max_size: Some(320),
         every: 3,
         max_frames: Some(2),
+
+        ..Default::default()
     };
     let imported = import(&dir, &opts, &mut no_progress()).unwrap();
     let s = &imported.scene;

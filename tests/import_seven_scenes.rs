@@ -83,6 +83,8 @@ fn every_tenth_frame_at_320_pixels() {
         max_size: Some(320),
         every: 10,
         max_frames: None,
+
+        ..Default::default()
     };
     let s = import(&dir, &opts, &mut |_, total| {
         calls += 1;

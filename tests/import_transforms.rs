@@ -323,6 +323,8 @@ fn downscaling_and_frame_selection() {
         max_size: Some(20),
         every: 2,
         max_frames: Some(2),
+
+        ..Default::default()
     };
     let mut seen = Vec::new();
     let s = import(tmp.path(), &opts, &mut |done, total| seen.push((done, total)))

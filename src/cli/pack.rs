@@ -8,7 +8,7 @@ use super::{CliResult, check_output, progress};
 
 #[derive(Args)]
 pub struct PackArgs {
-    /// Capture folder (autolabel scene, 7-Scenes/TUM) or a NeRF `transforms.json` (or its folder).
+    /// Capture folder (autolabel scene, 7-Scenes/TUM, COLMAP) or a NeRF `transforms.json` (or its folder).
     input: PathBuf,
     /// Output archive, e.g. `scene.scene.zip`.
     #[arg(short, long)]
@@ -22,6 +22,13 @@ pub struct PackArgs {
     /// Keep at most this many frames (after --every).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     max_frames: Option<u32>,
+    /// COLMAP captures: folder of binary foreground masks, one `<photo stem>.png` per photo
+    /// (>= 128 = foreground); a `masks/` folder beside `images/` is used without this.
+    #[arg(long)]
+    masks: Option<PathBuf>,
+    /// Names of the two mask classes, background first.
+    #[arg(long, value_delimiter = ',', num_args = 1, default_value = "background,object")]
+    mask_classes: Vec<String>,
     #[command(flatten)]
     features: super::features::FeatureArgs,
 }
@@ -29,10 +36,16 @@ pub struct PackArgs {
 pub fn run(args: PackArgs) -> CliResult {
     check_output(&args.output)?;
     args.features.check()?;
+    let mask_classes: [String; 2] = match <[String; 2]>::try_from(args.mask_classes) {
+        Ok(names) if names.iter().all(|n| !n.trim().is_empty()) => names,
+        _ => return Err("--mask-classes takes two non-empty names, background first: e.g. background,object".into()),
+    };
     let opts = ImportOptions {
         max_size: args.max_size,
         every: args.every,
         max_frames: args.max_frames,
+        masks: args.masks,
+        mask_classes,
     };
     let bar = progress::bar("loading");
     let mut imported = import(&args.input, &opts, &mut |done, total| {

@@ -43,17 +43,35 @@ pub(super) fn from_depth(frames: &[Frame], k: &Intrinsics, depth_scale: f64) -> 
             }
         }
     }
-    if axes[0].is_empty() {
+    let corners = central_box(axes, OUTLIER_FRACTION)?;
+    Bounds::around(corners.into_iter().chain(frames.iter().map(|f| f.pose.position())), PAD)
+}
+
+/// Corners of the box holding all but `cut` of the values at each end of each axis (x, y and z
+/// values listed separately); None when there are none.
+fn central_box(mut axes: [Vec<f64>; 3], cut: f64) -> Option<[DVec3; 2]> {
+    if axes.iter().any(Vec::is_empty) {
         return None;
     }
     let mut lo = [0.0; 3];
     let mut hi = [0.0; 3];
     for (i, values) in axes.iter_mut().enumerate() {
-        lo[i] = percentile(values, OUTLIER_FRACTION);
-        hi[i] = percentile(values, 1.0 - OUTLIER_FRACTION);
+        lo[i] = percentile(values, cut);
+        hi[i] = percentile(values, 1.0 - cut);
     }
-    let corners = [DVec3::from_array(lo), DVec3::from_array(hi)];
-    Bounds::around(corners.into_iter().chain(frames.iter().map(|f| f.pose.position())), PAD)
+    Some([DVec3::from_array(lo), DVec3::from_array(hi)])
+}
+
+/// The box holding all but `cut` of the points at each end of each axis, padded by `pad` of its
+/// size on each side (for sparse reconstructions, whose stray points would blow up a full box).
+pub(super) fn from_points(points: impl IntoIterator<Item = DVec3>, cut: f64, pad: f64) -> Option<Bounds> {
+    let mut axes: [Vec<f64>; 3] = [Vec::new(), Vec::new(), Vec::new()];
+    for p in points {
+        for (axis, v) in axes.iter_mut().zip(p.to_array()) {
+            axis.push(v);
+        }
+    }
+    Bounds::around(central_box(axes, cut)?, pad)
 }
 
 fn percentile(values: &mut [f64], q: f64) -> f64 {

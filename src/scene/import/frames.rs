@@ -3,6 +3,8 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use image::{GrayImage, RgbImage};
+
 use super::ImportOptions;
 use super::images::{load_depth, load_gt, load_rgb};
 use super::resize::{resize_nearest, resize_rgb, same_aspect, target_size};
@@ -154,6 +156,44 @@ pub(super) fn load_frames(
     invalid: InvalidDepth,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Loaded> {
+    load_frames_prepared(files, max_size, invalid, &AsStored, progress)
+}
+
+/// What an importer does to a frame's images at their native size, before they are downscaled:
+/// the COLMAP importer undistorts them there, since resampling twice would blur twice.
+pub(super) trait Prepare {
+    /// The colour image of the `frame`-th file.
+    fn rgb(&self, frame: usize, rgb: RgbImage) -> Result<RgbImage>;
+    /// The ground truth of the `frame`-th file, read from `path`, at `native` size or another
+    /// size of the same aspect ratio (it is resampled to the frame size afterwards).
+    fn gt(&self, frame: usize, path: &Path, native: (u32, u32)) -> Result<GrayImage>;
+}
+
+/// Images as the capture stores them.
+struct AsStored;
+
+impl Prepare for AsStored {
+    fn rgb(&self, _frame: usize, rgb: RgbImage) -> Result<RgbImage> {
+        Ok(rgb)
+    }
+
+    fn gt(&self, _frame: usize, path: &Path, native: (u32, u32)) -> Result<GrayImage> {
+        let g = load_gt(path)?;
+        if g.dimensions() != native {
+            check_resamplable(g.dimensions(), native, &path.display().to_string(), "ground truth")?;
+        }
+        Ok(g)
+    }
+}
+
+/// `load_frames` with `prepare` applied to each frame's colour and ground truth.
+pub(super) fn load_frames_prepared(
+    files: Vec<FrameFiles>,
+    max_size: Option<u32>,
+    invalid: InvalidDepth,
+    prepare: &dyn Prepare,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Loaded> {
     let total = files.len();
     progress(0, total);
     let mut frames = Vec::with_capacity(total);
@@ -194,7 +234,7 @@ pub(super) fn load_frames(
                 ),
             ));
         }
-        let rgb = resize_rgb(&rgb, size);
+        let rgb = resize_rgb(&prepare.rgb(i, rgb)?, size);
         let depth = match &f.depth {
             Some(path) => {
                 let mut d = load_depth(path)?;
@@ -210,13 +250,7 @@ pub(super) fn load_frames(
             None => None,
         };
         let gt = match &f.gt {
-            Some(path) => {
-                let g = load_gt(path)?;
-                if g.dimensions() != native {
-                    check_resamplable(g.dimensions(), native, &path.display().to_string(), "ground truth")?;
-                }
-                Some(resize_nearest(&g, size))
-            }
+            Some(path) => Some(resize_nearest(&prepare.gt(i, path, native)?, size)),
             None => None,
         };
         frames.push(Frame {
@@ -240,7 +274,7 @@ pub(super) fn load_frames(
     })
 }
 
-fn check_resamplable(got: (u32, u32), native: (u32, u32), file: &str, what: &str) -> Result<()> {
+pub(super) fn check_resamplable(got: (u32, u32), native: (u32, u32), file: &str, what: &str) -> Result<()> {
     if same_aspect(got, native) {
         return Ok(());
     }

@@ -1,7 +1,7 @@
 //! Importers: build a Scene from captures in other layouts (autolabel scene directories,
-//! 7-Scenes folders, NeRF-style `transforms.json`). Each layout has its own module; they share
+//! 7-Scenes folders, NeRF-style `transforms.json`, COLMAP sparse models). Each layout has its own module; they share
 //! decoding, resizing, frame selection and bounds estimation.
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::scene::error::{Result, SceneError};
 use crate::scene::manifest::Provenance;
@@ -10,6 +10,7 @@ use crate::scene::scene::Scene;
 mod autolabel;
 mod bounds;
 mod classes;
+mod colmap;
 mod frames;
 mod images;
 mod resize;
@@ -27,6 +28,11 @@ pub struct ImportOptions {
     pub every: u32,
     /// Keep at most this many frames (after `every`).
     pub max_frames: Option<u32>,
+    /// Folder of binary foreground masks (COLMAP captures only; a `masks/` folder beside
+    /// `images/` is used without asking).
+    pub masks: Option<PathBuf>,
+    /// Class names of mask values below and at or above 128.
+    pub mask_classes: [String; 2],
 }
 
 impl Default for ImportOptions {
@@ -35,6 +41,8 @@ impl Default for ImportOptions {
             max_size: None,
             every: 1,
             max_frames: None,
+            masks: None,
+            mask_classes: ["background".into(), "object".into()],
         }
     }
 }
@@ -47,6 +55,8 @@ pub enum Layout {
     SevenScenes,
     /// NeRF / instant-ngp / nerfstudio transforms.json.
     Transforms,
+    /// COLMAP sparse model: images/ and sparse/0/ (or sparse/) with cameras, images, points3D.
+    Colmap,
 }
 
 impl Layout {
@@ -55,6 +65,7 @@ impl Layout {
             Layout::Autolabel => "autolabel",
             Layout::SevenScenes => "7-scenes",
             Layout::Transforms => "transforms.json",
+            Layout::Colmap => "colmap",
         }
     }
 }
@@ -89,6 +100,10 @@ pub fn detect_layout(input: &Path) -> Result<Layout> {
     if has_rgb_dir && autolabel::has_camera_files(input) {
         return Ok(Layout::Autolabel);
     }
+    // COLMAP before transforms.json: only the sparse model carries points (depth and bounds).
+    if colmap::looks_like(input) {
+        return Ok(Layout::Colmap);
+    }
     if input.join(transforms::FILE).is_file() {
         return Ok(Layout::Transforms);
     }
@@ -102,17 +117,31 @@ pub fn detect_layout(input: &Path) -> Result<Layout> {
         input.display().to_string(),
         "not a capture layout scribblefield knows; expected one of: an autolabel scene folder \
          (rgb/, depth/, pose/, intrinsics.txt, bbox.txt), a 7-Scenes folder (frame-000000.color.jpg, \
-         frame-000000.depth.png, frame-000000.pose.txt, ...), or a folder with a transforms.json",
+         frame-000000.depth.png, frame-000000.pose.txt, ...), a folder with a transforms.json, or a COLMAP \
+         folder (images/ and sparse/0/ with cameras, images and points3D .txt or .bin)",
     ))
 }
 
 /// Imports the capture at `input`, calling `progress(done, total)` as frames load.
 pub fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Imported> {
     let layout = detect_layout(input)?;
+    if layout != Layout::Colmap
+        && let Some(masks) = &opts.masks
+    {
+        return Err(SceneError::invalid(
+            shown(masks),
+            format!(
+                "--masks is for COLMAP captures; {} is a {} capture",
+                shown(input),
+                layout.name()
+            ),
+        ));
+    }
     let built = match layout {
         Layout::Autolabel => autolabel::import(input, opts, progress)?,
         Layout::SevenScenes => seven_scenes::import(input, opts, progress)?,
         Layout::Transforms => transforms::import(input, opts, progress)?,
+        Layout::Colmap => colmap::import(input, opts, progress)?,
     };
     check_scene(&built.scene, input)?;
     Ok(built.finish(input))

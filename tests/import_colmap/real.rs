@@ -1,0 +1,191 @@
+//! The real capture: 52 photos of a marble head, a SIMPLE_RADIAL text model and foreground masks.
+use super::*;
+
+const CAPTURE: &str = "alexander-colmap";
+const FRAMES: usize = 52;
+
+/// The 3D points each photo observes (by photo name), read straight from the text model so the
+/// check does not share code with the importer.
+fn observations(dir: &Path) -> HashMap<String, Vec<DVec3>> {
+    let points: HashMap<i64, DVec3> = std::fs::read_to_string(dir.join("sparse/0/points3D.txt"))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().take(4).map(|w| w.parse().unwrap()).collect();
+            (v[0] as i64, DVec3::new(v[1], v[2], v[3]))
+        })
+        .collect();
+    let text = std::fs::read_to_string(dir.join("sparse/0/images.txt")).unwrap();
+    let lines: Vec<&str> = text.lines().filter(|l| !l.starts_with('#')).collect();
+    lines
+        .chunks(2)
+        .map(|pair| {
+            let name = pair[0].split_whitespace().nth(9).unwrap().to_string();
+            let words: Vec<&str> = pair[1].split_whitespace().collect();
+            let seen = words
+                .chunks(3)
+                .filter_map(|t| points.get(&t[2].parse::<i64>().unwrap()).copied())
+                .collect();
+            (name, seen)
+        })
+        .collect()
+}
+
+fn frame_of(scene: &Scene, name: &str) -> usize {
+    scene
+        .frames
+        .iter()
+        .position(|f| f.source.as_deref() == Some(name))
+        .unwrap()
+}
+
+#[test]
+fn real_capture_packs_with_poses_on_the_masks() {
+    let Some(dir) = real_data(CAPTURE) else { return };
+    assert_eq!(detect_layout(&dir).unwrap(), Layout::Colmap);
+    let imported = run(&dir).unwrap();
+    eprintln!(
+        "warnings: {:?}\nnotes: {:#?}",
+        imported.warnings, imported.scene.provenance.notes
+    );
+    assert!(imported.warnings.is_empty(), "{:?}", imported.warnings);
+    let bytes = write_archive(&imported.scene, std::io::Cursor::new(Vec::new()))
+        .unwrap()
+        .into_inner();
+    let s = read_archive(&bytes, "alexander.scene.zip").unwrap();
+    assert_eq!((s.frames.len(), s.width, s.height), (FRAMES, 800, 800));
+    let names: Vec<&str> = s.classes.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["background", "object"]);
+
+    // Project every point each photo observes through the archive's own pose and intrinsics: it
+    // must land on the photo's mask (the README measured a median of 100 %).
+    let seen = observations(&dir);
+    let mut rates = Vec::new();
+    for (name, points) in &seen {
+        let i = frame_of(&s, name);
+        let gt = s.frames[i].gt.as_ref().expect("ground truth from the mask");
+        let (mut inside, mut hits) = (0, 0);
+        for p in points {
+            let (px, z) = project(&s, i, *p);
+            let (x, y) = (px.x.round(), px.y.round());
+            if z > 0.0 && x >= 0.0 && y >= 0.0 && x < s.width as f64 && y < s.height as f64 {
+                inside += 1;
+                hits += usize::from(gt.get_pixel(x as u32, y as u32).0[0] == 1);
+            }
+        }
+        assert!(
+            inside * 10 >= points.len() * 9,
+            "{name}: {inside} of {} points in view",
+            points.len()
+        );
+        rates.push(hits as f64 / inside as f64);
+    }
+    rates.sort_by(f64::total_cmp);
+    let (median, worst) = (rates[rates.len() / 2], rates[0]);
+    let mean = rates.iter().sum::<f64>() / rates.len() as f64;
+    eprintln!("points on the mask: median {median:.4}, mean {mean:.4}, worst {worst:.4}");
+    assert!(
+        median >= 0.9 && mean >= 0.9 && worst >= 0.8,
+        "median {median}, mean {mean}, worst {worst}"
+    );
+
+    // The masks become 2-class ground truth with both classes in every frame.
+    for f in &s.frames {
+        let gt = f.gt.as_ref().unwrap();
+        let fg = gt.pixels().filter(|p| p.0[0] == 1).count() as f64 / gt.len() as f64;
+        assert!(fg > 0.15 && fg < 0.75, "{:?}: foreground {fg}", f.source);
+        assert!(gt.pixels().all(|p| p.0[0] <= 1 || p.0[0] == 255));
+    }
+
+    // Bounds: the head (all but a few stray points), far smaller than the camera orbit.
+    let all: Vec<DVec3> = seen.values().flatten().copied().collect();
+    let inside = all
+        .iter()
+        .filter(|p| (0..3).all(|a| s.bounds.min[a] <= p[a] && p[a] <= s.bounds.max[a]))
+        .count();
+    let orbit = s.frames.iter().map(|f| f.pose.position().length()).sum::<f64>() / FRAMES as f64;
+    let size: Vec<f64> = (0..3).map(|a| s.bounds.max[a] - s.bounds.min[a]).collect();
+    eprintln!(
+        "bounds {:?}, size {size:?}, camera distance from origin {orbit:.2}",
+        s.bounds
+    );
+    assert!(inside as f64 >= 0.97 * all.len() as f64, "{inside} of {}", all.len());
+    assert!(size.iter().all(|&d| d > 0.3 && d < orbit), "{size:?}");
+    assert!(s.frames.iter().all(|f| !(0..3).all(|a| {
+        let c = f.pose.position()[a];
+        s.bounds.min[a] <= c && c <= s.bounds.max[a]
+    })));
+
+    // Sparse depth: one reading per observed point (few share a pixel at 800x800), each equal to
+    // the depth of a point projecting there.
+    let mut per_frame = Vec::new();
+    for (name, points) in &seen {
+        let i = frame_of(&s, name);
+        let readings = depth_readings(&s, i);
+        assert!(
+            readings.len() * 10 >= points.len() * 9,
+            "{name}: {} of {}",
+            readings.len(),
+            points.len()
+        );
+        let projected: Vec<(DVec2, f64)> = points.iter().map(|p| project(&s, i, *p)).collect();
+        for (x, y, d) in readings {
+            let near = projected.iter().any(|(px, z)| {
+                (px.x - x as f64).abs() <= 1.5 && (px.y - y as f64).abs() <= 1.5 && (z - d).abs() <= 1e-3 * z
+            });
+            assert!(near, "{name} ({x}, {y}) = {d} is no observed point's depth");
+        }
+        per_frame.push(points.len());
+    }
+    eprintln!(
+        "sparse depth: {} to {} points per frame, depth_scale {}",
+        per_frame.iter().min().unwrap(),
+        per_frame.iter().max().unwrap(),
+        s.depth_scale
+    );
+}
+
+#[test]
+fn real_capture_downscaled() {
+    let Some(dir) = real_data(CAPTURE) else { return };
+    let opts = ImportOptions {
+        max_size: Some(200),
+        every: 13,
+        ..Default::default()
+    };
+    let s = run_with(&dir, &opts).unwrap().scene;
+    assert_eq!((s.frames.len(), s.width, s.height), (4, 200, 200));
+    let seen = observations(&dir);
+    for (i, f) in s.frames.iter().enumerate() {
+        let points = &seen[f.source.as_ref().unwrap()];
+        let readings = depth_readings(&s, i);
+        // Several points share a pixel at a quarter of the size; the nearest is kept.
+        assert!(
+            readings.len() > points.len() / 4,
+            "{} of {}",
+            readings.len(),
+            points.len()
+        );
+        let projected: Vec<(DVec2, f64)> = points.iter().map(|p| project(&s, i, *p)).collect();
+        for (x, y, d) in readings {
+            let near = |r: f64| {
+                projected
+                    .iter()
+                    .filter(move |(px, _)| (px.x - x as f64).abs() < r && (px.y - y as f64).abs() < r)
+                    .map(|(_, z)| *z)
+            };
+            // It is one point's depth (never a blend with the empty pixels around it)...
+            assert!(near(1.0).any(|z| (z - d).abs() <= 1e-3 * z), "({x}, {y}) = {d}");
+            // ...and no point that clearly falls on this pixel is nearer.
+            // (Within 1 %: a keypoint sits up to its reprojection error away from the projection.)
+            let nearest = near(0.3).fold(f64::INFINITY, f64::min);
+            assert!(
+                d <= nearest * 1.01,
+                "({x}, {y}) = {d}, but a point at {nearest} lands there"
+            );
+        }
+        let gt = f.gt.as_ref().unwrap();
+        assert_eq!(gt.dimensions(), (200, 200));
+    }
+}
