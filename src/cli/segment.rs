@@ -91,6 +91,12 @@ pub fn run(args: SegmentArgs) -> CliResult {
         },
     )?;
     bar.finish_and_clear();
+    let (drawn, trained) = trainer.labelled_pixels();
+    if trained > drawn {
+        println!(
+            "labels: {drawn} drawn pixels spread to {trained} inside their frames (scribble_propagation; \"enabled\": false in --config turns it off)"
+        );
+    }
 
     let render = progress::bar("rendering");
     render.set_length(scene.frames.len() as u64);

@@ -132,6 +132,8 @@ pub struct Trainer {
     step: u32,
     seed: u32,
     has_labels: bool,
+    /// Pixels the strokes cover, and pixels training draws labels from (with propagation).
+    labelled: (usize, usize),
     propagation: PropagationCache,
     pending_losses: Option<(u32, PendingRead<f32>)>,
     last_losses: Option<StepLosses>,
@@ -408,6 +410,7 @@ impl Trainer {
             step: 0,
             seed,
             has_labels: false,
+            labelled: (0, 0),
             propagation: PropagationCache::default(),
             pending_losses: None,
             last_losses: None,
@@ -437,9 +440,23 @@ impl Trainer {
             self.cfg.num_classes,
         );
         self.has_labels = index.labelled_pixel_count() > 0;
+        let drawn = LabelIndex::from_labels(
+            labels,
+            scene.frames.len() as u32,
+            scene.width,
+            scene.height,
+            self.cfg.num_classes,
+        );
+        self.labelled = (drawn.labelled_pixel_count(), index.labelled_pixel_count());
         self.scene.upload_labels(&self.ctx, &index)?;
         self.ray_batch.follow_labels(&self.ctx, &self.scene);
         Ok(())
+    }
+
+    /// Pixels the current strokes cover, and pixels training draws labels from once they have
+    /// spread (`FieldConfig::scribble_propagation`).
+    pub fn labelled_pixels(&self) -> (usize, usize) {
+        self.labelled
     }
 
     pub fn config(&self) -> &FieldConfig {
