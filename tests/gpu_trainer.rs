@@ -135,6 +135,7 @@ fn one_step_gradient_matches_the_reference_with_the_feature_only_semantic_head()
 fn check_one_step_gradient(name: &str, semantic_input: SemanticInput) {
     use scribblefield::field::gpu::rays::{StepUniforms, pick_pixel, sample_jitter};
     use scribblefield::field::gpu::scene_buffers::LabelIndex;
+    use scribblefield::field::propagate::propagate_labels;
     use scribblefield::field::reference::{FieldModel, RayTarget, SampledRay, TrainingRay, sampling};
 
     let Some(ctx) = gpu_for_tests(name) else {
@@ -182,7 +183,14 @@ fn check_one_step_gradient(name: &str, semantic_input: SemanticInput) {
 
     let uniforms = StepUniforms::for_step(&cfg, 1, seed, trainer.learning_rate());
     let (w, h) = (scene.width, scene.height);
-    let index = LabelIndex::from_labels(Some(&labels), scene.frames.len() as u32, w, h, cfg.num_classes);
+    // The labels the trainer draws from: the strokes spread inside their frames.
+    let maps = propagate_labels(&scene, &labels, cfg.num_classes as usize, &cfg.scribble_propagation);
+    let index = LabelIndex::from_maps(&maps, scene.frames.len() as u32, w, h, cfg.num_classes);
+    assert!(
+        index.labelled_pixel_count()
+            > LabelIndex::from_labels(Some(&labels), scene.frames.len() as u32, w, h, cfg.num_classes)
+                .labelled_pixel_count()
+    );
     let total = w * h * scene.frames.len() as u32;
     let batch: Vec<TrainingRay> = (0..cfg.batch_rays)
         .map(|r| {
