@@ -41,7 +41,16 @@ pub struct PropagationOptions {
     /// so a hole in dense depth marks where one object ends. Sparse depth (a reconstruction's
     /// keypoints) has holes everywhere and skips this.
     pub depth_hole_factor: f32,
-    /// A pixel becomes a label only where its most likely class leads the next by this much.
+    /// How far a walk goes before it gives up, as a fraction of the image diagonal (through a
+    /// uniform region; edges shorten it). Each step ends the walk with a small probability, so a
+    /// pixel far from every stroke (the floor, when the only background strokes are on the wall)
+    /// is reached by none and stays unlabelled, instead of taking the class of whichever stroke
+    /// is least far.
+    pub reach: f32,
+    /// A pixel becomes a label only where the walk reaches its most likely class with at least
+    /// this probability...
+    pub min_probability: f32,
+    /// ...and that class leads the next by this much.
     pub min_margin: f32,
 }
 
@@ -52,6 +61,8 @@ impl Default for PropagationOptions {
             colour_sigma: 8.0,
             depth_sigma: 0.02,
             depth_hole_factor: 3e-4,
+            reach: 0.5,
+            min_probability: 0.5,
             min_margin: 0.5,
         }
     }
@@ -60,7 +71,11 @@ impl Default for PropagationOptions {
 impl PropagationOptions {
     /// A value that cannot work, named by its field.
     pub fn validate(&self) -> Result<(), String> {
-        for (name, v) in [("colour_sigma", self.colour_sigma), ("depth_sigma", self.depth_sigma)] {
+        for (name, v) in [
+            ("colour_sigma", self.colour_sigma),
+            ("depth_sigma", self.depth_sigma),
+            ("reach", self.reach),
+        ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(format!(
                     "scribble_propagation: `{name}` = {v}: must be a positive number"
@@ -73,11 +88,13 @@ impl PropagationOptions {
                 self.depth_hole_factor
             ));
         }
-        if !(self.min_margin.is_finite() && (0.0..=1.0).contains(&self.min_margin)) {
-            return Err(format!(
-                "scribble_propagation: `min_margin` = {}: must be in [0, 1]",
-                self.min_margin
-            ));
+        for (name, v) in [
+            ("min_probability", self.min_probability),
+            ("min_margin", self.min_margin),
+        ] {
+            if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
+                return Err(format!("scribble_propagation: `{name}` = {v}: must be in [0, 1]"));
+            }
         }
         Ok(())
     }
@@ -119,7 +136,7 @@ pub fn propagate_frame(strokes: &[u16], classes: usize, guide: Guide<'_>, option
                 second = p;
             }
         }
-        if first - second >= options.min_margin {
+        if first >= options.min_probability && first - second >= options.min_margin {
             *label = present[best];
         }
     }
@@ -200,6 +217,8 @@ struct Graph {
     right: Vec<f32>,
     /// Weight of the edge from pixel i to i + width (0 in the last row).
     down: Vec<f32>,
+    /// Weight of each pixel's edge to a sink that ends the walk (`PropagationOptions::reach`).
+    absorption: f64,
 }
 
 impl Graph {
@@ -239,11 +258,15 @@ impl Graph {
                 }
             }
         }
+        // A walk that ends with probability about a/4 per step spreads over about 1/sqrt(a)
+        // pixels of a uniform region.
+        let reach_pixels = f64::from(options.reach) * ((width * width + height * height) as f64).sqrt();
         Graph {
             width,
             height,
             right,
             down,
+            absorption: 1.0 / (reach_pixels * reach_pixels).max(1.0),
         }
     }
 
@@ -265,8 +288,8 @@ impl Graph {
     }
 
     /// The probability that a walk from each pixel reaches a stroke of `class` before a stroke of
-    /// another class: strokes are fixed at 1 or 0, and every other pixel solves
-    /// `degree·x_i − Σ w_ij·x_j = 0`, here by Jacobi-preconditioned conjugate gradients over the
+    /// another class and before it ends: strokes are fixed at 1 or 0, and every other pixel solves
+    /// `(degree + absorption)·x_i − Σ w_ij·x_j = 0`, here by Jacobi-preconditioned conjugate gradients over the
     /// unlabelled pixels.
     fn walk(&self, seeds: &[u16], class: u16) -> Vec<f32> {
         let n = seeds.len();
@@ -275,7 +298,7 @@ impl Graph {
         for (k, &i) in free.iter().enumerate() {
             slot[i] = k;
         }
-        let mut degree = vec![0f64; free.len()];
+        let mut degree = vec![self.absorption; free.len()];
         let mut rhs = vec![0f64; free.len()];
         for (k, &i) in free.iter().enumerate() {
             self.for_neighbours(i, |j, w| {
@@ -493,6 +516,30 @@ mod tests {
         assert_eq!(second[0], first[0], "frame 0 did not change");
         assert_ne!(second[1], first[1], "frame 2 gained a stroke");
         assert_eq!(second, propagate_labels(&scene, &labels, 2, &options));
+    }
+
+    #[test]
+    fn pixels_beyond_the_reach_of_every_stroke_stay_unlabelled() {
+        // A dark red block with a stroke of class 0 at the left end of a long grey strip whose
+        // near end has a stroke of class 1: the far end is grey like class 1's stroke, but 75
+        // pixels away.
+        let rgb = RgbImage::from_fn(96, 8, |x, _| {
+            if x < 8 {
+                Rgb([120, 20, 20])
+            } else {
+                Rgb([150, 150, 150])
+            }
+        });
+        let strokes = strokes_at(96, 8, &[(2, 4, 0), (12, 4, 1)]);
+        let guide = Guide { rgb: &rgb, depth: None };
+        let short = propagate_frame(&strokes, 2, guide, &PropagationOptions::default());
+        assert_eq!(short[4 * 96 + 20], 1, "near the stroke");
+        assert_eq!(short[4 * 96 + 90], UNLABELLED, "48 pixels of reach do not get there");
+        let long = PropagationOptions {
+            reach: 4.0,
+            ..PropagationOptions::default()
+        };
+        assert_eq!(propagate_frame(&strokes, 2, guide, &long)[4 * 96 + 90], 1);
     }
 
     #[test]
