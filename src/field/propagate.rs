@@ -62,8 +62,8 @@ impl Default for PropagationOptions {
             depth_sigma: 0.02,
             depth_hole_factor: 3e-4,
             reach: 0.5,
-            min_probability: 0.5,
-            min_margin: 0.5,
+            min_probability: 0.7,
+            min_margin: 0.7,
         }
     }
 }
@@ -415,6 +415,15 @@ mod tests {
         })
     }
 
+    /// Full-height strokes at columns `(x, class)`: a user's stroke across an object.
+    fn columns(width: u32, height: u32, marks: &[(u32, u16)]) -> Vec<u16> {
+        let dots: Vec<(u32, u32, u16)> = marks
+            .iter()
+            .flat_map(|&(x, c)| (0..height).map(move |y| (x, y, c)))
+            .collect();
+        strokes_at(width, height, &dots)
+    }
+
     fn strokes_at(width: u32, height: u32, marks: &[(u32, u32, u16)]) -> Vec<u16> {
         let mut map = vec![UNLABELLED; (width * height) as usize];
         for &(x, y, c) in marks {
@@ -426,7 +435,7 @@ mod tests {
     #[test]
     fn two_strokes_fill_their_regions_and_stop_at_the_edge() {
         let rgb = two_regions();
-        let strokes = strokes_at(24, 16, &[(3, 8, 0), (20, 8, 1)]);
+        let strokes = columns(24, 16, &[(3, 0), (20, 1)]);
         let guide = Guide { rgb: &rgb, depth: None };
         let map = propagate_frame(&strokes, 2, guide, &PropagationOptions::default());
         for y in 0..16 {
@@ -442,7 +451,7 @@ mod tests {
         let rgb = RgbImage::from_pixel(24, 16, Rgb([150, 150, 150]));
         let depth: ImageBuffer<Luma<u16>, Vec<u16>> =
             ImageBuffer::from_fn(24, 16, |x, _| Luma([if x < 12 { 1000 } else { 2000 }]));
-        let strokes = strokes_at(24, 16, &[(3, 8, 0), (20, 8, 1)]);
+        let strokes = columns(24, 16, &[(3, 0), (20, 1)]);
         let options = PropagationOptions::default();
         let with_depth = propagate_frame(
             &strokes,
@@ -458,11 +467,14 @@ mod tests {
         let labelled = |m: &[u16]| m.iter().filter(|&&c| c != UNLABELLED).count();
         assert_eq!(labelled(&with_depth), 24 * 16);
         let without = propagate_frame(&strokes, 2, Guide { rgb: &rgb, depth: None }, &options);
-        assert!(
-            labelled(&without) < 24 * 16 / 2,
-            "a uniform image gives no confident labels far from the strokes: {}",
-            labelled(&without)
-        );
+        for x in 9..15 {
+            assert_eq!(
+                without[8 * 24 + x],
+                UNLABELLED,
+                "({x}, 8): a uniform image gives no confident label midway between the strokes"
+            );
+        }
+        assert!(labelled(&without) < labelled(&with_depth));
     }
 
     #[test]
