@@ -23,10 +23,11 @@ pub struct FieldConfigArgs {
     /// Base field config; `--config` overrides fields of it.
     #[arg(long, value_enum, default_value_t = Preset::Default)]
     pub preset: Preset,
-    /// Field config as JSON: fields given replace the preset's (`adam` and `loss` field by field,
-    /// `encoding` as a whole); see `FieldConfig`. Unknown fields are an error.
+    /// Field config as JSON, inline (`'{"feature_supervision": true}'`) or a file: fields given
+    /// replace the preset's (`adam`, `loss` and `scribble_propagation` field by field, `encoding`
+    /// as a whole); see `FieldConfig`. Unknown fields are an error.
     #[arg(long)]
-    pub config: Option<PathBuf>,
+    pub config: Option<String>,
 }
 
 impl FieldConfigArgs {
@@ -44,11 +45,11 @@ impl FieldConfigArgs {
             Preset::Budget => scribblefield::eval::headless::budget_config(classes),
         };
         let mut cfg = match &self.config {
-            Some(path) => {
-                let text = std::fs::read(path).map_err(|e| format!("--config {}: {e}", path.display()))?;
+            Some(arg) => {
+                let (text, source) = config_text(arg)?;
                 let changes: serde_json::Value =
-                    serde_json::from_slice(&text).map_err(|e| format!("--config {}: {e}", path.display()))?;
-                apply_config_changes(&preset, &changes).map_err(|e| format!("--config {}: {e}", path.display()))?
+                    serde_json::from_str(&text).map_err(|e| format!("--config {source}: {e}"))?;
+                apply_config_changes(&preset, &changes).map_err(|e| format!("--config {source}: {e}"))?
             }
             None => preset,
         };
@@ -63,7 +64,8 @@ impl FieldConfigArgs {
     pub fn describe(&self) -> String {
         let preset = format!("{:?}", self.preset).to_lowercase();
         match &self.config {
-            Some(path) => format!("{preset} with {}", path.display()),
+            Some(arg) if is_inline(arg) => format!("{preset} with {}", arg.trim()),
+            Some(path) => format!("{preset} with {path}"),
             None => preset,
         }
     }
@@ -81,8 +83,28 @@ pub fn without_missing_codes(cfg: &mut FieldConfig, scene: &Scene, archive: &Pat
     }
 }
 
-/// `base` with the fields of the JSON object `changes` replaced: nested objects (`adam`, `loss`)
-/// field by field, `encoding` (a tagged choice) as a whole. Unknown fields are an error.
+/// A `--config` argument that is JSON itself rather than a file name.
+fn is_inline(arg: &str) -> bool {
+    arg.trim_start().starts_with('{')
+}
+
+/// The JSON text of a `--config` argument and how to name it in errors: the argument itself when
+/// inline, else the file it names.
+fn config_text(arg: &str) -> Result<(String, String), String> {
+    if is_inline(arg) {
+        return Ok((arg.to_string(), "(inline JSON)".into()));
+    }
+    let path = PathBuf::from(arg);
+    let text = std::fs::read_to_string(&path).map_err(|e| {
+        format!(
+            "--config {arg}: {e} (give a JSON file, or the JSON itself such as '{{\"feature_supervision\": true}}')"
+        )
+    })?;
+    Ok((text, path.display().to_string()))
+}
+
+/// `base` with the fields of the JSON object `changes` replaced: nested objects (`adam`, `loss`,
+/// `scribble_propagation`) field by field, `encoding` (a tagged choice) as a whole. Unknown fields are an error.
 pub fn apply_config_changes(base: &FieldConfig, changes: &serde_json::Value) -> Result<FieldConfig, String> {
     use serde_json::Value;
     let Value::Object(changes) = changes else {
@@ -125,5 +147,33 @@ mod tests {
         let e = apply_config_changes(&base, &serde_json::json!({"batch_ray": 1})).unwrap_err();
         assert!(e.contains("batch_ray"), "{e}");
         assert!(apply_config_changes(&base, &serde_json::json!([1])).is_err());
+    }
+
+    #[test]
+    fn config_is_inline_json_or_a_file() {
+        let args = |config: &str| FieldConfigArgs {
+            preset: Preset::Budget,
+            config: Some(config.into()),
+        };
+        let inline = args(r#" {"feature_supervision": true, "scribble_propagation": {"min_margin": 0.9}}"#);
+        let cfg = inline.resolve(3, None).unwrap();
+        assert!(cfg.feature_supervision);
+        assert_eq!(cfg.scribble_propagation.min_margin, 0.9);
+        assert_eq!(
+            cfg.scribble_propagation.reach,
+            FieldConfig::default().scribble_propagation.reach
+        );
+        assert!(inline.describe().starts_with("budget with {"), "{}", inline.describe());
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("c.json");
+        std::fs::write(&file, r#"{"batch_rays": 64}"#).unwrap();
+        assert_eq!(args(file.to_str().unwrap()).resolve(3, None).unwrap().batch_rays, 64);
+        let missing = args("nope.json").resolve(3, None).unwrap_err().to_string();
+        assert!(
+            missing.contains("--config nope.json") && missing.contains("the JSON itself"),
+            "{missing}"
+        );
+        let broken = args(r#"{"batch_rays": }"#).resolve(3, None).unwrap_err().to_string();
+        assert!(broken.contains("(inline JSON)"), "{broken}");
     }
 }
