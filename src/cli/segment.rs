@@ -3,6 +3,7 @@ use std::path::PathBuf;
 use clap::Args;
 use scribblefield::eval::headless::{render_and_score, train_schedule};
 use scribblefield::export::MaskSet;
+use scribblefield::field::gpu::scene_buffers::LabelIndex;
 use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::field::refine::RefineOptions;
 use scribblefield::gpu::{GpuContext, GpuOptions};
@@ -91,7 +92,15 @@ pub fn run(args: SegmentArgs) -> CliResult {
         },
     )?;
     bar.finish_and_clear();
-    let (drawn, trained) = trainer.labelled_pixels();
+    let drawn = LabelIndex::from_labels(
+        Some(&labels),
+        scene.frames.len() as u32,
+        scene.width,
+        scene.height,
+        labels.classes.len() as u32,
+    )
+    .labelled_pixel_count();
+    let trained = trainer.labelled_pixels();
     if trained > drawn {
         println!(
             "labels: {drawn} drawn pixels spread to {trained} inside their frames (scribble_propagation; \"enabled\": false in --config turns it off)"

@@ -131,9 +131,8 @@ pub struct Trainer {
     adam: AdamPass,
     step: u32,
     seed: u32,
-    has_labels: bool,
-    /// Pixels the strokes cover, and pixels training draws labels from (with propagation).
-    labelled: (usize, usize),
+    /// Pixels training draws labels from (the strokes, spread by propagation).
+    labelled_pixels: usize,
     propagation: PropagationCache,
     pending_losses: Option<(u32, PendingRead<f32>)>,
     last_losses: Option<StepLosses>,
@@ -409,8 +408,7 @@ impl Trainer {
             adam,
             step: 0,
             seed,
-            has_labels: false,
-            labelled: (0, 0),
+            labelled_pixels: 0,
             propagation: PropagationCache::default(),
             pending_losses: None,
             last_losses: None,
@@ -439,24 +437,16 @@ impl Trainer {
             scene.height,
             self.cfg.num_classes,
         );
-        self.has_labels = index.labelled_pixel_count() > 0;
-        let drawn = LabelIndex::from_labels(
-            labels,
-            scene.frames.len() as u32,
-            scene.width,
-            scene.height,
-            self.cfg.num_classes,
-        );
-        self.labelled = (drawn.labelled_pixel_count(), index.labelled_pixel_count());
+        self.labelled_pixels = index.labelled_pixel_count();
         self.scene.upload_labels(&self.ctx, &index)?;
         self.ray_batch.follow_labels(&self.ctx, &self.scene);
         Ok(())
     }
 
-    /// Pixels the current strokes cover, and pixels training draws labels from once they have
-    /// spread (`FieldConfig::scribble_propagation`).
-    pub fn labelled_pixels(&self) -> (usize, usize) {
-        self.labelled
+    /// Pixels training draws labels from: the current strokes, spread inside their frames
+    /// (`FieldConfig::scribble_propagation`).
+    pub fn labelled_pixels(&self) -> usize {
+        self.labelled_pixels
     }
 
     pub fn config(&self) -> &FieldConfig {
@@ -472,12 +462,12 @@ impl Trainer {
     }
 
     pub fn has_labels(&self) -> bool {
-        self.has_labels
+        self.labelled_pixels > 0
     }
 
     /// The learning rate of the next step: warm-up until labels exist, then the annotating one.
     pub fn learning_rate(&self) -> f32 {
-        if self.has_labels {
+        if self.has_labels() {
             self.cfg.adam.lr_annotating
         } else {
             self.cfg.adam.lr_warmup
