@@ -52,7 +52,7 @@ pub fn parse_npy_map(bytes: &[u8], file: &str, layout: NpyLayout) -> Result<Feat
         return Err(bad("not a .npy file (no \\x93NUMPY magic)".into()));
     }
     let major = bytes[6];
-    let (header_len, start) = match major {
+    let (header_len, start): (usize, usize) = match major {
         1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
         2 | 3 if bytes.len() >= 12 => (
             u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
@@ -60,8 +60,11 @@ pub fn parse_npy_map(bytes: &[u8], file: &str, layout: NpyLayout) -> Result<Feat
         ),
         v => return Err(bad(format!("unsupported .npy version {v}"))),
     };
+    let header_end = start
+        .checked_add(header_len)
+        .ok_or_else(|| bad("truncated header".into()))?;
     let header = bytes
-        .get(start..start + header_len)
+        .get(start..header_end)
         .ok_or_else(|| bad("truncated header".into()))?;
     let header = std::str::from_utf8(header).map_err(|_| bad("header is not text".into()))?;
     let descr = dict_value(header, "descr").ok_or_else(|| bad(format!("no 'descr' in header {header:?}")))?;
@@ -95,21 +98,48 @@ pub fn parse_npy_map(bytes: &[u8], file: &str, layout: NpyLayout) -> Result<Feat
     if h == 0 || w == 0 || d == 0 {
         return Err(bad(format!("shape {shape} is empty")));
     }
-    let count = a * b * c;
-    let data = &bytes[start + header_len..];
-    let values: Vec<f32> = match descr {
-        "<f4" => decode(data, count, 4, |c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])),
-        "<f2" => decode(data, count, 2, |c| f16::from_le_bytes([c[0], c[1]]).to_f32()),
-        "<f8" => decode(data, count, 8, |c| {
-            f64::from_le_bytes(c.try_into().expect("8 bytes")) as f32
-        }),
+    // The shape comes from the file: its product is checked so that a huge shape is refused
+    // instead of wrapping to a small one (or overflowing an index later).
+    let too_big = || bad(format!("shape {shape} has more elements than this machine can address"));
+    let count = a.checked_mul(b).and_then(|n| n.checked_mul(c)).ok_or_else(too_big)?;
+    // Frames are addressed with u32 sides elsewhere.
+    if u32::try_from(h).is_err() || u32::try_from(w).is_err() || u32::try_from(d).is_err() {
+        return Err(bad(format!(
+            "shape {shape}: a side exceeds {} (the largest feature map side)",
+            u32::MAX
+        )));
+    }
+    let size = match descr {
+        "<f4" => 4,
+        "<f2" => 2,
+        "<f8" => 8,
         other => {
             return Err(bad(format!(
                 "dtype {other:?} is not supported (use little-endian float16, float32 or float64)"
             )));
         }
+    };
+    let needed = count.checked_mul(size).ok_or_else(too_big)?;
+    let data = &bytes[header_end..];
+    // Exactly the array's bytes: less is a truncated file, more is not what the header says.
+    if data.len() != needed {
+        let relation = if data.len() < needed {
+            "needs more data than the file holds"
+        } else {
+            "is shorter than the file's data"
+        };
+        return Err(bad(format!(
+            "shape {shape} of {descr} {relation}: {needed} bytes expected, {} present",
+            data.len()
+        )));
     }
-    .ok_or_else(|| bad(format!("shape {shape} of {descr} needs more data than the file holds")))?;
+    let values: Vec<f32> = match size {
+        4 => decode::<4>(data, |c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])),
+        2 => decode::<2>(data, |c| f16::from_le_bytes([c[0], c[1]]).to_f32()),
+        _ => decode::<8>(data, |c| {
+            f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f32
+        }),
+    };
     if let Some(i) = values.iter().position(|v| !v.is_finite()) {
         return Err(bad(format!("value {i} is {} (features must be finite)", values[i])));
     }
@@ -133,9 +163,8 @@ pub fn parse_npy_map(bytes: &[u8], file: &str, layout: NpyLayout) -> Result<Feat
     })
 }
 
-fn decode(data: &[u8], count: usize, size: usize, f: impl Fn(&[u8]) -> f32) -> Option<Vec<f32>> {
-    let bytes = data.get(..count.checked_mul(size)?)?;
-    Some(bytes.chunks_exact(size).map(f).collect())
+fn decode<const N: usize>(data: &[u8], f: impl Fn(&[u8]) -> f32) -> Vec<f32> {
+    data.chunks_exact(N).map(f).collect()
 }
 
 /// The text after `'key':` up to the next top-level comma (a tuple counts as one value).
@@ -219,6 +248,58 @@ mod tests {
         let at = nan.iter().position(|&b| b == b'4').unwrap();
         nan[at] = b'1';
         assert!(err(&nan).contains("dtype \"<f1\" is not supported"), "{}", err(&nan));
+    }
+
+    /// A header claiming `shape` over a few bytes of data.
+    fn with_shape(shape: &str) -> Vec<u8> {
+        let header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}\n");
+        let mut out = b"\x93NUMPY\x01\x00".to_vec();
+        out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+        out.extend_from_slice(header.as_bytes());
+        out.extend_from_slice(&[0; 16]);
+        out
+    }
+
+    #[test]
+    fn huge_shapes_are_refused_not_wrapped() {
+        for layout in [NpyLayout::Hwc, NpyLayout::Chw] {
+            let err = |shape: &str| {
+                parse_npy_map(&with_shape(shape), "f.npy", layout)
+                    .unwrap_err()
+                    .to_string()
+            };
+            // 2^32 * 2^32 overflows 64 bits.
+            let e = err("(4294967296, 4294967296, 1)");
+            assert!(e.contains("f.npy: shape (4294967296, 4294967296, 1)"), "{e}");
+            assert!(
+                e.contains("more elements than this machine can address") || e.contains("exceeds"),
+                "{e}"
+            );
+            // (2^63 + 1) * 2 wraps to 2 without the check.
+            let e = err("(9223372036854775809, 2, 1)");
+            assert!(e.contains("more elements than this machine can address"), "{e}");
+            // Fits usize, but the byte count (x4) does not.
+            let e = err("(4611686018427387904, 1, 1)");
+            assert!(e.contains("more elements") || e.contains("exceeds"), "{e}");
+        }
+    }
+
+    #[test]
+    fn data_must_match_the_shape_exactly() {
+        let mut long = write_npy_f32(&[1, 1, 2], &[1.0, 2.0]);
+        long.extend_from_slice(&[0; 4]);
+        let e = parse_npy_map(&long, "f.npy", NpyLayout::Hwc).unwrap_err().to_string();
+        assert!(
+            e.contains("is shorter than the file's data: 8 bytes expected, 12 present"),
+            "{e}"
+        );
+        let e = parse_npy_map(&with_shape("(2, 2, 2)"), "f.npy", NpyLayout::Hwc)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("needs more data than the file holds: 32 bytes expected, 16 present"),
+            "{e}"
+        );
     }
 
     #[test]

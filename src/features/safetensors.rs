@@ -80,27 +80,34 @@ impl SafeTensors {
                 .and_then(|s| s.as_array())
                 .ok_or_else(|| bad_entry("no array `shape`"))?
                 .iter()
-                .map(|d| d.as_u64().map(|d| d as usize))
+                .map(|d| d.as_u64().and_then(|d| usize::try_from(d).ok()))
                 .collect::<Option<Vec<_>>>()
-                .ok_or_else(|| bad_entry("a `shape` that is not a list of non-negative integers"))?;
+                .ok_or_else(|| bad_entry("a `shape` that is not a list of non-negative integers that fit in memory"))?;
             let offsets = entry
                 .get("data_offsets")
                 .and_then(|o| o.as_array())
                 .filter(|o| o.len() == 2)
-                .and_then(|o| Some((o[0].as_u64()? as usize, o[1].as_u64()? as usize)))
+                .and_then(|o| Some((o[0].as_u64()?, o[1].as_u64()?)))
                 .ok_or_else(|| bad_entry("no `data_offsets` [begin, end]"))?;
+            // Compared as u64 before any conversion: a 32-bit target must not truncate them.
             let (begin, end) = offsets;
-            if begin > end || end > data_len {
+            if begin > end || end > data_len as u64 {
                 return Err(bad(format!(
                     "tensor `{name}`: data_offsets [{begin}, {end}] outside the {data_len} data bytes (truncated file?)"
                 )));
             }
+            let (begin, end) = (begin as usize, end as usize);
             let size = dtype_size(&dtype).ok_or_else(|| bad_entry(&format!("unknown dtype `{dtype}`")))?;
-            let count: usize = shape.iter().product();
-            if count * size != end - begin {
+            // The shape is the file's: its product is checked so a huge shape cannot wrap to a
+            // size that happens to match the offsets.
+            let bytes_needed = shape.iter().try_fold(size, |n, &d| n.checked_mul(d)).ok_or_else(|| {
+                bad(format!(
+                    "tensor `{name}`: shape {shape:?} of {dtype} has more bytes than this machine can address"
+                ))
+            })?;
+            if bytes_needed != end - begin {
                 return Err(bad(format!(
-                    "tensor `{name}`: shape {shape:?} of {dtype} needs {} bytes but data_offsets span {}",
-                    count * size,
+                    "tensor `{name}`: shape {shape:?} of {dtype} needs {bytes_needed} bytes but data_offsets span {}",
                     end - begin
                 )));
             }
@@ -245,5 +252,53 @@ mod tests {
         garbled[8] = b'[';
         let m = message(SafeTensors::from_bytes("w.safetensors", garbled));
         assert!(m.contains("w.safetensors") && m.contains("not valid JSON"), "{m}");
+    }
+
+    /// A file whose header is `header` (JSON) over `data_len` zero bytes.
+    fn with_header(header: &str, data_len: usize) -> Vec<u8> {
+        let mut out = (header.len() as u64).to_le_bytes().to_vec();
+        out.extend_from_slice(header.as_bytes());
+        out.resize(out.len() + data_len, 0);
+        out
+    }
+
+    #[test]
+    fn a_shape_whose_size_overflows_is_refused_with_the_tensor_and_shape_named() {
+        // 2^62 * 4 bytes wraps to 0 without a checked product, matching empty offsets.
+        let h = r#"{"w": {"dtype": "F32", "shape": [4611686018427387904], "data_offsets": [0, 0]}}"#;
+        let m = message(SafeTensors::from_bytes("w.safetensors", with_header(h, 0)));
+        assert!(
+            m.contains("w.safetensors: tensor `w`: shape [4611686018427387904] of F32 has more bytes"),
+            "{m}"
+        );
+        // (2^63 + 1) * 2 wraps to 2: one F8 of 2 bytes would match.
+        let h = r#"{"w": {"dtype": "U8", "shape": [9223372036854775809, 2], "data_offsets": [0, 2]}}"#;
+        let m = message(SafeTensors::from_bytes("w.safetensors", with_header(h, 2)));
+        assert!(
+            m.contains("tensor `w`") && m.contains("more bytes than this machine"),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn offsets_outside_the_data_are_refused_with_the_tensor_and_offsets_named() {
+        let h =
+            r#"{"w": {"dtype": "F32", "shape": [1], "data_offsets": [18446744073709551612, 18446744073709551615]}}"#;
+        let m = message(SafeTensors::from_bytes("w.safetensors", with_header(h, 4)));
+        assert!(
+            m.contains(
+                "tensor `w`: data_offsets [18446744073709551612, 18446744073709551615] outside the 4 data bytes"
+            ),
+            "{m}"
+        );
+        let h = r#"{"w": {"dtype": "F32", "shape": [1], "data_offsets": [4, 0]}}"#;
+        let m = message(SafeTensors::from_bytes("w.safetensors", with_header(h, 4)));
+        assert!(m.contains("tensor `w`: data_offsets [4, 0] outside"), "{m}");
+        let h = r#"{"w": {"dtype": "F32", "shape": [2], "data_offsets": [0, 4]}}"#;
+        let m = message(SafeTensors::from_bytes("w.safetensors", with_header(h, 4)));
+        assert!(
+            m.contains("tensor `w`: shape [2] of F32 needs 8 bytes but data_offsets span 4"),
+            "{m}"
+        );
     }
 }
