@@ -262,6 +262,63 @@ fn bad_transforms_are_named() {
 }
 
 #[test]
+fn paths_outside_the_capture_folder_are_refused() {
+    let (tmp, mut doc) = synth_scene();
+    // A real image one level above the capture, which `..` would otherwise pack.
+    let capture = tmp.path().join("capture");
+    for i in 0..FRAMES {
+        let from = tmp.path().join(format!("images/frame_{i:04}.png"));
+        let to = capture.join(format!("images/frame_{i:04}.png"));
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::rename(from, to).unwrap();
+    }
+    save_rgb(&tmp.path().join("secret.png"), &pattern_rgb(W, H, 9));
+
+    doc["frames"][3]["file_path"] = json!("../secret.png");
+    write_json(&capture, &doc);
+    expect_err(
+        run(&capture),
+        &[
+            "transforms.json",
+            "frames[3].file_path \"../secret.png\" climbs out with ..",
+            "outside the capture folder",
+        ],
+    );
+    let allowed = ImportOptions {
+        allow_outside_paths: true,
+        ..Default::default()
+    };
+    assert_eq!(
+        import(&capture, &allowed, &mut |_, _| {}).unwrap().scene.frames.len(),
+        FRAMES
+    );
+
+    let secret = tmp.path().join("secret.png").display().to_string();
+    doc["frames"][3]["file_path"] = json!(secret);
+    write_json(&capture, &doc);
+    expect_err(run(&capture), &[&format!("frames[3].file_path {secret:?} is absolute")]);
+
+    // Refused even when the file is absent, and for frames that would not be kept.
+    doc["frames"][3]["file_path"] = json!("images/frame_0003.png");
+    doc["frames"][5]["depth_file_path"] = json!("depth/../../../x.png");
+    write_json(&capture, &doc);
+    let opts = ImportOptions {
+        max_frames: Some(1),
+        ..Default::default()
+    };
+    expect_err(
+        import(&capture, &opts, &mut |_, _| {}),
+        &["frames[5].depth_file_path \"depth/../../../x.png\" climbs out"],
+    );
+
+    // `./` and a detour that stays inside are fine.
+    doc["frames"][5]["depth_file_path"] = Value::Null;
+    doc["frames"][0]["file_path"] = json!("./images/../images/frame_0000.png");
+    write_json(&capture, &doc);
+    assert_eq!(run(&capture).unwrap().scene.frames.len(), FRAMES);
+}
+
+#[test]
 fn broken_or_empty_json_is_named() {
     let (tmp, _) = synth_scene();
     truncate_half(&tmp.path().join("transforms.json"));

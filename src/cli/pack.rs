@@ -29,6 +29,11 @@ pub struct PackArgs {
     /// Names of the two mask classes, background first.
     #[arg(long, value_delimiter = ',', num_args = 1, default_value = "background,object")]
     mask_classes: Vec<String>,
+    /// Accept image and depth paths in the capture's files (`transforms.json` `file_path`,
+    /// COLMAP image names) that are absolute or leave the capture folder with `..`; refused by
+    /// default so that a capture from elsewhere cannot pack arbitrary files.
+    #[arg(long)]
+    allow_outside_paths: bool,
     #[command(flatten)]
     features: super::features::FeatureArgs,
 }
@@ -46,6 +51,7 @@ pub fn run(args: PackArgs) -> CliResult {
         max_frames: args.max_frames,
         masks: args.masks,
         mask_classes,
+        allow_outside_paths: args.allow_outside_paths,
     };
     let bar = progress::bar("loading");
     let mut imported = import(&args.input, &opts, &mut |done, total| {

@@ -215,3 +215,37 @@ fn photos_must_match_their_camera() {
     none.write_text(&tmp.path().join("sparse/0"));
     expect_err(run(tmp.path()), &["images", "none of the 5 photos"]);
 }
+
+#[test]
+fn image_names_outside_images_are_refused() {
+    // Refused whether or not the named file exists.
+    let tmp = text_edited("images.txt", "photo_01.png", "../../secret.png");
+    expect_err(
+        run(tmp.path()),
+        &[
+            "images.txt",
+            "image 12 name \"../../secret.png\" climbs out with ..",
+            "outside the capture folder",
+        ],
+    );
+
+    let tmp = text_edited("images.txt", "photo_01.png", "/etc/passwd");
+    expect_err(
+        run(tmp.path()),
+        &["image 12 name \"/etc/passwd\" is absolute", "--allow-outside-paths"],
+    );
+
+    // A name that stays inside is fine.
+    let tmp = text_edited("images.txt", "photo_01.png", "./photo_01.png");
+    let imported = run(tmp.path()).unwrap();
+    assert_eq!(imported.scene.frames.len(), 5);
+
+    // Allowed on request: the escaping photo is packed.
+    let tmp = text_edited("images.txt", "photo_01.png", "../images/photo_01.png");
+    let opts = ImportOptions {
+        allow_outside_paths: true,
+        ..Default::default()
+    };
+    assert_eq!(run_with(tmp.path(), &opts).unwrap().scene.frames.len(), 5);
+    expect_err(run(tmp.path()), &["climbs out with .."]);
+}

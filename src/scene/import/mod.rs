@@ -33,6 +33,10 @@ pub struct ImportOptions {
     pub masks: Option<PathBuf>,
     /// Class names of mask values below and at or above 128.
     pub mask_classes: [String; 2],
+    /// Accept file paths written in a capture's text files (`transforms.json` `file_path`,
+    /// COLMAP image names) that are absolute or leave the capture folder with `..`. Off by
+    /// default: a capture downloaded from elsewhere must not pack files from anywhere on disk.
+    pub allow_outside_paths: bool,
 }
 
 impl Default for ImportOptions {
@@ -43,6 +47,7 @@ impl Default for ImportOptions {
             max_frames: None,
             masks: None,
             mask_classes: ["background".into(), "object".into()],
+            allow_outside_paths: false,
         }
     }
 }
@@ -192,6 +197,49 @@ fn check_scene(scene: &Scene, input: &Path) -> Result<()> {
         labels.check(&format!("{at}: imported labels"), scene.frames.len() as u32)?;
     }
     Ok(())
+}
+
+/// `relative` (the value of `field` in `file`, a path written in a capture's own files) joined
+/// to `base`, the capture folder. An absolute path, or one that climbs above `base` with `..`, is
+/// refused unless the user allowed outside paths: the capture's text decides which files get
+/// packed, and it must not reach files the user never pointed at. The check is on the path's
+/// components, not the file system, so folders the user linked into the capture still work.
+fn capture_path(base: &Path, relative: &str, field: &str, file: &str, opts: &ImportOptions) -> Result<PathBuf> {
+    use std::path::Component;
+    if opts.allow_outside_paths {
+        return Ok(base.join(relative));
+    }
+    let outside = |why: &str| {
+        SceneError::invalid(
+            file,
+            format!(
+                "{field} {relative:?} {why}, outside the capture folder {}; paths in a capture must stay inside \
+                 it (pack --allow-outside-paths accepts them)",
+                shown(base)
+            ),
+        )
+    };
+    let path = Path::new(relative);
+    let mut depth: usize = 0;
+    for part in path.components() {
+        match part {
+            Component::Prefix(_) | Component::RootDir => return Err(outside("is absolute")),
+            Component::ParentDir => depth = depth.checked_sub(1).ok_or_else(|| outside("climbs out with .."))?,
+            Component::Normal(_) => depth += 1,
+            Component::CurDir => {}
+        }
+    }
+    // On Unix a Windows-style absolute path (C:\x, \\server\x) is one normal component; it
+    // names no file inside the capture either.
+    let bytes = relative.as_bytes();
+    let drive = bytes.len() >= 2
+        && bytes[0].is_ascii_alphabetic()
+        && bytes[1] == b':'
+        && matches!(bytes.get(2), None | Some(b'/' | b'\\'));
+    if relative.starts_with('\\') || drive {
+        return Err(outside("is absolute"));
+    }
+    Ok(base.join(path))
 }
 
 /// Display name of a path for messages.

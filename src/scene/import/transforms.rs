@@ -10,7 +10,7 @@ use super::bounds::{from_cameras, from_depth};
 use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, load_frames, scene_of, select};
 use super::images::dimensions;
 use super::text::pose_from_numbers;
-use super::{Built, ImportOptions, Layout, shown};
+use super::{Built, ImportOptions, Layout, capture_path, shown};
 use crate::scene::archive::limits;
 use crate::scene::camera::{Intrinsics, Pose};
 use crate::scene::error::{Result, SceneError};
@@ -99,7 +99,12 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
     let mut present = Vec::new();
     let mut missing = Vec::new();
     for (i, f) in parsed.frames.iter().enumerate() {
-        match resolve_image(base, &f.file_path) {
+        // Every frame's paths are checked, kept or not: a refused path is a problem of the file.
+        if let Some(d) = &f.depth_file_path {
+            capture_path(base, d, &format!("frames[{i}].depth_file_path"), &file, opts)?;
+        }
+        let image = capture_path(base, &f.file_path, &format!("frames[{i}].file_path"), &file, opts)?;
+        match resolve_image(image) {
             Some(path) => present.push((i, f, path)),
             None => missing.push(f.file_path.clone()),
         }
@@ -159,7 +164,7 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
         let gl = pose_from_numbers(&numbers, &format!("{at}: transform_matrix"))?;
         let depth = match &entry.depth_file_path {
             Some(d) => {
-                let p = base.join(d);
+                let p = capture_path(base, d, &format!("frames[{i}].depth_file_path"), &file, opts)?;
                 if !p.is_file() {
                     return Err(SceneError::missing(shown(&p), format!("depth of {at}")));
                 }
@@ -205,15 +210,20 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
     })
 }
 
-/// The image a `file_path` names: as given, or with an image extension appended.
-fn resolve_image(base: &Path, file_path: &str) -> Option<PathBuf> {
-    let direct = base.join(file_path);
+/// The image a `file_path` names (already joined to the capture folder): as given, or with an
+/// image extension appended.
+fn resolve_image(direct: PathBuf) -> Option<PathBuf> {
     if direct.is_file() {
         return Some(direct);
     }
     IMAGE_EXTS
         .iter()
-        .map(|ext| base.join(format!("{file_path}.{ext}")))
+        .map(|ext| {
+            let mut p = direct.clone().into_os_string();
+            p.push(".");
+            p.push(ext);
+            PathBuf::from(p)
+        })
         .find(|p| p.is_file())
 }
 

@@ -137,8 +137,17 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
             shown(&images_dir)
         ));
     }
-    let (present, missing): (Vec<&Image>, Vec<&Image>) =
-        registered.into_iter().partition(|i| images_dir.join(&i.name).is_file());
+    // Image names come from the model's file; each must name a file inside images/ (the mask
+    // folder is then searched with the same, confined, names).
+    let mut image_paths = BTreeMap::new();
+    for image in &registered {
+        let field = format!("image {} name", image.id);
+        let path = super::capture_path(&images_dir, &image.name, &field, &model.files[1], opts)?;
+        image_paths.insert(image.name.as_str(), path);
+    }
+    let (present, missing): (Vec<&Image>, Vec<&Image>) = registered
+        .into_iter()
+        .partition(|i| image_paths[i.name.as_str()].is_file());
     if let Some(first) = missing.first() {
         warnings.push(format!(
             "{}: {} registered photos are missing (first: {}, image {}); skipped",
@@ -165,7 +174,7 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
     for (i, image) in kept.iter().enumerate() {
         files.push(FrameFiles {
             name: image.name.clone(),
-            rgb: images_dir.join(&image.name),
+            rgb: image_paths[image.name.as_str()].clone(),
             depth: None,
             gt: masks.as_ref().map(|m| m[i].clone()),
             pose: camera_to_world(image, &model.files[1])?,
