@@ -31,10 +31,11 @@ impl Intrinsics {
         DVec3::new((u - self.cx) / self.fx, (v - self.cy) / self.fy, 1.0)
     }
 
-    /// Checks the values are finite and positive where they must be; `problem` text otherwise.
+    /// Checks the values are finite and positive where they must be, in f64 and again as the
+    /// f32 the GPU and the page work in; `problem` text naming the field and value otherwise.
     pub fn check(&self) -> Result<(), String> {
-        let all = [self.fx, self.fy, self.cx, self.cy];
-        if all.iter().any(|v| !v.is_finite()) {
+        let fields = [("fx", self.fx), ("fy", self.fy), ("cx", self.cx), ("cy", self.cy)];
+        if fields.iter().any(|(_, v)| !v.is_finite()) {
             return Err(format!("intrinsics must be finite, got {self:?}"));
         }
         if self.fx <= 0.0 || self.fy <= 0.0 {
@@ -43,7 +44,32 @@ impl Intrinsics {
                 self.fx, self.fy
             ));
         }
+        for (field, v) in fields {
+            f32_finite("intrinsics", field, v)?;
+        }
+        // A focal length that is subnormal (or zero) as f32 makes 1/f infinite in the shaders.
+        for (field, v) in [("fx", self.fx), ("fy", self.fy)] {
+            if (v as f32) < f32::MIN_POSITIVE {
+                return Err(format!(
+                    "intrinsics {field} = {v:e} is too small for a 32-bit float (at least {:e})",
+                    f32::MIN_POSITIVE
+                ));
+            }
+        }
         Ok(())
+    }
+}
+
+/// `value` (`what`'s `field`) must stay finite when narrowed to f32: the GPU and the page use
+/// f32, so a value that is fine as f64 (1e301) would become infinite there.
+pub fn f32_finite(what: &str, field: &str, value: f64) -> Result<(), String> {
+    if (value as f32).is_finite() {
+        Ok(())
+    } else {
+        Err(format!(
+            "{what} {field} = {value:e} is outside the 32-bit float range (|value| <= {:e})",
+            f32::MAX
+        ))
     }
 }
 
@@ -159,6 +185,18 @@ impl Bounds {
             }
             if self.min[i] >= self.max[i] {
                 return Err(format!("bounds min must be below max on every axis, got {self:?}"));
+            }
+        }
+        for i in 0..3 {
+            let axis = ["x", "y", "z"][i];
+            f32_finite("bounds", &format!("min.{axis}"), self.min[i])?;
+            f32_finite("bounds", &format!("max.{axis}"), self.max[i])?;
+            // Distinct in f64 but equal in f32 is an empty box on the GPU.
+            if self.min[i] as f32 >= self.max[i] as f32 {
+                return Err(format!(
+                    "bounds min.{axis} = {} and max.{axis} = {} are equal as 32-bit floats; the box must have a size",
+                    self.min[i], self.max[i]
+                ));
             }
         }
         Ok(())
