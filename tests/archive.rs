@@ -379,3 +379,6 @@ fn writer_refuses_inconsistent_scenes() {
             .contains("not rigid")
     );
 }
+
+#[path = "archive/hostile.rs"]
+mod hostile;

@@ -319,6 +319,30 @@ fn paths_outside_the_capture_folder_are_refused() {
 }
 
 #[test]
+fn intrinsics_that_vanish_or_overflow_as_f32_are_refused() {
+    let (tmp, mut doc) = synth_scene();
+    doc["fl_x"] = json!(1e-300);
+    write_json(tmp.path(), &doc);
+    expect_err(
+        run(tmp.path()),
+        &[
+            "transforms.json",
+            "intrinsics fx = 1e-300 is too small for a 32-bit float",
+        ],
+    );
+    doc["fl_x"] = json!(50.0);
+    doc["cx"] = json!(1e301);
+    write_json(tmp.path(), &doc);
+    expect_err(
+        run(tmp.path()),
+        &[
+            "transforms.json",
+            "intrinsics cx = 1e301 is outside the 32-bit float range",
+        ],
+    );
+}
+
+#[test]
 fn broken_or_empty_json_is_named() {
     let (tmp, _) = synth_scene();
     truncate_half(&tmp.path().join("transforms.json"));
