@@ -6,8 +6,22 @@ use crate::scene::error::{Result, SceneError};
 pub const LABELS_FORMAT: &str = "scribblefield-labels";
 pub const LABELS_VERSION: u32 = 1;
 
-/// Largest brush radius accepted from a file, in pixels; more is surely a corrupt value.
-const MAX_RADIUS: f32 = 4096.0;
+/// Limits on labels from outside (labels.json, an archive, a share link, an autosave), all
+/// enforced by [`LabelSet::check`]. Rasterizing a stroke costs about its points times the
+/// brush's square, and the page rasterizes labels on every load and edit: these keep a hostile
+/// file or link from freezing it. docs/limits.md lists them.
+pub mod limits {
+    /// Largest brush radius in pixels: the annotator's own maximum, so anything it draws passes.
+    pub const MAX_RADIUS: f32 = crate::labels::brush::MAX_RADIUS;
+    /// Points in one stroke. The annotator records a point per few pixels of drag, so a stroke
+    /// across an 8192-pixel frame and back stays far below this.
+    pub const MAX_POINTS_PER_STROKE: usize = 65_536;
+    /// Points over all strokes of all frames (8 MiB of coordinates). Scribble masks imported as
+    /// strokes use two points per run of pixels in a row, so sparse scribbles on hundreds of
+    /// frames fit.
+    pub const MAX_TOTAL_POINTS: usize = 1 << 20;
+}
+use limits::{MAX_POINTS_PER_STROKE, MAX_RADIUS, MAX_TOTAL_POINTS};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ClassInfo {
@@ -50,6 +64,49 @@ impl Default for LabelSet {
             frames: vec![],
         }
     }
+}
+
+/// Checks stroke `index` of `frame` against the class count (when given) and the limits, adding its points
+/// to `total_points`; the problem, naming frame and stroke, otherwise. Shared with the share-link
+/// decoder, which checks as it decodes so a hostile link is refused before it is built whole.
+pub(crate) fn check_stroke(
+    s: &Stroke,
+    frame: u32,
+    index: usize,
+    classes: Option<usize>,
+    total_points: &mut usize,
+) -> std::result::Result<(), String> {
+    let at = format!("frame {frame} stroke {index}");
+    if let (Some(c), Some(classes)) = (s.class, classes)
+        && c as usize >= classes
+    {
+        return Err(format!("{at}: class {c} but only {classes} classes are defined"));
+    }
+    if !(s.radius.is_finite() && s.radius > 0.0 && s.radius <= MAX_RADIUS) {
+        return Err(format!(
+            "{at}: brush radius {} is not in (0, {MAX_RADIUS}] (the brush's largest)",
+            s.radius
+        ));
+    }
+    if s.points.is_empty() {
+        return Err(format!("{at}: has no points"));
+    }
+    if s.points.len() > MAX_POINTS_PER_STROKE {
+        return Err(format!(
+            "{at}: {} points, more than the limit of {MAX_POINTS_PER_STROKE} per stroke",
+            s.points.len()
+        ));
+    }
+    *total_points += s.points.len();
+    if *total_points > MAX_TOTAL_POINTS {
+        return Err(format!(
+            "{at}: brings the points of all strokes past the limit of {MAX_TOTAL_POINTS}"
+        ));
+    }
+    if s.points.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(format!("{at}: has non-finite coordinates"));
+    }
+    Ok(())
 }
 
 impl LabelSet {
@@ -97,6 +154,8 @@ impl LabelSet {
                 format!("{} classes is too many", self.classes.len()),
             ));
         }
+        let mut seen = std::collections::HashSet::new();
+        let mut total_points = 0usize;
         for fl in &self.frames {
             if fl.frame >= frame_count {
                 return Err(SceneError::invalid(
@@ -104,28 +163,19 @@ impl LabelSet {
                     format!("labels for frame {} but the scene has {frame_count} frames", fl.frame),
                 ));
             }
+            // Two entries for one frame would be merged by some readers and not others.
+            if !seen.insert(fl.frame) {
+                return Err(SceneError::invalid(
+                    file,
+                    format!(
+                        "frame {} has more than one entry; each frame's strokes must be in one entry",
+                        fl.frame
+                    ),
+                ));
+            }
             for (i, s) in fl.strokes.iter().enumerate() {
-                let at = format!("frame {} stroke {i}", fl.frame);
-                if let Some(c) = s.class
-                    && c as usize >= self.classes.len()
-                {
-                    return Err(SceneError::invalid(
-                        file,
-                        format!("{at}: class {c} but only {} classes are defined", self.classes.len()),
-                    ));
-                }
-                if !(s.radius.is_finite() && s.radius > 0.0 && s.radius <= MAX_RADIUS) {
-                    return Err(SceneError::invalid(
-                        file,
-                        format!("{at}: brush radius {} is not in (0, {MAX_RADIUS}]", s.radius),
-                    ));
-                }
-                if s.points.is_empty() {
-                    return Err(SceneError::invalid(file, format!("{at}: has no points")));
-                }
-                if s.points.iter().flatten().any(|v| !v.is_finite()) {
-                    return Err(SceneError::invalid(file, format!("{at}: has non-finite coordinates")));
-                }
+                check_stroke(s, fl.frame, i, Some(self.classes.len()), &mut total_points)
+                    .map_err(|p| SceneError::invalid(file, p))?;
             }
         }
         Ok(())

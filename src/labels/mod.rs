@@ -13,5 +13,6 @@ pub mod summary;
 pub mod synthetic;
 pub mod view;
 
+pub use format::limits;
 pub use format::{ClassInfo, FrameLabels, LABELS_FORMAT, LABELS_VERSION, LabelSet, Stroke};
 pub use raster::{UNLABELLED, mask_to_strokes, rasterize_frame};

@@ -20,7 +20,8 @@ use flate2::Compression;
 use flate2::read::DeflateDecoder;
 use flate2::write::DeflateEncoder;
 
-use super::format::{ClassInfo, FrameLabels, LabelSet, Stroke};
+use super::format::limits::{MAX_POINTS_PER_STROKE, MAX_TOTAL_POINTS};
+use super::format::{ClassInfo, FrameLabels, LabelSet, Stroke, check_stroke};
 
 const CODE_VERSION: u8 = 1;
 /// Steps per pixel of coordinates and radii in the code.
@@ -42,6 +43,9 @@ pub fn snap(v: f32) -> f32 {
 pub enum ShareError {
     #[error("the annotations in the link are damaged: {0}")]
     Corrupt(String),
+    /// Well formed, but over one of the label limits (`format::limits`).
+    #[error("the annotations in the link are over a limit: {0}")]
+    Limit(String),
     #[error("the link was made by a newer version (annotation code version {0})")]
     Version(u8),
     #[error(
@@ -127,6 +131,10 @@ pub fn decode_labels(code: &str) -> Result<LabelSet, ShareError> {
     }
     let frames = r.count("frames")?;
     let mut frame = 0u64;
+    // Counted as they are read: the limits are checked before a stroke's points are allocated.
+    // Class ids are left to `LabelSet::check`, like the frame count.
+    let mut total_points = 0usize;
+    let mut checked_points = 0usize;
     for _ in 0..frames {
         frame = (frame + r.varint()?) & 0xffff_ffff;
         let strokes = r.count("strokes")?;
@@ -134,13 +142,25 @@ pub fn decode_labels(code: &str) -> Result<LabelSet, ShareError> {
             frame: frame as u32,
             strokes: Vec::with_capacity(strokes),
         };
-        for _ in 0..strokes {
+        for index in 0..strokes {
             let class = match r.varint()? {
                 0 => None,
                 c => Some(u16::try_from(c - 1).map_err(|_| corrupt(format!("class id {} is too large", c - 1)))?),
             };
             let radius = r.varint()? as f32 / SUBPIXEL;
             let points = r.count("points")?;
+            let at = format!("frame {frame} stroke {index}");
+            if points > MAX_POINTS_PER_STROKE {
+                return Err(ShareError::Limit(format!(
+                    "{at}: {points} points, more than the limit of {MAX_POINTS_PER_STROKE} per stroke"
+                )));
+            }
+            total_points += points;
+            if total_points > MAX_TOTAL_POINTS {
+                return Err(ShareError::Limit(format!(
+                    "{at}: brings the points of all strokes past the limit of {MAX_TOTAL_POINTS}"
+                )));
+            }
             let mut last = [0i64; 2];
             let mut pts = Vec::with_capacity(points);
             for _ in 0..points {
@@ -153,18 +173,30 @@ pub fn decode_labels(code: &str) -> Result<LabelSet, ShareError> {
                 }
                 pts.push(p);
             }
-            fl.strokes.push(Stroke {
+            let stroke = Stroke {
                 class,
                 radius,
                 points: pts,
-            });
+            };
+            check_stroke(&stroke, fl.frame, index, None, &mut checked_points).map_err(ShareError::Limit)?;
+            fl.strokes.push(stroke);
         }
         labels.frames.push(fl);
     }
     if r.at != raw.len() {
         return Err(corrupt(format!("{} bytes left over", raw.len() - r.at)));
     }
+    // A frame listed twice (the code allows it) keeps all its strokes in order, in one entry,
+    // as a label set must have it; the stable sort keeps each frame's strokes in code order.
     labels.frames.sort_by_key(|f| f.frame);
+    let mut merged: Vec<FrameLabels> = Vec::with_capacity(labels.frames.len());
+    for fl in labels.frames.drain(..) {
+        match merged.last_mut() {
+            Some(last) if last.frame == fl.frame => last.strokes.extend(fl.strokes),
+            _ => merged.push(fl),
+        }
+    }
+    labels.frames = merged;
     Ok(labels)
 }
 
