@@ -48,9 +48,14 @@ pub const MIRRORS: &[Mirror] = &[
         "composite.wgsl",
         "CompositeUniforms",
     ),
-    mirror("src/field/gpu/dense.rs", "DenseDims", "dense_forward.wgsl", "DenseDims"),
     mirror(
-        "src/field/gpu/dense.rs",
+        "src/field/gpu/dense/layer.rs",
+        "DenseDims",
+        "dense_forward.wgsl",
+        "DenseDims",
+    ),
+    mirror(
+        "src/field/gpu/dense/uniform.rs",
         "ChunkInfo",
         "dense_backward_weight_uniform.wgsl",
         "ChunkInfo",
@@ -120,7 +125,7 @@ pub struct FieldLayout {
 /// A struct's size and fields, on one side of the mirror.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct StructLayout {
-    /// Where it comes from, for messages: "`DenseDims` in src/field/gpu/dense/dims.rs".
+    /// Where it comes from, for messages: "`DenseDims` in src/field/gpu/dense/layer.rs".
     pub origin: String,
     pub name: String,
     pub size: u32,

@@ -21,7 +21,7 @@ use crate::labels::LabelSet;
 use crate::scene::{Bounds, Pca, Scene};
 
 use super::adam::{AdamBuffers, AdamPass};
-use super::composite::{CompositeInputs, CompositeLayout, CompositePass, HeadSource, LOSS_WORDS};
+use super::composite::{CompositeInputs, CompositeLayout, CompositePass, LOSS_WORDS};
 use super::dense::{DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView, UNIFORM_WEIGHT_FLOATS};
 use super::encoding::{
     DirectionLayout, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
@@ -218,23 +218,23 @@ impl Trainer {
             cfg,
             &CompositeInputs {
                 step_uniforms: &step_uniforms,
-                h0: HeadSource {
-                    buffer: &samples.density_out,
+                h0: RowView {
+                    buffer: samples.density_out.clone(),
                     stride: 1 + g,
                     offset: 0,
                 },
-                color: HeadSource {
-                    buffer: &color_out,
+                color: RowView {
+                    buffer: color_out.clone(),
                     stride: 3,
                     offset: 0,
                 },
-                logits: HeadSource {
-                    buffer: &logits,
+                logits: RowView {
+                    buffer: logits.clone(),
                     stride: c,
                     offset: 0,
                 },
-                feature: HeadSource {
-                    buffer: &samples.feature_out,
+                feature: RowView {
+                    buffer: samples.feature_out.clone(),
                     stride: d,
                     offset: 0,
                 },
