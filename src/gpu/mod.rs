@@ -8,6 +8,7 @@ pub mod error;
 pub mod matmul;
 pub mod matmul_bench;
 pub mod pipeline;
+pub mod pipeline_cache;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod shader_check;
 pub mod shaders;

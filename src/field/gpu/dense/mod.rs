@@ -16,8 +16,8 @@
 //! (`shaders/_dense_tile.wgsl`): each invocation accumulates 4×4 outputs from tiles staged in
 //! workgroup memory; the invocation grid and chunk depth are override constants picked per
 //! layer shape by [`TileShape`], so 128-wide layers use 64×64 tiles and 1-, 3- or C-wide outputs
-//! tall thin ones. Pipelines are compiled once per (kernel, shape) in [`DensePipelines`] and
-//! shared by every layer of every MLP.
+//! tall thin ones. Pipelines are compiled once per (kernel, shape) and device (through
+//! [`DensePipelines`] into the context's pipeline cache) and shared by every layer of every MLP.
 //!
 //! On CPU devices (lavapipe, SwiftShader) the forward and the input gradient use a second
 //! family of kernels, [`DenseFamily::UniformWeights`] (`shaders/dense_*_uniform.wgsl`): one

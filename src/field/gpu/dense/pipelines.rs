@@ -1,6 +1,6 @@
-//! The cache of compiled dense pipelines, one per (kernel, override constants), shared by every
-//! layer of every MLP, and the choice of kernel family for one product.
-use std::collections::HashMap;
+//! The dense kernels by name, the override constants each is compiled with, and the choice of
+//! kernel family for one product. Compiled pipelines are kept by the context's pipeline cache,
+//! so every layer of every MLP (and every later trainer on the device) shares them.
 
 use super::DenseFamily;
 use super::layer::{DenseLayerSpec, range_binding};
@@ -9,7 +9,7 @@ use super::uniform::{uniform_block, uniform_dispatch};
 use crate::gpu::pipeline::{KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum DenseKernel {
     Forward,
     BackwardInput,
@@ -19,16 +19,6 @@ pub(super) enum DenseKernel {
     BackwardInputUniform,
     MaskOutputGradient,
     ChunkPartialSums,
-}
-
-/// The override constants a pipeline is compiled with.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub(super) enum KernelVariant {
-    Tiled(TileShape),
-    /// Outputs (or inputs) per invocation of a uniform-weight kernel.
-    Block(u32),
-    /// Outputs per invocation and invocations per workgroup of the uniform-window dW kernel.
-    Columns(u32, u32),
 }
 
 impl DenseKernel {
@@ -66,10 +56,10 @@ impl DenseKernel {
     }
 }
 
-/// The compiled dense kernels, one per (kernel, variant) met so far; shared by all layers.
+/// Which dense kernel family layers use; compiles (or fetches from the context's cache) the
+/// pipeline for one kernel and its override constants.
 pub struct DensePipelines {
     pub(super) family: DenseFamily,
-    pub(super) compiled: HashMap<(DenseKernel, KernelVariant), wgpu::ComputePipeline>,
 }
 
 impl Default for DensePipelines {
@@ -85,10 +75,7 @@ impl DensePipelines {
     }
 
     pub fn with_family(family: DenseFamily) -> DensePipelines {
-        DensePipelines {
-            family,
-            compiled: HashMap::new(),
-        }
+        DensePipelines { family }
     }
 
     pub fn family(&self) -> DenseFamily {
@@ -96,7 +83,7 @@ impl DensePipelines {
     }
 
     pub(super) async fn get(
-        &mut self,
+        &self,
         ctx: &GpuContext,
         kernel: DenseKernel,
         shape: TileShape,
@@ -107,29 +94,24 @@ impl DensePipelines {
             ("TY", f64::from(shape.ty)),
             ("KC", f64::from(shape.kc)),
         ];
-        self.compile(ctx, kernel, KernelVariant::Tiled(shape), &constants).await
+        self.compile(ctx, kernel, &constants).await
     }
 
     pub(super) async fn get_uniform(
-        &mut self,
+        &self,
         ctx: &GpuContext,
         kernel: DenseKernel,
         block: u32,
     ) -> Result<wgpu::ComputePipeline, GpuError> {
-        self.compile(ctx, kernel, KernelVariant::Block(block), &[("BLOCK", f64::from(block))])
-            .await
+        self.compile(ctx, kernel, &[("BLOCK", f64::from(block))]).await
     }
 
     pub(super) async fn compile(
-        &mut self,
+        &self,
         ctx: &GpuContext,
         kernel: DenseKernel,
-        variant: KernelVariant,
         constants: &[(&str, f64)],
     ) -> Result<wgpu::ComputePipeline, GpuError> {
-        if let Some(pipeline) = self.compiled.get(&(kernel, variant)) {
-            return Ok(pipeline.clone());
-        }
         let (label, source, entry_point) = kernel.source();
         let spec = KernelSpec {
             label,
@@ -138,9 +120,7 @@ impl DensePipelines {
             layout: None,
             constants,
         };
-        let pipeline = create_compute_pipeline(ctx, &spec).await?;
-        self.compiled.insert((kernel, variant), pipeline.clone());
-        Ok(pipeline)
+        create_compute_pipeline(ctx, &spec).await
     }
 }
 
@@ -166,7 +146,7 @@ impl DensePipelines {
     /// The kernel for one of a layer's weight products: uniform weights where the family wants
     /// them and the layer fits, tiled otherwise.
     pub(super) async fn product_kernel<'a>(
-        &mut self,
+        &self,
         ctx: &GpuContext,
         label: &str,
         params: &'a wgpu::Buffer,

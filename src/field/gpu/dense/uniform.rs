@@ -5,7 +5,7 @@ use std::num::NonZeroU64;
 use std::ops::Range;
 
 use super::layer::{BoundDispatch, DenseLayerSpec, bind_group};
-use super::pipelines::{DenseKernel, DensePipelines, KernelVariant};
+use super::pipelines::{DenseKernel, DensePipelines};
 use super::{DenseFamily, RowView};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError};
@@ -111,9 +111,7 @@ impl UniformWeightPartials {
             },
         );
 
-        let mask_pipeline = pipelines
-            .compile(ctx, DenseKernel::MaskOutputGradient, KernelVariant::Block(0), &[])
-            .await?;
+        let mask_pipeline = pipelines.compile(ctx, DenseKernel::MaskOutputGradient, &[]).await?;
         let mask_bind = bind_group(
             ctx,
             label,
@@ -235,7 +233,7 @@ impl DensePipelines {
     /// The per-chunk weight-gradient kernel, whose dZ window and chunk slot are bound with
     /// dynamic offsets (so an explicit layout), and its two bind group layouts.
     pub(super) async fn chunk_sums_pipeline(
-        &mut self,
+        &self,
         ctx: &GpuContext,
         block: u32,
         columns: u32,
@@ -251,49 +249,32 @@ impl DensePipelines {
             count: None,
         };
         let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-        let common = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("dense chunk sums common"),
-            entries: &[
-                entry(0, wgpu::BufferBindingType::Uniform, false, None),
-                entry(3, storage(true), false, None),
-                entry(4, storage(false), false, None),
-            ],
-        });
-        let windows = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("dense chunk sums windows"),
-            entries: &[
-                entry(
-                    0,
-                    wgpu::BufferBindingType::Uniform,
-                    true,
-                    Some(UNIFORM_WEIGHT_FLOATS as u64 * 4),
-                ),
-                entry(1, wgpu::BufferBindingType::Uniform, true, Some(16)),
-            ],
-        });
-        let layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("dense chunk sums"),
-            bind_group_layouts: &[Some(&common), Some(&windows)],
-            immediate_size: 0,
-        });
-        let key = (DenseKernel::ChunkPartialSums, KernelVariant::Columns(block, columns));
-        let pipeline = match self.compiled.get(&key) {
-            Some(p) => p.clone(),
-            None => {
-                let (label, source, entry_point) = DenseKernel::ChunkPartialSums.source();
-                let spec = KernelSpec {
-                    label,
-                    source,
-                    entry_point,
-                    layout: Some(&layout),
-                    constants: &[("BLOCK", f64::from(block)), ("COLUMNS", f64::from(columns))],
-                };
-                let pipeline = create_compute_pipeline(ctx, &spec).await?;
-                self.compiled.insert(key, pipeline.clone());
-                pipeline
-            }
+        let common = [
+            entry(0, wgpu::BufferBindingType::Uniform, false, None),
+            entry(3, storage(true), false, None),
+            entry(4, storage(false), false, None),
+        ];
+        let windows = [
+            entry(
+                0,
+                wgpu::BufferBindingType::Uniform,
+                true,
+                Some(UNIFORM_WEIGHT_FLOATS as u64 * 4),
+            ),
+            entry(1, wgpu::BufferBindingType::Uniform, true, Some(16)),
+        ];
+        let (label, source, entry_point) = DenseKernel::ChunkPartialSums.source();
+        let spec = KernelSpec {
+            label,
+            source,
+            entry_point,
+            layout: Some(&[&common, &windows]),
+            constants: &[("BLOCK", f64::from(block)), ("COLUMNS", f64::from(columns))],
         };
-        // A pipeline with an explicit layout accepts bind groups of layouts equal to it.
+        let pipeline = create_compute_pipeline(ctx, &spec).await?;
+        // The context hands out the very layouts the pipeline was built with.
+        let common = ctx.bind_group_layout("dense chunk sums common", &common);
+        let windows = ctx.bind_group_layout("dense chunk sums windows", &windows);
         Ok((pipeline, [common, windows]))
     }
 
