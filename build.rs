@@ -1,10 +1,14 @@
 //! Validates every `shaders/*.wgsl` with naga (a broken shader fails the build, naming the file,
-//! line and column) and embeds the include-expanded stages as `$OUT_DIR/shaders.rs`, which
+//! line and column), checks that every Rust struct uploaded as a WGSL struct has naga's layout of
+//! it (`src/gpu/uniform_layout.rs`; a mismatch fails the build, naming the struct, field and both
+//! offsets) and embeds the include-expanded stages as `$OUT_DIR/shaders.rs`, which
 //! `src/gpu/shaders.rs` includes. Conventions: `shaders/README.md`.
 extern crate naga;
 
 #[path = "src/gpu/shader_check.rs"]
 mod shader_check;
+#[path = "src/gpu/uniform_layout.rs"]
+mod uniform_layout;
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -15,21 +19,26 @@ fn main() {
     let shader_dir = manifest_dir.join("shaders");
     println!("cargo:rerun-if-changed=shaders");
     println!("cargo:rerun-if-changed=src/gpu/shader_check.rs");
+    println!("cargo:rerun-if-changed=src/gpu/uniform_layout.rs");
 
     let files = match read_shader_files(&shader_dir) {
         Ok(files) => files,
-        Err(message) => fail(&[message]),
+        Err(message) => fail("shader", &[message]),
     };
     let stages = match shader_check::check_all(&files) {
         Ok(stages) => stages,
-        Err(problems) => fail(&problems.iter().map(ToString::to_string).collect::<Vec<_>>()),
+        Err(problems) => fail("shader", &problems.iter().map(ToString::to_string).collect::<Vec<_>>()),
     };
     warn_about_unused_snippets(&files, &stages);
+    check_uniform_mirrors(&manifest_dir, &stages);
 
     let out_dir = PathBuf::from(std::env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     let generated = generate_constants(&stages);
     if let Err(error) = std::fs::write(out_dir.join("shaders.rs"), generated) {
-        fail(&[format!("cannot write {}/shaders.rs: {error}", out_dir.display())]);
+        fail(
+            "build script",
+            &[format!("cannot write {}/shaders.rs: {error}", out_dir.display())],
+        );
     }
 }
 
@@ -91,12 +100,31 @@ fn generate_constants(stages: &[shader_check::ExpandedShader]) -> String {
     out
 }
 
+/// Every Rust struct of `uniform_layout::MIRRORS` against naga's layout of its WGSL struct.
+fn check_uniform_mirrors(manifest_dir: &Path, stages: &[shader_check::ExpandedShader]) {
+    let rust_files: std::collections::BTreeSet<&str> =
+        uniform_layout::MIRRORS.iter().map(|mirror| mirror.rust_file).collect();
+    for file in rust_files {
+        println!("cargo:rerun-if-changed={file}");
+    }
+    let read = |file: &str| {
+        std::fs::read_to_string(manifest_dir.join(file)).map_err(|error| format!("cannot read {file}: {error}"))
+    };
+    let problems = uniform_layout::check_mirrors(uniform_layout::MIRRORS, read, stages);
+    if !problems.is_empty() {
+        fail(
+            "uniform layout",
+            &problems.iter().map(ToString::to_string).collect::<Vec<_>>(),
+        );
+    }
+}
+
 /// Cargo prints a failed build script's stderr: each problem with naga's report, then a summary.
-fn fail(messages: &[String]) -> ! {
+fn fail(kind: &str, messages: &[String]) -> ! {
     for message in messages {
         eprintln!("error: {message}\n");
     }
-    eprintln!("{} shader problem(s):", messages.len());
+    eprintln!("{} {kind} problem(s):", messages.len());
     for message in messages {
         eprintln!("  {}", message.lines().next().unwrap_or_default());
     }

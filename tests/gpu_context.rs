@@ -100,3 +100,24 @@ fn dispatch_1d_spreads_over_two_dimensions_only_when_needed() {
     assert!(Dispatch1d::new(u64::MAX / 2, 1, 65535).is_err());
     assert!(Dispatch1d::new(10, 0, 65535).is_err());
 }
+
+#[test]
+fn pipelines_are_compiled_once_per_device() {
+    use scribblefield::gpu::pipeline::{KernelSpec, create_compute_pipeline};
+    use scribblefield::gpu::shaders;
+    let Some(ctx) = gpu_for_tests("pipelines_are_compiled_once_per_device") else {
+        return;
+    };
+    let spec = KernelSpec::new("iota", shaders::IOTA, "iota");
+    let first = pollster::block_on(create_compute_pipeline(&ctx, &spec)).unwrap();
+    // A clone of the context (what a second trainer gets) shares the cache.
+    let again = pollster::block_on(create_compute_pipeline(&ctx.clone(), &spec)).unwrap();
+    assert_eq!(first, again);
+    let stats = ctx.pipeline_cache_stats();
+    assert_eq!((stats.compiled, stats.reused), (1, 1), "{stats:?}");
+    // Another context, even on the same device, has a cache of its own.
+    let other = GpuContext::from_device(ctx.device.clone(), ctx.queue.clone());
+    pollster::block_on(create_compute_pipeline(&other, &spec)).unwrap();
+    assert_eq!(other.pipeline_cache_stats().compiled, 1);
+    assert_eq!(ctx.pipeline_cache_stats().compiled, 1);
+}

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use scribblefield::field::FieldConfig;
 use scribblefield::field::gpu::composite::{
-    CompositeInputs, CompositeLayout, CompositePass, CompositeUniforms, HeadSource,
+    CompositeInputs, CompositeLayout, CompositePass, CompositeUniforms, RowView,
 };
 use scribblefield::field::gpu::rays::{
     NO_LABEL, RAY_HAS_CODE, RAY_HITS_BOX, StepUniforms, TARGET_DEPTH, TARGET_FLAGS, TARGET_HEADER_WORDS, TARGET_LABEL,
@@ -219,23 +219,23 @@ fn run_on_gpu(ctx: &GpuContext, batch: &Batch) -> GpuRun {
     let hs = batch.heads_stride() as u32;
     let inputs = CompositeInputs {
         step_uniforms: &step,
-        h0: HeadSource {
-            buffer: &density,
+        h0: RowView {
+            buffer: density.clone(),
             stride: DENSITY_STRIDE,
             offset: 0,
         },
-        color: HeadSource {
-            buffer: &color,
+        color: RowView {
+            buffer: color.clone(),
             stride: 3,
             offset: 0,
         },
-        logits: HeadSource {
-            buffer: &heads,
+        logits: RowView {
+            buffer: heads.clone(),
             stride: hs,
             offset: 0,
         },
-        feature: HeadSource {
-            buffer: &heads,
+        feature: RowView {
+            buffer: heads.clone(),
             stride: hs,
             offset: cfg.num_classes,
         },
@@ -404,23 +404,23 @@ fn composite_rejects_head_sources_too_small() {
     let small = storage_buffer_from(&ctx, "small", &[0.0f32; 16]).unwrap();
     let inputs = CompositeInputs {
         step_uniforms: &step,
-        h0: HeadSource {
-            buffer: &small,
+        h0: RowView {
+            buffer: small.clone(),
             stride: 1,
             offset: 0,
         },
-        color: HeadSource {
-            buffer: &small,
+        color: RowView {
+            buffer: small.clone(),
             stride: 3,
             offset: 0,
         },
-        logits: HeadSource {
-            buffer: &small,
+        logits: RowView {
+            buffer: small.clone(),
             stride: 3,
             offset: 0,
         },
-        feature: HeadSource {
-            buffer: &small,
+        feature: RowView {
+            buffer: small.clone(),
             stride: 5,
             offset: 0,
         },
@@ -459,23 +459,23 @@ fn composite_throughput_report() {
     let hs = batch.heads_stride() as u32;
     let inputs = CompositeInputs {
         step_uniforms: &step,
-        h0: HeadSource {
-            buffer: &density,
+        h0: RowView {
+            buffer: density.clone(),
             stride: DENSITY_STRIDE,
             offset: 0,
         },
-        color: HeadSource {
-            buffer: &color,
+        color: RowView {
+            buffer: color.clone(),
             stride: 3,
             offset: 0,
         },
-        logits: HeadSource {
-            buffer: &heads,
+        logits: RowView {
+            buffer: heads.clone(),
             stride: hs,
             offset: 0,
         },
-        feature: HeadSource {
-            buffer: &heads,
+        feature: RowView {
+            buffer: heads.clone(),
             stride: hs,
             offset: cfg.num_classes,
         },

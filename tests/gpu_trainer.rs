@@ -82,6 +82,41 @@ fn losses_fall_on_the_demo_scene() {
     );
 }
 
+/// A training restart in the page builds a second trainer on the same context: it must reuse
+/// the pipelines the first one compiled.
+#[test]
+fn a_second_trainer_compiles_no_pipelines() {
+    let Some(ctx) = gpu_for_tests("a_second_trainer_compiles_no_pipelines") else {
+        return;
+    };
+    let scene = demo_scene(&DemoOptions {
+        width: 32,
+        height: 24,
+        frames: 4,
+        ..Default::default()
+    })
+    .unwrap();
+    let cfg = FieldConfig {
+        num_classes: scene.classes.len() as u32,
+        batch_rays: 64,
+        ..FieldConfig::small()
+    };
+    let mut first = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, 1)).unwrap();
+    first.train(1);
+    let after_first = ctx.pipeline_cache_stats();
+    assert!(after_first.compiled > 0, "{after_first:?}");
+    drop(first);
+    let mut second = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, 2)).unwrap();
+    second.train(1);
+    let after_second = ctx.pipeline_cache_stats();
+    assert_eq!(
+        after_second.compiled, after_first.compiled,
+        "cache misses: {after_second:?}"
+    );
+    assert!(after_second.reused > after_first.reused, "{after_second:?}");
+    assert!(second.losses_blocking().unwrap().terms.total().is_finite());
+}
+
 #[test]
 #[ignore = "measurement: prints where a training step's GPU time goes"]
 fn profile_a_step() {

@@ -4,7 +4,10 @@
 //! Creation is async because the browser forbids blocking; native code may use
 //! [`GpuContext::new_blocking`]. The web app gets its device from eframe and wraps it with
 //! [`GpuContext::from_device`].
+use std::sync::Arc;
+
 use super::error::GpuError;
+use super::pipeline_cache::{PipelineCache, PipelineCacheStats};
 
 /// How to pick the adapter.
 #[derive(Debug, Clone)]
@@ -56,6 +59,8 @@ pub struct GpuContext {
     pub has_timestamps: bool,
     /// Set by [`GpuContext::treated_as_software`]: overrides what the adapter says.
     software_override: Option<bool>,
+    /// Pipelines and bind group layouts compiled on this device, shared by every clone.
+    pipeline_cache: Arc<PipelineCache>,
 }
 
 impl GpuContext {
@@ -98,7 +103,24 @@ impl GpuContext {
             device,
             queue,
             software_override: None,
+            pipeline_cache: Arc::default(),
         }
+    }
+
+    /// The device's pipeline cache (see `gpu::pipeline::create_compute_pipeline`).
+    pub(crate) fn pipeline_cache(&self) -> &PipelineCache {
+        &self.pipeline_cache
+    }
+
+    /// How many pipelines this device compiled and how many it handed out again.
+    pub fn pipeline_cache_stats(&self) -> PipelineCacheStats {
+        self.pipeline_cache.stats()
+    }
+
+    /// The bind group layout with these entries, created once per device: what bind groups of a
+    /// pipeline built with an explicit layout (`KernelSpec::layout`) are made with.
+    pub fn bind_group_layout(&self, label: &str, entries: &[wgpu::BindGroupLayoutEntry]) -> wgpu::BindGroupLayout {
+        self.pipeline_cache.bind_group_layout(&self.device, label, entries)
     }
 
     /// The same device, with kernels chosen as for a software rasterizer (`true`) or a GPU

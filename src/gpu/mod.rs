@@ -8,17 +8,20 @@ pub mod error;
 pub mod matmul;
 pub mod matmul_bench;
 pub mod pipeline;
+pub mod pipeline_cache;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod shader_check;
 pub mod shaders;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod test_support;
 pub mod timing;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod uniform_layout;
 
 pub use context::{GpuContext, GpuOptions};
 pub use error::GpuError;
 
-/// `shader_check` is shared with build.rs, where `naga` is a build-dependency; here it is
+/// `shader_check` and `uniform_layout` are shared with build.rs, where `naga` is a build-dependency; here it is
 /// wgpu's own copy (same version, with the WGSL front end).
 #[cfg(not(target_arch = "wasm32"))]
 use wgpu::naga;

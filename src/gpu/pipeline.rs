@@ -1,7 +1,9 @@
-//! Compute pipelines from the embedded shaders, bind groups of plain buffers, and 1D dispatches
-//! that stay within the per-dimension workgroup limit.
+//! Compute pipelines from the embedded shaders (compiled once per device: see
+//! `gpu::pipeline_cache`), bind groups of plain buffers, and 1D dispatches that stay within the
+//! per-dimension workgroup limit.
 use super::context::GpuContext;
 use super::error::GpuError;
+use super::pipeline_cache::PipelineKey;
 
 /// What to build a compute pipeline from.
 #[derive(Debug, Clone, Copy)]
@@ -12,8 +14,9 @@ pub struct KernelSpec<'a> {
     pub source: &'a str,
     pub entry_point: &'a str,
     /// `None`: derive the layout from the shader (then fetch it with
-    /// `pipeline.get_bind_group_layout(i)`); `Some`: an explicit layout shared between pipelines.
-    pub layout: Option<&'a wgpu::PipelineLayout>,
+    /// `pipeline.get_bind_group_layout(i)`); `Some`: an explicit layout, the entries of each bind
+    /// group in order (make bind groups with `GpuContext::bind_group_layout` of the same entries).
+    pub layout: Option<&'a [&'a [wgpu::BindGroupLayoutEntry]]>,
     /// Values for the shader's `override` constants.
     pub constants: &'a [(&'a str, f64)],
 }
@@ -31,20 +34,49 @@ impl<'a> KernelSpec<'a> {
     }
 }
 
-/// Compiles a compute pipeline. wgpu's complaints (a shader that fails the device's own checks,
-/// a bad layout) come back as [`GpuError::Validation`] instead of a panic.
+/// Compiles a compute pipeline, or hands out the one compiled earlier on this device for the same
+/// source, entry point, constants and layout. wgpu's complaints (a shader that fails the
+/// device's own checks, a bad layout) come back as [`GpuError::Validation`] instead of a panic;
+/// a pipeline that failed is not kept.
 pub async fn create_compute_pipeline(
     ctx: &GpuContext,
     spec: &KernelSpec<'_>,
 ) -> Result<wgpu::ComputePipeline, GpuError> {
+    let key = PipelineKey {
+        source: spec.source.to_string(),
+        entry_point: spec.entry_point.to_string(),
+        constants: spec
+            .constants
+            .iter()
+            .map(|&(name, value)| (name.to_string(), value.to_bits()))
+            .collect(),
+        layout: spec
+            .layout
+            .map(|groups| groups.iter().map(|entries| entries.to_vec()).collect()),
+    };
+    if let Some(pipeline) = ctx.pipeline_cache().pipeline(&key) {
+        return Ok(pipeline);
+    }
     let validation = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
     let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(spec.label),
         source: wgpu::ShaderSource::Wgsl(spec.source.into()),
     });
+    let layout = spec.layout.map(|groups| {
+        let groups: Vec<wgpu::BindGroupLayout> = groups
+            .iter()
+            .map(|entries| ctx.bind_group_layout(spec.label, entries))
+            .collect();
+        let groups: Vec<Option<&wgpu::BindGroupLayout>> = groups.iter().map(Some).collect();
+        ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(spec.label),
+            bind_group_layouts: &groups,
+            immediate_size: 0,
+        })
+    });
     let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some(spec.label),
-        layout: spec.layout,
+        layout: layout.as_ref(),
         module: &module,
         entry_point: Some(spec.entry_point),
         compilation_options: wgpu::PipelineCompilationOptions {
@@ -54,7 +86,10 @@ pub async fn create_compute_pipeline(
         cache: None,
     });
     match validation.pop().await {
-        None => Ok(pipeline),
+        None => {
+            ctx.pipeline_cache().insert_pipeline(key, &pipeline);
+            Ok(pipeline)
+        }
         Some(error) => Err(GpuError::from_scope(
             format!("pipeline {} ({})", spec.label, spec.entry_point),
             error,

@@ -23,6 +23,7 @@ use crate::gpu::pipeline::{Dispatch1d, KernelSpec, bind_buffers, create_compute_
 use crate::gpu::{GpuContext, GpuError, shaders};
 
 use super::rays::{RAY_WORKGROUP_SIZE, TARGET_HEADER_WORDS};
+pub use super::row_view::RowView;
 
 /// Loss words at the start of a ray's output row: rgb, depth, semantic, feature.
 pub const LOSS_WORDS: usize = 4;
@@ -49,26 +50,19 @@ pub struct CompositeUniforms {
     pub weight_feature: f32,
 }
 
-/// Where one head's per-sample outputs live: sample n's values start at `n · stride + offset`.
-#[derive(Clone, Copy, Debug)]
-pub struct HeadSource<'a> {
-    pub buffer: &'a wgpu::Buffer,
-    pub stride: u32,
-    pub offset: u32,
-}
-
-/// Everything the pass reads.
-#[derive(Clone, Copy, Debug)]
+/// Everything the pass reads. Each head's outputs are a [`RowView`]: sample n's values start at
+/// `n · stride + offset`.
+#[derive(Clone, Debug)]
 pub struct CompositeInputs<'a> {
     pub step_uniforms: &'a wgpu::Buffer,
     /// h₀: 1 value per sample (column 0 of the density MLP's output rows).
-    pub h0: HeadSource<'a>,
+    pub h0: RowView,
     /// Colour before the sigmoid: 3 values.
-    pub color: HeadSource<'a>,
+    pub color: RowView,
     /// Semantic logits: C values.
-    pub logits: HeadSource<'a>,
+    pub logits: RowView,
     /// Feature f: D values.
-    pub feature: HeadSource<'a>,
+    pub feature: RowView,
     /// `SamplePointsPass::intervals`.
     pub intervals: &'a wgpu::Buffer,
     /// `RayBatchPass::targets`.
@@ -141,10 +135,10 @@ impl CompositePass {
         let layout = CompositeLayout::new(cfg);
         let batch = cfg.batch_rays as usize;
         let samples = batch * cfg.samples_per_ray();
-        let heads = [("h0", inputs.h0, 1), ("colour", inputs.color, 3)];
+        let heads = [("h0", &inputs.h0, 1), ("colour", &inputs.color, 3)];
         let wide_heads = [
-            ("logits", inputs.logits, cfg.num_classes),
-            ("feature", inputs.feature, cfg.feature_dim),
+            ("logits", &inputs.logits, cfg.num_classes),
+            ("feature", &inputs.feature, cfg.feature_dim),
         ];
         for (name, source, width) in heads.into_iter().chain(wide_heads) {
             let needed = (samples as u64 - 1) * u64::from(source.stride) + u64::from(source.offset) + u64::from(width);
@@ -189,10 +183,10 @@ impl CompositePass {
         let buffers = [
             inputs.step_uniforms,
             &uniform,
-            inputs.h0.buffer,
-            inputs.color.buffer,
-            inputs.logits.buffer,
-            inputs.feature.buffer,
+            &inputs.h0.buffer,
+            &inputs.color.buffer,
+            &inputs.logits.buffer,
+            &inputs.feature.buffer,
             inputs.intervals,
             inputs.targets,
             &grad_heads,

@@ -12,6 +12,7 @@ pub mod encoding;
 pub mod head_glue;
 pub mod rays;
 pub mod refine;
+pub mod row_view;
 pub mod scene_buffers;
 pub mod trainer;
 pub mod view;

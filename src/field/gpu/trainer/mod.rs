@@ -7,6 +7,7 @@
 //!   → colour MLP, semantic MLP → composite + losses + their backward
 //!   → semantic⁻¹ → glue (df) → feature⁻¹ → colour⁻¹ → glue (dg) → density⁻¹ → hash grid⁻¹ → Adam
 //! ```
+//! That order is written once, as `stages::TRAINING_STEP`.
 //! The same code runs natively and in the browser: nothing here blocks.
 use crate::field::config::FieldConfig;
 use crate::field::params::ParamLayout;
@@ -21,7 +22,7 @@ use crate::labels::LabelSet;
 use crate::scene::{Bounds, Pca, Scene};
 
 use super::adam::{AdamBuffers, AdamPass};
-use super::composite::{CompositeInputs, CompositeLayout, CompositePass, HeadSource, LOSS_WORDS};
+use super::composite::{CompositeInputs, CompositeLayout, CompositePass, LOSS_WORDS};
 use super::dense::{DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView, UNIFORM_WEIGHT_FLOATS};
 use super::encoding::{
     DirectionLayout, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
@@ -33,11 +34,12 @@ use super::rays::{NO_LABEL, RayGeometry, TARGET_FLAGS, TARGET_HEADER_WORDS, TARG
 use super::scene_buffers::{LabelIndex, SceneBuffers};
 use super::view::view_rays;
 pub use super::view::{DepthGuide, FrameAssembler, RenderedFrame, ViewCamera};
+use stages::{FIELD_STAGES, TRAINING_STEP};
+
+mod render;
+mod stages;
 
 const SH: u32 = 16;
-
-/// A named stage of the training step and how to record it.
-type Stage<'a> = (&'static str, Box<dyn Fn(&mut wgpu::ComputePass<'_>) + 'a>);
 
 /// Losses of one step, as read back.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -218,23 +220,23 @@ impl Trainer {
             cfg,
             &CompositeInputs {
                 step_uniforms: &step_uniforms,
-                h0: HeadSource {
-                    buffer: &samples.density_out,
+                h0: RowView {
+                    buffer: samples.density_out.clone(),
                     stride: 1 + g,
                     offset: 0,
                 },
-                color: HeadSource {
-                    buffer: &color_out,
+                color: RowView {
+                    buffer: color_out.clone(),
                     stride: 3,
                     offset: 0,
                 },
-                logits: HeadSource {
-                    buffer: &logits,
+                logits: RowView {
+                    buffer: logits.clone(),
                     stride: c,
                     offset: 0,
                 },
-                feature: HeadSource {
-                    buffer: &samples.feature_out,
+                feature: RowView {
+                    buffer: samples.feature_out.clone(),
                     stride: d,
                     offset: 0,
                 },
@@ -479,56 +481,18 @@ impl Trainer {
     /// rewrites the step uniforms). Returns at once; the GPU works on.
     pub fn train(&mut self, steps: u32) {
         for _ in 0..steps {
-            self.step += 1;
-            let uniforms = StepUniforms::for_step(&self.cfg, self.step, self.seed, self.learning_rate());
-            self.ctx
-                .queue
-                .write_buffer(&self.step_uniforms, 0, bytemuck::bytes_of(&uniforms));
-            let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("training step"),
-            });
-            encoder.clear_buffer(&self.optimizer.grads, 0, None);
+            let mut encoder = self.begin_step();
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("training step"),
                     timestamp_writes: None,
                 });
-                self.record_forward(&mut pass);
-                self.composite.record(&mut pass);
-                self.record_backward(&mut pass);
-                self.adam.record(&mut pass);
+                for stage in TRAINING_STEP {
+                    self.record_stage(stage, &mut pass);
+                }
             }
             self.ctx.queue.submit([encoder.finish()]);
         }
-    }
-
-    fn record_forward(&self, pass: &mut wgpu::ComputePass<'_>) {
-        self.ray_batch.record(pass);
-        self.record_field(pass);
-    }
-
-    /// Everything after the rays are chosen up to the heads' outputs (training and rendering).
-    fn record_field(&self, pass: &mut wgpu::ComputePass<'_>) {
-        self.sample_points.record(pass);
-        self.encode.record(pass);
-        self.sh.record(pass);
-        self.density.record_forward(pass);
-        self.feature.record_forward(pass);
-        self.glue.record_assemble(pass);
-        self.color.record_forward(pass);
-        self.semantic.record_forward(pass);
-    }
-
-    fn record_backward(&self, pass: &mut wgpu::ComputePass<'_>) {
-        // Every MLP here was built with gradients, so recording cannot fail.
-        let built = "training MLPs are built with gradients";
-        self.semantic.record_backward(pass).expect(built);
-        self.glue.record_gather_feature(pass);
-        self.feature.record_backward(pass).expect(built);
-        self.color.record_backward(pass).expect(built);
-        self.glue.record_gather_geometry(pass);
-        self.density.record_backward(pass).expect(built);
-        self.hash_backward.record(pass);
     }
 
     /// Trains one step with every stage in its own timed compute pass, and returns the GPU time
@@ -538,67 +502,23 @@ impl Trainer {
             self.train(1);
             return Ok(None);
         };
-        self.step += 1;
-        let uniforms = StepUniforms::for_step(&self.cfg, self.step, self.seed, self.learning_rate());
-        self.ctx
-            .queue
-            .write_buffer(&self.step_uniforms, 0, bytemuck::bytes_of(&uniforms));
-        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
-        encoder.clear_buffer(&self.optimizer.grads, 0, None);
-        let stages = self.stages();
-        for (name, record) in &stages {
+        let mut encoder = self.begin_step();
+        for stage in TRAINING_STEP {
+            let name = stage.name();
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some(name),
                 timestamp_writes: timer.timestamp_writes(name),
             });
-            record(&mut pass);
+            self.record_stage(stage, &mut pass);
         }
-        drop(stages);
         timer.resolve(&mut encoder);
         self.ctx.queue.submit([encoder.finish()]);
         Ok(Some(total_by_name(&timer.read(&self.ctx).times().await?)))
     }
 
-    /// The stages of a training step in order, each recording its passes.
-    fn stages(&self) -> Vec<Stage<'_>> {
-        let built = "training MLPs are built with gradients";
-        vec![
-            ("rays", Box::new(|p| self.ray_batch.record(p))),
-            ("samples", Box::new(|p| self.sample_points.record(p))),
-            ("encoding", Box::new(|p| self.encode.record(p))),
-            ("sh", Box::new(|p| self.sh.record(p))),
-            ("density mlp", Box::new(|p| self.density.record_forward(p))),
-            ("feature mlp", Box::new(|p| self.feature.record_forward(p))),
-            ("glue", Box::new(|p| self.glue.record_assemble(p))),
-            ("colour mlp", Box::new(|p| self.color.record_forward(p))),
-            ("semantic mlp", Box::new(|p| self.semantic.record_forward(p))),
-            ("composite", Box::new(|p| self.composite.record(p))),
-            (
-                "semantic mlp backward",
-                Box::new(|p| self.semantic.record_backward(p).expect(built)),
-            ),
-            ("glue backward", Box::new(|p| self.glue.record_gather_feature(p))),
-            (
-                "feature mlp backward",
-                Box::new(|p| self.feature.record_backward(p).expect(built)),
-            ),
-            (
-                "colour mlp backward",
-                Box::new(|p| self.color.record_backward(p).expect(built)),
-            ),
-            ("glue backward", Box::new(|p| self.glue.record_gather_geometry(p))),
-            (
-                "density mlp backward",
-                Box::new(|p| self.density.record_backward(p).expect(built)),
-            ),
-            ("encoding backward", Box::new(|p| self.hash_backward.record(p))),
-            ("adam", Box::new(|p| self.adam.record(p))),
-        ]
-    }
-
     /// Stages in one training step (see [`Trainer::submit_stage`]).
     pub fn stage_count(&self) -> usize {
-        self.stages().len()
+        TRAINING_STEP.len()
     }
 
     /// Records stage `index` of a training step alone in its own command buffer and submits it;
@@ -606,165 +526,21 @@ impl Trainer {
     /// [`Trainer::train`] does. For wall-clock profiling where timestamp queries are missing
     /// (the caller times each submission until the GPU is done). Returns the stage's name.
     pub fn submit_stage(&mut self, index: usize) -> Option<&'static str> {
-        if index == 0 {
-            self.step += 1;
-            let uniforms = StepUniforms::for_step(&self.cfg, self.step, self.seed, self.learning_rate());
-            self.ctx
-                .queue
-                .write_buffer(&self.step_uniforms, 0, bytemuck::bytes_of(&uniforms));
-        }
-        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
-        if index == 0 {
-            encoder.clear_buffer(&self.optimizer.grads, 0, None);
-        }
-        let stages = self.stages();
-        let (name, record) = stages.get(index)?;
+        let stage = *TRAINING_STEP.get(index)?;
+        let mut encoder = if index == 0 {
+            self.begin_step()
+        } else {
+            self.ctx.device.create_command_encoder(&Default::default())
+        };
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(name),
+                label: Some(stage.name()),
                 timestamp_writes: None,
             });
-            record(&mut pass);
-        }
-        let name = *name;
-        drop(stages);
-        self.ctx.queue.submit([encoder.finish()]);
-        Some(name)
-    }
-
-    /// Renders frame `frame` at its own resolution, in tiles of one batch of rays each, with the
-    /// scene's depth guiding the samples as in training (rays made on the GPU). Each tile is read
-    /// back before the next is recorded, so memory stays at one batch whatever the frame size.
-    pub async fn render_frame(&mut self, frame: u32, width: u32, height: u32) -> Result<RenderedFrame, GpuError> {
-        if frame >= self.frame_count || width * height != self.pixels_per_frame {
-            return Err(GpuError::invalid_argument(
-                "render",
-                format!(
-                    "frame {frame} of {width} x {height} is not in this scene ({} frames)",
-                    self.frame_count
-                ),
-            ));
-        }
-        let first = frame * self.pixels_per_frame;
-        let mut out = self.assembler(width, height);
-        let mut done = 0u32;
-        while done < self.pixels_per_frame {
-            let count = (self.pixels_per_frame - done).min(self.cfg.batch_rays);
-            self.frame_tile.set_tile(&self.ctx, first + done, count);
-            self.render_tile(count, &mut out, true).await?;
-            done += count;
-        }
-        Ok(out.finish(self.display_pca.as_ref()))
-    }
-
-    /// Renders any camera at any resolution (a new pose, or a scene frame at a lower resolution
-    /// for a quick preview). With [`DepthGuide::Estimate`] the view is rendered twice, the
-    /// second time with samples around the depth the first one found.
-    pub async fn render_view(&mut self, view: &ViewCamera, guide: DepthGuide<'_>) -> Result<RenderedFrame, GpuError> {
-        let pixels = view.pixels();
-        if pixels == 0 || view.width > 16384 || view.height > 16384 {
-            return Err(GpuError::invalid_argument(
-                "render",
-                format!("a view of {} x {} pixels cannot be rendered", view.width, view.height),
-            ));
-        }
-        let estimated;
-        let depth = match guide {
-            DepthGuide::Measured(depth) => {
-                if depth.len() != pixels {
-                    return Err(GpuError::invalid_argument(
-                        "render",
-                        format!("depth guide has {} values for a view of {pixels} pixels", depth.len()),
-                    ));
-                }
-                Some(depth)
-            }
-            DepthGuide::Estimate => {
-                estimated = self.render_rays(view, None).await?.depth().to_vec();
-                Some(estimated.as_slice())
-            }
-        };
-        Ok(self.render_rays(view, depth).await?.finish(self.display_pca.as_ref()))
-    }
-
-    async fn render_rays(&mut self, view: &ViewCamera, depth: Option<&[f32]>) -> Result<FrameAssembler, GpuError> {
-        let batch = self.cfg.batch_rays as usize;
-        let mut out = self.assembler(view.width, view.height);
-        // Rendering computes no loss: target rows only carry the flags (the composite skips rays
-        // that miss the box by them) and no label.
-        let row_words = TARGET_HEADER_WORDS + self.cfg.feature_dim as usize;
-        let mut targets = vec![0u32; batch * row_words];
-        let miss = RayGeometry {
-            origin: [0.0; 3],
-            z_per_t: 1.0,
-            dir: [0.0, 0.0, 1.0],
-            near: 0.0,
-            far: 0.0,
-            depth: 0.0,
-            pixel: 0,
-            flags: 0,
-        };
-        let mut done = 0;
-        while done < view.pixels() {
-            let count = (view.pixels() - done).min(batch);
-            let mut rays = view_rays(view, &self.bounds, depth, done, count);
-            rays.resize(batch, miss);
-            for (row, ray) in targets.chunks_exact_mut(row_words).zip(&rays) {
-                row[TARGET_LABEL] = NO_LABEL;
-                row[TARGET_FLAGS] = ray.flags;
-                row[TARGET_PIXEL] = ray.pixel;
-            }
-            self.ctx
-                .queue
-                .write_buffer(&self.ray_batch.rays, 0, bytemuck::cast_slice(&rays));
-            self.ctx
-                .queue
-                .write_buffer(&self.ray_batch.targets, 0, bytemuck::cast_slice(&targets));
-            self.render_tile(count as u32, &mut out, false).await?;
-            done += count;
-        }
-        Ok(out)
-    }
-
-    fn assembler(&self, width: u32, height: u32) -> FrameAssembler {
-        FrameAssembler::new(
-            width,
-            height,
-            self.cfg.num_classes as usize,
-            self.cfg.feature_dim as usize,
-        )
-    }
-
-    /// Renders the batch's rays (made by the frame-tile kernel when `frame_tile`, else already
-    /// written) and adds the first `count` to `out`.
-    async fn render_tile(&mut self, count: u32, out: &mut FrameAssembler, frame_tile: bool) -> Result<(), GpuError> {
-        // A fixed step keeps the sample jitter of a pixel the same on every render.
-        let uniforms = StepUniforms::for_step(&self.cfg, 1, self.seed ^ 0x5eed, 0.0);
-        self.ctx
-            .queue
-            .write_buffer(&self.step_uniforms, 0, bytemuck::bytes_of(&uniforms));
-        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
-            if frame_tile {
-                self.frame_tile.record(&mut pass);
-            }
-            self.record_field(&mut pass);
-            self.composite.record(&mut pass);
+            self.record_stage(stage, &mut pass);
         }
         self.ctx.queue.submit([encoder.finish()]);
-        let stride = self.composite.layout.ray_output_stride();
-        let rendered = self.composite.layout.rendered_offset();
-        let rows = read_elements_async::<f32>(
-            &self.ctx,
-            &self.composite.ray_outputs,
-            0..(count as usize * stride) as u64,
-        )
-        .await?;
-        for row in rows.chunks_exact(stride) {
-            out.push(&row[rendered..]);
-        }
-        Ok(())
+        Some(stage.name())
     }
 
     /// Starts reading the losses of the latest step, unless a read is already under way.

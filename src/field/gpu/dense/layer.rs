@@ -1,0 +1,451 @@
+//! One dense layer: its spec, the uniform block every dense kernel reads, and its forward and
+//! backward bound to their buffers (picking the tiled or uniform-weight kernels per product).
+use std::num::NonZeroU64;
+use std::ops::Range;
+
+use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
+use super::tiled::{REDUCE_SHAPE, REDUCE_WORKGROUP, TileShape, weight_chunks};
+use super::uniform::{UniformWeightPartials, WindowedLayer, uniform_weight_chunks};
+use super::{Activation, DenseFamily, RowView};
+use crate::gpu::buffers::{storage_buffer_zeroed, uniform_buffer_from};
+use crate::gpu::pipeline::Dispatch1d;
+use crate::gpu::{GpuContext, GpuError};
+
+/// Uniform block of every dense kernel; mirrors `DenseDims` in `shaders/_dense_tile.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct DenseDims {
+    pub rows: u32,
+    pub in_dim: u32,
+    pub out_dim: u32,
+    pub relu: u32,
+    pub x_stride: u32,
+    pub x_offset: u32,
+    pub y_stride: u32,
+    pub y_offset: u32,
+    pub dy_stride: u32,
+    pub dy_offset: u32,
+    pub dx_stride: u32,
+    pub dx_offset: u32,
+    pub weight_offset: u32,
+    pub chunk_rows: u32,
+    pub chunks: u32,
+    pub _pad: u32,
+}
+
+/// One layer's shape and weights.
+#[derive(Debug, Clone)]
+pub struct DenseLayerSpec {
+    pub label: String,
+    pub rows: u32,
+    pub in_dim: u32,
+    pub out_dim: u32,
+    pub activation: Activation,
+    /// The `[out][in]` matrix's range of the flat parameter (and gradient) buffer.
+    pub weights: Range<usize>,
+}
+
+impl DenseLayerSpec {
+    pub(super) fn check(&self) -> Result<(), GpuError> {
+        if self.rows == 0 || self.in_dim == 0 || self.out_dim == 0 {
+            return Err(GpuError::invalid_argument(
+                &self.label,
+                format!(
+                    "rows {}, in {} and out {} must be positive",
+                    self.rows, self.in_dim, self.out_dim
+                ),
+            ));
+        }
+        let expected = self.in_dim as usize * self.out_dim as usize;
+        if self.weights.len() != expected {
+            return Err(GpuError::invalid_argument(
+                &self.label,
+                format!(
+                    "weight range {:?} holds {} values, not {expected}",
+                    self.weights,
+                    self.weights.len()
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    fn base_dims(&self) -> DenseDims {
+        DenseDims {
+            rows: self.rows,
+            in_dim: self.in_dim,
+            out_dim: self.out_dim,
+            relu: u32::from(self.activation == Activation::Relu),
+            ..DenseDims::default()
+        }
+    }
+}
+
+/// A pipeline, its bind group and workgroup counts: one recorded dispatch.
+pub(super) struct BoundDispatch {
+    pub(super) pipeline: wgpu::ComputePipeline,
+    pub(super) bind_group: wgpu::BindGroup,
+    pub(super) workgroups: [u32; 3],
+}
+
+impl BoundDispatch {
+    pub(super) fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        let [x, y, z] = self.workgroups;
+        pass.dispatch_workgroups(x, y, z);
+    }
+}
+
+pub(super) fn bind_group(
+    ctx: &GpuContext,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    resources: &[(u32, wgpu::BindingResource<'_>)],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry<'_>> = resources
+        .iter()
+        .map(|(binding, resource)| wgpu::BindGroupEntry {
+            binding: *binding,
+            resource: resource.clone(),
+        })
+        .collect();
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &entries,
+    })
+}
+
+/// The part of a flat buffer holding `range` (in f32), bound from an offset the device accepts,
+/// so only the layer's weights count against the binding-size limit (the hash table in front
+/// of them may be larger than one binding); returns the binding and where `range` starts in it.
+pub(super) fn range_binding<'a>(
+    ctx: &GpuContext,
+    what: &str,
+    buffer: &'a wgpu::Buffer,
+    range: &Range<usize>,
+) -> Result<(wgpu::BindingResource<'a>, u32), GpuError> {
+    let end = range.end as u64 * 4;
+    if end > buffer.size() {
+        return Err(GpuError::invalid_argument(
+            what,
+            format!("range {range:?} ends past the buffer's {} f32", buffer.size() / 4),
+        ));
+    }
+    let align = u64::from(ctx.limits.min_storage_buffer_offset_alignment.max(4));
+    let start = range.start as u64 * 4 / align * align;
+    let size = end - start;
+    ctx.ensure_storage_binding_fits(what, size)?;
+    let size =
+        NonZeroU64::new(size).ok_or_else(|| GpuError::invalid_argument(what, format!("range {range:?} is empty")))?;
+    let local = (range.start as u64 - start / 4) as u32;
+    Ok((
+        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer,
+            offset: start,
+            size: Some(size),
+        }),
+        local,
+    ))
+}
+
+fn check_binding(ctx: &GpuContext, what: &str, buffer: &wgpu::Buffer) -> Result<(), GpuError> {
+    ctx.ensure_storage_binding_fits(what, buffer.size())
+}
+
+/// The forward of one layer, bound to its buffers.
+pub struct DenseForward {
+    spec: DenseLayerSpec,
+    dispatch: BoundDispatch,
+    family: DenseFamily,
+}
+
+impl DenseForward {
+    /// `input` must hold `spec.rows` rows of `in_dim` values, `output` of `out_dim`; the output
+    /// is overwritten.
+    pub async fn new(
+        ctx: &GpuContext,
+        pipelines: &mut DensePipelines,
+        spec: &DenseLayerSpec,
+        params: &wgpu::Buffer,
+        input: &RowView,
+        output: &RowView,
+    ) -> Result<DenseForward, GpuError> {
+        spec.check()?;
+        let label = format!("{} forward", spec.label);
+        input.check(&format!("{label} input"), spec.rows, spec.in_dim)?;
+        output.check(&format!("{label} output"), spec.rows, spec.out_dim)?;
+        check_binding(ctx, &label, &input.buffer)?;
+        check_binding(ctx, &label, &output.buffer)?;
+        let (pipeline, (weights, weight_offset), workgroups, family) = pipelines
+            .product_kernel(ctx, &label, params, spec, ProductKind::Forward)
+            .await?;
+        let dims = DenseDims {
+            x_stride: input.stride,
+            x_offset: input.offset,
+            y_stride: output.stride,
+            y_offset: output.offset,
+            weight_offset,
+            ..spec.base_dims()
+        };
+        let uniform = uniform_buffer_from(ctx, &label, &dims);
+        let bind_group = bind_group(
+            ctx,
+            &label,
+            &pipeline,
+            &[
+                (0, uniform.as_entire_binding()),
+                (1, input.buffer.as_entire_binding()),
+                (2, weights),
+                (3, output.buffer.as_entire_binding()),
+            ],
+        );
+        Ok(DenseForward {
+            spec: spec.clone(),
+            dispatch: BoundDispatch {
+                pipeline,
+                bind_group,
+                workgroups,
+            },
+            family,
+        })
+    }
+
+    pub fn spec(&self) -> &DenseLayerSpec {
+        &self.spec
+    }
+
+    /// The kernels this layer's forward runs (uniform weights only where the layer fits).
+    pub fn family(&self) -> DenseFamily {
+        self.family
+    }
+
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        self.dispatch.record(pass);
+    }
+}
+
+/// Buffers of one layer's backward.
+#[derive(Debug, Clone)]
+pub struct DenseGradients<'a> {
+    /// The flat gradient buffer (same layout as the parameters); dW is added at `spec.weights`.
+    pub grads: &'a wgpu::Buffer,
+    /// dL/dY, `out_dim` values per row.
+    pub output_grad: &'a RowView,
+    /// Where dL/dX goes (`in_dim` values per row, overwritten); `None` skips it.
+    pub input_grad: Option<&'a RowView>,
+}
+
+/// The backward of one layer, bound to its buffers; owns the per-chunk partial sums of dW.
+pub struct DenseBackward {
+    input_grad: Option<BoundDispatch>,
+    partial_sums: WeightPartials,
+    reduce: BoundDispatch,
+    chunks: u32,
+}
+
+/// The first half of dW: every chunk of rows' partial matrix.
+enum WeightPartials {
+    /// One dispatch of the tiled kernel over all chunks.
+    Tiled(BoundDispatch),
+    /// dZ masked into a packed buffer, then one dispatch per chunk reading it as uniform.
+    Uniform(UniformWeightPartials),
+}
+
+impl WeightPartials {
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        match self {
+            WeightPartials::Tiled(dispatch) => dispatch.record(pass),
+            WeightPartials::Uniform(partials) => partials.record(pass),
+        }
+    }
+}
+
+impl DenseBackward {
+    /// `input` and `output` are the forward's views (X and the activated Y).
+    pub async fn new(
+        ctx: &GpuContext,
+        pipelines: &mut DensePipelines,
+        spec: &DenseLayerSpec,
+        params: &wgpu::Buffer,
+        input: &RowView,
+        output: &RowView,
+        gradients: &DenseGradients<'_>,
+    ) -> Result<DenseBackward, GpuError> {
+        spec.check()?;
+        let label = format!("{} backward", spec.label);
+        input.check(&format!("{label} input"), spec.rows, spec.in_dim)?;
+        output.check(&format!("{label} output"), spec.rows, spec.out_dim)?;
+        let output_grad = gradients.output_grad;
+        output_grad.check(&format!("{label} output gradient"), spec.rows, spec.out_dim)?;
+        for buffer in [&input.buffer, &output.buffer, &output_grad.buffer] {
+            check_binding(ctx, &label, buffer)?;
+        }
+        let base = DenseDims {
+            x_stride: input.stride,
+            x_offset: input.offset,
+            y_stride: output.stride,
+            y_offset: output.offset,
+            dy_stride: output_grad.stride,
+            dy_offset: output_grad.offset,
+            ..spec.base_dims()
+        };
+
+        let input_grad = match gradients.input_grad {
+            None => None,
+            Some(input_grad) => {
+                let label = format!("{label} input gradient");
+                input_grad.check(&label, spec.rows, spec.in_dim)?;
+                check_binding(ctx, &label, &input_grad.buffer)?;
+                let (pipeline, (weights, weight_offset), workgroups, _) = pipelines
+                    .product_kernel(ctx, &label, params, spec, ProductKind::BackwardInput)
+                    .await?;
+                let dims = DenseDims {
+                    dx_stride: input_grad.stride,
+                    dx_offset: input_grad.offset,
+                    weight_offset,
+                    ..base
+                };
+                let uniform = uniform_buffer_from(ctx, &label, &dims);
+                let bind_group = bind_group(
+                    ctx,
+                    &label,
+                    &pipeline,
+                    &[
+                        (0, uniform.as_entire_binding()),
+                        (1, output_grad.buffer.as_entire_binding()),
+                        (2, output.buffer.as_entire_binding()),
+                        (3, weights),
+                        (4, input_grad.buffer.as_entire_binding()),
+                    ],
+                );
+                Some(BoundDispatch {
+                    pipeline,
+                    bind_group,
+                    workgroups,
+                })
+            }
+        };
+
+        let label = format!("{label} weight gradient");
+        let uniform_plan = match pipelines.family {
+            DenseFamily::UniformWeights => uniform_weight_chunks(ctx, spec),
+            DenseFamily::Tiled => None,
+        };
+        let shape = TileShape::for_product(spec.in_dim, Some(spec.out_dim));
+        let (chunk_rows, chunks) = match uniform_plan {
+            Some(plan) => plan,
+            None => weight_chunks(ctx, spec, shape)?,
+        };
+        let matrix = spec.in_dim as usize * spec.out_dim as usize;
+        let partials = storage_buffer_zeroed::<f32>(ctx, &format!("{label} partials"), chunks as usize * matrix)?;
+        let (grads, grad_offset) = range_binding(ctx, &label, gradients.grads, &spec.weights)?;
+        let dims = DenseDims {
+            chunk_rows,
+            chunks,
+            weight_offset: grad_offset,
+            ..base
+        };
+        let uniform = uniform_buffer_from(ctx, &label, &dims);
+
+        let partial_sums = match uniform_plan {
+            Some(_) => WeightPartials::Uniform(
+                UniformWeightPartials::new(
+                    ctx,
+                    pipelines,
+                    WindowedLayer {
+                        label: &label,
+                        spec,
+                        dims: &uniform,
+                        input,
+                        output,
+                        output_grad,
+                        partials: &partials,
+                        chunk_rows,
+                        chunks,
+                    },
+                )
+                .await?,
+            ),
+            None => {
+                let pipeline = pipelines.get(ctx, DenseKernel::PartialSums, shape).await?;
+                let bind = bind_group(
+                    ctx,
+                    &label,
+                    &pipeline,
+                    &[
+                        (0, uniform.as_entire_binding()),
+                        (1, output_grad.buffer.as_entire_binding()),
+                        (2, output.buffer.as_entire_binding()),
+                        (3, input.buffer.as_entire_binding()),
+                        (4, partials.as_entire_binding()),
+                    ],
+                );
+                let workgroups = [
+                    spec.in_dim.div_ceil(shape.tile_columns()),
+                    spec.out_dim.div_ceil(shape.tile_rows()),
+                    chunks,
+                ];
+                WeightPartials::Tiled(BoundDispatch {
+                    pipeline,
+                    bind_group: bind,
+                    workgroups,
+                })
+            }
+        };
+
+        let pipeline = pipelines.get(ctx, DenseKernel::ReduceChunks, REDUCE_SHAPE).await?;
+        let bind = bind_group(
+            ctx,
+            &label,
+            &pipeline,
+            &[
+                (0, uniform.as_entire_binding()),
+                (4, partials.as_entire_binding()),
+                (5, grads),
+            ],
+        );
+        let reduce_groups = Dispatch1d::for_device(ctx, matrix as u64, REDUCE_WORKGROUP)?;
+        let reduce = BoundDispatch {
+            pipeline,
+            bind_group: bind,
+            workgroups: [reduce_groups.x, reduce_groups.y, 1],
+        };
+        Ok(DenseBackward {
+            input_grad,
+            partial_sums,
+            reduce,
+            chunks,
+        })
+    }
+
+    /// Chunks of rows whose partial dW are summed by the second kernel.
+    pub fn chunks(&self) -> u32 {
+        self.chunks
+    }
+
+    /// Records dX (if wanted), then the dW partial sums and their reduction into the gradient.
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        if let Some(input_grad) = &self.input_grad {
+            input_grad.record(pass);
+        }
+        self.partial_sums.record(pass);
+        self.reduce.record(pass);
+    }
+
+    /// Whether dW reads dZ through uniform windows (the CPU-device kernels).
+    pub fn uses_uniform_windows(&self) -> bool {
+        matches!(self.partial_sums, WeightPartials::Uniform(_))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dims_uniform_is_sixteen_words() {
+        assert_eq!(size_of::<DenseDims>(), 64);
+    }
+}

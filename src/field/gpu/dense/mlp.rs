@@ -1,0 +1,208 @@
+//! Whole MLPs on the dense layers: the twin of `reference::mlp`.
+use super::layer::{DenseBackward, DenseForward, DenseGradients, DenseLayerSpec};
+use super::{Activation, DenseFamily, DensePipelines, RowView};
+use crate::field::params::MlpLayout;
+use crate::gpu::buffers::storage_buffer_zeroed;
+use crate::gpu::{GpuContext, GpuError};
+
+/// Gradient buffers of an MLP's backward.
+#[derive(Debug, Clone)]
+pub struct MlpGradients {
+    /// The flat gradient buffer; every layer's dW is added at its range.
+    pub grads: wgpu::Buffer,
+    /// dL/d(output), `output_dim` values per row.
+    pub output_grad: RowView,
+    /// Where dL/d(input) goes (overwritten); `None` when the input needs no gradient.
+    pub input_grad: Option<RowView>,
+}
+
+/// What an MLP reads and writes.
+#[derive(Debug, Clone)]
+pub struct MlpPassDesc<'a> {
+    pub label: &'a str,
+    pub layout: &'a MlpLayout,
+    pub rows: u32,
+    pub params: &'a wgpu::Buffer,
+    /// `input_dim` values per row.
+    pub input: RowView,
+    /// Where the last layer writes; `None`: a packed buffer the pass allocates.
+    pub output: Option<RowView>,
+    /// `None` builds a forward-only pass (rendering).
+    pub gradients: Option<MlpGradients>,
+}
+
+/// A whole MLP (ReLU after every hidden layer, linear output, as `reference::mlp`): the forward
+/// keeps every layer's output in buffers this pass owns (N × width, packed) for the backward.
+pub struct MlpPass {
+    forward: Vec<DenseForward>,
+    backward: Option<Vec<DenseBackward>>,
+    /// Output of layer k (the input of layer k + 1; the last is the MLP's output).
+    outputs: Vec<RowView>,
+    /// dL/d(input of layer k) for k ≥ 1, packed, owned.
+    hidden_grads: Vec<wgpu::Buffer>,
+}
+
+impl MlpPass {
+    pub async fn new(
+        ctx: &GpuContext,
+        pipelines: &mut DensePipelines,
+        desc: MlpPassDesc<'_>,
+    ) -> Result<MlpPass, GpuError> {
+        let MlpPassDesc {
+            label,
+            layout,
+            rows,
+            params,
+            input,
+            output,
+            gradients,
+        } = desc;
+        let dims: Vec<u32> = layout
+            .dims
+            .iter()
+            .map(|&d| u32::try_from(d).map_err(|_| GpuError::invalid_argument(label, format!("width {d} exceeds u32"))))
+            .collect::<Result<_, _>>()?;
+        let layers = layout.layers.len();
+        if layers == 0 || dims.len() != layers + 1 {
+            return Err(GpuError::invalid_argument(
+                label,
+                format!("layout {layout:?} has no consistent layers"),
+            ));
+        }
+        let specs: Vec<DenseLayerSpec> = (0..layers)
+            .map(|k| DenseLayerSpec {
+                label: format!("{label}.{k}"),
+                rows,
+                in_dim: dims[k],
+                out_dim: dims[k + 1],
+                activation: if k + 1 < layers {
+                    Activation::Relu
+                } else {
+                    Activation::None
+                },
+                weights: layout.layers[k].clone(),
+            })
+            .collect();
+
+        let mut outputs = Vec::with_capacity(layers);
+        for (k, spec) in specs.iter().enumerate() {
+            let view = match (&output, k + 1 == layers) {
+                (Some(view), true) => view.clone(),
+                _ => {
+                    let count = rows as usize * spec.out_dim as usize;
+                    let buffer = storage_buffer_zeroed::<f32>(ctx, &format!("{} output", spec.label), count)?;
+                    RowView::packed(&buffer, spec.out_dim)
+                }
+            };
+            outputs.push(view);
+        }
+        let mut forward = Vec::with_capacity(layers);
+        for (k, spec) in specs.iter().enumerate() {
+            let layer_input = if k == 0 { &input } else { &outputs[k - 1] };
+            forward.push(DenseForward::new(ctx, pipelines, spec, params, layer_input, &outputs[k]).await?);
+        }
+
+        let mut hidden_grads = Vec::new();
+        let backward = match gradients {
+            None => None,
+            Some(gradients) => {
+                for spec in &specs[1..] {
+                    let count = rows as usize * spec.in_dim as usize;
+                    hidden_grads.push(storage_buffer_zeroed::<f32>(
+                        ctx,
+                        &format!("{} input gradient", spec.label),
+                        count,
+                    )?);
+                }
+                let hidden_views: Vec<RowView> = hidden_grads
+                    .iter()
+                    .zip(&specs[1..])
+                    .map(|(b, spec)| RowView::packed(b, spec.in_dim))
+                    .collect();
+                let mut backward = Vec::with_capacity(layers);
+                for (k, spec) in specs.iter().enumerate() {
+                    let layer_input = if k == 0 { &input } else { &outputs[k - 1] };
+                    let output_grad = if k + 1 == layers {
+                        &gradients.output_grad
+                    } else {
+                        &hidden_views[k]
+                    };
+                    let input_grad = if k == 0 {
+                        gradients.input_grad.as_ref()
+                    } else {
+                        Some(&hidden_views[k - 1])
+                    };
+                    let layer_gradients = DenseGradients {
+                        grads: &gradients.grads,
+                        output_grad,
+                        input_grad,
+                    };
+                    backward.push(
+                        DenseBackward::new(ctx, pipelines, spec, params, layer_input, &outputs[k], &layer_gradients)
+                            .await?,
+                    );
+                }
+                Some(backward)
+            }
+        };
+        Ok(MlpPass {
+            forward,
+            backward,
+            outputs,
+            hidden_grads,
+        })
+    }
+
+    /// Records every layer's forward, in order.
+    pub fn record_forward(&self, pass: &mut wgpu::ComputePass<'_>) {
+        for layer in &self.forward {
+            layer.record(pass);
+        }
+    }
+
+    /// Records every layer's backward, last layer first. Needs the forward of the same rows
+    /// recorded before it (it reads the stored outputs); fails on a forward-only pass.
+    pub fn record_backward(&self, pass: &mut wgpu::ComputePass<'_>) -> Result<(), GpuError> {
+        let backward = self.backward.as_ref().ok_or_else(|| {
+            let label = self.forward.first().map_or("mlp", |layer| layer.spec().label.as_str());
+            GpuError::invalid_argument(label, "backward recorded on a pass built without gradients")
+        })?;
+        for layer in backward.iter().rev() {
+            layer.record(pass);
+        }
+        Ok(())
+    }
+
+    /// The MLP's (linear) output.
+    pub fn output(&self) -> &RowView {
+        &self.outputs[self.outputs.len() - 1]
+    }
+
+    /// Output of layer `k` (ReLU-activated for hidden layers).
+    pub fn layer_output(&self, k: usize) -> Option<&RowView> {
+        self.outputs.get(k)
+    }
+
+    /// dL/d(input of layer k) for k ≥ 1, as written by the backward.
+    pub fn hidden_gradient(&self, k: usize) -> Option<&wgpu::Buffer> {
+        k.checked_sub(1).and_then(|i| self.hidden_grads.get(i))
+    }
+
+    pub fn layers(&self) -> impl Iterator<Item = &DenseLayerSpec> {
+        self.forward.iter().map(DenseForward::spec)
+    }
+
+    /// For each layer's backward: whether dW reads dZ through uniform windows (none: forward only).
+    pub fn weight_gradient_windows(&self) -> Vec<bool> {
+        self.backward
+            .iter()
+            .flatten()
+            .map(DenseBackward::uses_uniform_windows)
+            .collect()
+    }
+
+    /// The kernel family each layer's forward (and input gradient) runs.
+    pub fn layer_families(&self) -> impl Iterator<Item = DenseFamily> + '_ {
+        self.forward.iter().map(DenseForward::family)
+    }
+}

@@ -1,0 +1,78 @@
+//! Bias-free dense layers and whole MLPs on the GPU, the twin of `reference::mlp`.
+//!
+//! One layer over N rows computes `Y[n][o] = act(Σ_i X[n][i]·W[o][i])` (act ReLU or none), with
+//! X and Y [`RowView`]s (a row stride and a column offset each, so a layer can read a slice of a
+//! concatenation row and write into a slice of a wider row) and W the layer's row-major
+//! `[out][in]` range of the flat parameter buffer. Its backward, given dY:
+//! - `dZ = dY ⊙ act'(Y)` (ReLU: `Y > 0`, 0 at 0 as the reference), formed while staging tiles;
+//! - `dX = dZ·W`, OVERWRITING the input-gradient view (skipped when there is none, e.g. the
+//!   colour MLP's SH input);
+//! - `dW = dZᵀ·X`, ADDED to the gradient buffer at the layer's range and nowhere else (the
+//!   trainer zeroes the gradient buffer before a step; the hash-table part is another pass's).
+//!   The sum over N is deterministic: every chunk of rows writes its own partial matrix, then a
+//!   second kernel sums the chunks in order, so a step gives the same bits every run.
+//!
+//! The three kernels (`shaders/dense_*.wgsl`) share one register-tiled product
+//! (`shaders/_dense_tile.wgsl`): each invocation accumulates 4×4 outputs from tiles staged in
+//! workgroup memory; the invocation grid and chunk depth are override constants picked per
+//! layer shape by [`TileShape`], so 128-wide layers use 64×64 tiles and 1-, 3- or C-wide outputs
+//! tall thin ones. Pipelines are compiled once per (kernel, shape) and device (through
+//! [`DensePipelines`] into the context's pipeline cache) and shared by every layer of every MLP.
+//!
+//! On CPU devices (lavapipe, SwiftShader) the forward and the input gradient use a second
+//! family of kernels, [`DenseFamily::UniformWeights`] (`shaders/dense_*_uniform.wgsl`): one
+//! invocation per row, the layer's weights read through a uniform binding, which those devices
+//! load once per SIMD group instead of once per lane (see the shader for the measurement). It
+//! needs the parameter buffer made with UNIFORM usage and [`UNIFORM_WEIGHT_FLOATS`] of padding
+//! after the last layer, and a layer of at most that many weights; other layers, and every
+//! weight gradient, use the tiled kernels.
+//!
+//! X and Y (and dY and dX) of one layer must be different buffers: WebGPU forbids binding one
+//! buffer both read-only and writable in a dispatch.
+//!
+//! Where things live: [`tiled`] (tile shapes and the tiled weight-gradient chunking),
+//! [`uniform`] (the uniform-weight family), [`pipelines`] (the pipeline cache and the choice of
+//! kernel per product), [`layer`] (layer specs, one layer's forward and backward) and [`mlp`]
+//! (whole MLPs). Everything a caller needs is re-exported here.
+mod layer;
+mod mlp;
+mod pipelines;
+mod tiled;
+mod uniform;
+
+pub use layer::{DenseBackward, DenseDims, DenseForward, DenseGradients, DenseLayerSpec};
+pub use mlp::{MlpGradients, MlpPass, MlpPassDesc};
+pub use pipelines::DensePipelines;
+pub use tiled::TileShape;
+pub use uniform::UNIFORM_WEIGHT_FLOATS;
+
+pub use crate::field::gpu::row_view::RowView;
+use crate::gpu::GpuContext;
+
+/// Which kernels compute the forward and input gradient of a layer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum DenseFamily {
+    /// Workgroup-tiled products (GPUs).
+    Tiled,
+    /// Row-per-invocation loops over weights in a uniform binding (CPU devices), where a layer
+    /// and the parameter buffer allow it; tiled otherwise.
+    UniformWeights,
+}
+
+impl DenseFamily {
+    /// The family that is faster on `ctx`'s kind of device.
+    pub fn for_device(ctx: &GpuContext) -> DenseFamily {
+        if ctx.is_software() {
+            DenseFamily::UniformWeights
+        } else {
+            DenseFamily::Tiled
+        }
+    }
+}
+
+/// The layer's nonlinearity, applied to the product (there is no bias).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Activation {
+    Relu,
+    None,
+}

@@ -1,0 +1,175 @@
+//! The dense kernels by name, the override constants each is compiled with, and the choice of
+//! kernel family for one product. Compiled pipelines are kept by the context's pipeline cache,
+//! so every layer of every MLP (and every later trainer on the device) shares them.
+
+use super::DenseFamily;
+use super::layer::{DenseLayerSpec, range_binding};
+use super::tiled::{TileShape, row_tile_dispatch};
+use super::uniform::{uniform_block, uniform_dispatch};
+use crate::gpu::pipeline::{KernelSpec, create_compute_pipeline};
+use crate::gpu::{GpuContext, GpuError, shaders};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum DenseKernel {
+    Forward,
+    BackwardInput,
+    PartialSums,
+    ReduceChunks,
+    ForwardUniform,
+    BackwardInputUniform,
+    MaskOutputGradient,
+    ChunkPartialSums,
+}
+
+impl DenseKernel {
+    pub(super) fn source(self) -> (&'static str, &'static str, &'static str) {
+        match self {
+            DenseKernel::Forward => ("dense forward", shaders::DENSE_FORWARD, "forward"),
+            DenseKernel::BackwardInput => ("dense backward input", shaders::DENSE_BACKWARD_INPUT, "backward_input"),
+            DenseKernel::PartialSums => (
+                "dense weight partial sums",
+                shaders::DENSE_BACKWARD_WEIGHT,
+                "partial_sums",
+            ),
+            DenseKernel::ReduceChunks => ("dense weight reduce", shaders::DENSE_BACKWARD_WEIGHT, "reduce_chunks"),
+            DenseKernel::ForwardUniform => (
+                "dense forward (uniform weights)",
+                shaders::DENSE_FORWARD_UNIFORM,
+                "forward",
+            ),
+            DenseKernel::BackwardInputUniform => (
+                "dense backward input (uniform weights)",
+                shaders::DENSE_BACKWARD_INPUT_UNIFORM,
+                "backward_input",
+            ),
+            DenseKernel::MaskOutputGradient => (
+                "dense output gradient mask",
+                shaders::DENSE_BACKWARD_WEIGHT_UNIFORM,
+                "mask_output_gradient",
+            ),
+            DenseKernel::ChunkPartialSums => (
+                "dense weight partial sums (uniform windows)",
+                shaders::DENSE_BACKWARD_WEIGHT_UNIFORM,
+                "chunk_partial_sums",
+            ),
+        }
+    }
+}
+
+/// Which dense kernel family layers use; compiles (or fetches from the context's cache) the
+/// pipeline for one kernel and its override constants.
+pub struct DensePipelines {
+    pub(super) family: DenseFamily,
+}
+
+impl Default for DensePipelines {
+    fn default() -> Self {
+        DensePipelines::with_family(DenseFamily::Tiled)
+    }
+}
+
+impl DensePipelines {
+    /// Tiled kernels everywhere.
+    pub fn new() -> DensePipelines {
+        DensePipelines::default()
+    }
+
+    pub fn with_family(family: DenseFamily) -> DensePipelines {
+        DensePipelines { family }
+    }
+
+    pub fn family(&self) -> DenseFamily {
+        self.family
+    }
+
+    pub(super) async fn get(
+        &self,
+        ctx: &GpuContext,
+        kernel: DenseKernel,
+        shape: TileShape,
+    ) -> Result<wgpu::ComputePipeline, GpuError> {
+        ctx.ensure_workgroup_storage_fits(kernel.source().0, shape.workgroup_storage_bytes())?;
+        let constants = [
+            ("TX", f64::from(shape.tx)),
+            ("TY", f64::from(shape.ty)),
+            ("KC", f64::from(shape.kc)),
+        ];
+        self.compile(ctx, kernel, &constants).await
+    }
+
+    pub(super) async fn get_uniform(
+        &self,
+        ctx: &GpuContext,
+        kernel: DenseKernel,
+        block: u32,
+    ) -> Result<wgpu::ComputePipeline, GpuError> {
+        self.compile(ctx, kernel, &[("BLOCK", f64::from(block))]).await
+    }
+
+    pub(super) async fn compile(
+        &self,
+        ctx: &GpuContext,
+        kernel: DenseKernel,
+        constants: &[(&str, f64)],
+    ) -> Result<wgpu::ComputePipeline, GpuError> {
+        let (label, source, entry_point) = kernel.source();
+        let spec = KernelSpec {
+            label,
+            source,
+            entry_point,
+            layout: None,
+            constants,
+        };
+        create_compute_pipeline(ctx, &spec).await
+    }
+}
+
+/// The two products that multiply by a layer's weights.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum ProductKind {
+    /// Y = act(X Wᵀ): `out_dim` columns.
+    Forward,
+    /// dX = dZ W: `in_dim` columns.
+    BackwardInput,
+}
+
+/// A pipeline, the weights' binding (and where the layer starts in it), the workgroup counts and
+/// the family actually used.
+pub(super) type ProductKernel<'a> = (
+    wgpu::ComputePipeline,
+    (wgpu::BindingResource<'a>, u32),
+    [u32; 3],
+    DenseFamily,
+);
+
+impl DensePipelines {
+    /// The kernel for one of a layer's weight products: uniform weights where the family wants
+    /// them and the layer fits, tiled otherwise.
+    pub(super) async fn product_kernel<'a>(
+        &self,
+        ctx: &GpuContext,
+        label: &str,
+        params: &'a wgpu::Buffer,
+        spec: &DenseLayerSpec,
+        kind: ProductKind,
+    ) -> Result<ProductKernel<'a>, GpuError> {
+        let (columns, uniform_kernel, tiled_kernel) = match kind {
+            ProductKind::Forward => (spec.out_dim, DenseKernel::ForwardUniform, DenseKernel::Forward),
+            ProductKind::BackwardInput => (
+                spec.in_dim,
+                DenseKernel::BackwardInputUniform,
+                DenseKernel::BackwardInput,
+            ),
+        };
+        if let Some(binding) = self.uniform_weights(ctx, params, &spec.weights) {
+            let pipeline = self.get_uniform(ctx, uniform_kernel, uniform_block(columns)).await?;
+            let workgroups = uniform_dispatch(ctx, spec.rows, columns)?;
+            return Ok((pipeline, binding, workgroups, DenseFamily::UniformWeights));
+        }
+        let shape = TileShape::for_product(columns, None);
+        let pipeline = self.get(ctx, tiled_kernel, shape).await?;
+        let binding = range_binding(ctx, label, params, &spec.weights)?;
+        let workgroups = row_tile_dispatch(ctx, spec.rows, shape, columns.div_ceil(shape.tile_columns()))?;
+        Ok((pipeline, binding, workgroups, DenseFamily::Tiled))
+    }
+}

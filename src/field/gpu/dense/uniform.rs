@@ -1,0 +1,308 @@
+//! The uniform-weight dense kernels (`shaders/dense_*_uniform.wgsl`), used on CPU devices: one
+//! invocation per row with the layer's weights in a uniform binding, and the weight gradient
+//! read through 64 KiB uniform windows of dZ, one dispatch per chunk of rows.
+use std::num::NonZeroU64;
+use std::ops::Range;
+
+use super::layer::{BoundDispatch, DenseLayerSpec, bind_group};
+use super::pipelines::{DenseKernel, DensePipelines};
+use super::{DenseFamily, RowView};
+use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
+use crate::gpu::{GpuContext, GpuError};
+
+/// f32 in the uniform binding of the uniform-weight kernels (64 KiB, WebGPU's default limit).
+pub const UNIFORM_WEIGHT_FLOATS: usize = 16384;
+/// Invocations per workgroup of the uniform-weight kernels (`WORKGROUP` in the shader).
+pub(super) const UNIFORM_WORKGROUP: u32 = 64;
+
+/// Outputs per invocation of a uniform-weight kernel: the fewest of 4, 8, 16 covering `width`.
+pub(super) fn uniform_block(width: u32) -> u32 {
+    match width {
+        0..=4 => 4,
+        5..=8 => 8,
+        _ => 16,
+    }
+}
+
+pub(super) fn uniform_dispatch(ctx: &GpuContext, rows: u32, width: u32) -> Result<[u32; 3], GpuError> {
+    let groups = Dispatch1d::for_device(ctx, u64::from(rows), UNIFORM_WORKGROUP)?;
+    Ok([groups.x, groups.y, width.div_ceil(uniform_block(width))])
+}
+
+/// Mirrors `ChunkInfo` in `shaders/dense_backward_weight_uniform.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ChunkInfo {
+    index: u32,
+    _pad: [u32; 3],
+}
+
+/// What the uniform-window weight gradient of one layer reads and writes.
+pub(super) struct WindowedLayer<'a> {
+    pub label: &'a str,
+    pub spec: &'a DenseLayerSpec,
+    /// The layer's `DenseDims` uniform buffer.
+    pub dims: &'a wgpu::Buffer,
+    /// X, the activated Y and dY of the forward.
+    pub input: &'a RowView,
+    pub output: &'a RowView,
+    pub output_grad: &'a RowView,
+    /// Where each chunk's partial dW goes.
+    pub partials: &'a wgpu::Buffer,
+    /// From [`uniform_weight_chunks`].
+    pub chunk_rows: u32,
+    pub chunks: u32,
+}
+
+pub(super) struct UniformWeightPartials {
+    mask: BoundDispatch,
+    pipeline: wgpu::ComputePipeline,
+    common: wgpu::BindGroup,
+    windows: wgpu::BindGroup,
+    /// Bytes between consecutive chunks' dZ windows, and between their `ChunkInfo` slots.
+    window_stride: u32,
+    info_stride: u32,
+    chunks: u32,
+    workgroups: [u32; 2],
+    /// Owned so the bind groups' buffers live as long as the pass.
+    _buffers: [wgpu::Buffer; 2],
+}
+
+impl UniformWeightPartials {
+    pub(super) async fn new(
+        ctx: &GpuContext,
+        pipelines: &mut DensePipelines,
+        layer: WindowedLayer<'_>,
+    ) -> Result<Self, GpuError> {
+        let WindowedLayer {
+            label,
+            spec,
+            dims,
+            input,
+            output,
+            output_grad,
+            partials,
+            chunk_rows,
+            chunks,
+        } = layer;
+        let window_floats = chunk_rows as usize * spec.out_dim as usize;
+        // Every chunk's window is UNIFORM_WEIGHT_FLOATS long from its start, the last included.
+        let dz_floats = (chunks as usize - 1) * window_floats + UNIFORM_WEIGHT_FLOATS;
+        ctx.ensure_storage_binding_fits(label, dz_floats as u64 * 4)?;
+        let dz = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(&format!("{label} dZ")),
+            size: dz_floats as u64 * 4,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::UNIFORM,
+            mapped_at_creation: false,
+        });
+        let info_stride = ctx.limits.min_uniform_buffer_offset_alignment.max(16);
+        let mut infos = vec![0u8; chunks as usize * info_stride as usize];
+        for c in 0..chunks {
+            let info = ChunkInfo { index: c, _pad: [0; 3] };
+            let at = (c * info_stride) as usize;
+            infos[at..at + size_of::<ChunkInfo>()].copy_from_slice(bytemuck::bytes_of(&info));
+        }
+        let info = wgpu::util::DeviceExt::create_buffer_init(
+            &ctx.device,
+            &wgpu::util::BufferInitDescriptor {
+                label: Some(&format!("{label} chunk slots")),
+                contents: &infos,
+                usage: wgpu::BufferUsages::UNIFORM,
+            },
+        );
+
+        let mask_pipeline = pipelines.compile(ctx, DenseKernel::MaskOutputGradient, &[]).await?;
+        let mask_bind = bind_group(
+            ctx,
+            label,
+            &mask_pipeline,
+            &[
+                (0, dims.as_entire_binding()),
+                (1, output_grad.buffer.as_entire_binding()),
+                (2, output.buffer.as_entire_binding()),
+                (6, dz.as_entire_binding()),
+            ],
+        );
+        let groups = Dispatch1d::for_device(ctx, u64::from(spec.rows) * u64::from(spec.out_dim), UNIFORM_WORKGROUP)?;
+        let mask = BoundDispatch {
+            pipeline: mask_pipeline,
+            bind_group: mask_bind,
+            workgroups: [groups.x, groups.y, 1],
+        };
+
+        let block = uniform_block(spec.out_dim);
+        let columns = spec.in_dim.next_power_of_two().clamp(8, UNIFORM_WORKGROUP);
+        let (pipeline, layouts) = pipelines.chunk_sums_pipeline(ctx, block, columns).await?;
+        let common = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout: &layouts[0],
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: dims.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: input.buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: partials.as_entire_binding(),
+                },
+            ],
+        });
+        let windows = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout: &layouts[1],
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &dz,
+                        offset: 0,
+                        size: NonZeroU64::new(UNIFORM_WEIGHT_FLOATS as u64 * 4),
+                    }),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &info,
+                        offset: 0,
+                        size: NonZeroU64::new(size_of::<ChunkInfo>() as u64),
+                    }),
+                },
+            ],
+        });
+        Ok(UniformWeightPartials {
+            mask,
+            pipeline,
+            common,
+            windows,
+            window_stride: (window_floats * 4) as u32,
+            info_stride,
+            chunks,
+            workgroups: [spec.in_dim.div_ceil(columns), spec.out_dim.div_ceil(block)],
+            _buffers: [dz, info],
+        })
+    }
+
+    pub(super) fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        self.mask.record(pass);
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.common, &[]);
+        for c in 0..self.chunks {
+            pass.set_bind_group(1, &self.windows, &[c * self.window_stride, c * self.info_stride]);
+            pass.dispatch_workgroups(self.workgroups[0], self.workgroups[1], 1);
+        }
+    }
+}
+
+/// Rows per chunk and chunk count for the uniform-window weight gradient: as many rows as fit
+/// a 64 KiB window, each window starting at an offset the device accepts for uniform bindings;
+/// `None` when the partial matrices would not fit one storage binding (then: tiled).
+pub(super) fn uniform_weight_chunks(ctx: &GpuContext, spec: &DenseLayerSpec) -> Option<(u32, u32)> {
+    if (ctx.limits.max_uniform_buffer_binding_size as usize) < UNIFORM_WEIGHT_FLOATS * 4 {
+        return None;
+    }
+    let out = spec.out_dim as usize;
+    if out > UNIFORM_WEIGHT_FLOATS {
+        return None;
+    }
+    let align = (ctx.limits.min_uniform_buffer_offset_alignment.max(4) / 4) as usize;
+    // chunk_rows · out must be a multiple of `align` floats.
+    let step = align / gcd(out, align);
+    let chunk_rows = (UNIFORM_WEIGHT_FLOATS / out) / step * step;
+    if chunk_rows == 0 {
+        return None;
+    }
+    let chunks = (spec.rows as usize).div_ceil(chunk_rows);
+    let partial_bytes = chunks as u64 * out as u64 * u64::from(spec.in_dim) * 4;
+    let dz_bytes = ((chunks - 1) * chunk_rows * out + UNIFORM_WEIGHT_FLOATS) as u64 * 4;
+    let limit = ctx
+        .limits
+        .max_storage_buffer_binding_size
+        .min(ctx.limits.max_buffer_size);
+    (partial_bytes <= limit && dz_bytes <= limit).then_some((chunk_rows as u32, chunks as u32))
+}
+
+fn gcd(a: usize, b: usize) -> usize {
+    if b == 0 { a } else { gcd(b, a % b) }
+}
+
+impl DensePipelines {
+    /// The per-chunk weight-gradient kernel, whose dZ window and chunk slot are bound with
+    /// dynamic offsets (so an explicit layout), and its two bind group layouts.
+    pub(super) async fn chunk_sums_pipeline(
+        &self,
+        ctx: &GpuContext,
+        block: u32,
+        columns: u32,
+    ) -> Result<(wgpu::ComputePipeline, [wgpu::BindGroupLayout; 2]), GpuError> {
+        let entry = |binding, ty, dynamic: bool, min: Option<u64>| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty,
+                has_dynamic_offset: dynamic,
+                min_binding_size: min.and_then(NonZeroU64::new),
+            },
+            count: None,
+        };
+        let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
+        let common = [
+            entry(0, wgpu::BufferBindingType::Uniform, false, None),
+            entry(3, storage(true), false, None),
+            entry(4, storage(false), false, None),
+        ];
+        let windows = [
+            entry(
+                0,
+                wgpu::BufferBindingType::Uniform,
+                true,
+                Some(UNIFORM_WEIGHT_FLOATS as u64 * 4),
+            ),
+            entry(1, wgpu::BufferBindingType::Uniform, true, Some(16)),
+        ];
+        let (label, source, entry_point) = DenseKernel::ChunkPartialSums.source();
+        let spec = KernelSpec {
+            label,
+            source,
+            entry_point,
+            layout: Some(&[&common, &windows]),
+            constants: &[("BLOCK", f64::from(block)), ("COLUMNS", f64::from(columns))],
+        };
+        let pipeline = create_compute_pipeline(ctx, &spec).await?;
+        // The context hands out the very layouts the pipeline was built with.
+        let common = ctx.bind_group_layout("dense chunk sums common", &common);
+        let windows = ctx.bind_group_layout("dense chunk sums windows", &windows);
+        Ok((pipeline, [common, windows]))
+    }
+
+    /// The uniform binding of `range` of `params` and where the range starts in it, when this
+    /// family wants uniform-weight kernels and the layer and buffer allow them.
+    pub(super) fn uniform_weights<'a>(
+        &self,
+        ctx: &GpuContext,
+        params: &'a wgpu::Buffer,
+        range: &Range<usize>,
+    ) -> Option<(wgpu::BindingResource<'a>, u32)> {
+        if self.family != DenseFamily::UniformWeights
+            || !params.usage().contains(wgpu::BufferUsages::UNIFORM)
+            || (ctx.limits.max_uniform_buffer_binding_size as usize) < UNIFORM_WEIGHT_FLOATS * 4
+        {
+            return None;
+        }
+        let align = (ctx.limits.min_uniform_buffer_offset_alignment.max(4) / 4) as usize;
+        let start = range.start / align * align;
+        let local = range.start - start;
+        if local + range.len() > UNIFORM_WEIGHT_FLOATS || (start + UNIFORM_WEIGHT_FLOATS) as u64 * 4 > params.size() {
+            return None;
+        }
+        let binding = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer: params,
+            offset: start as u64 * 4,
+            size: NonZeroU64::new(UNIFORM_WEIGHT_FLOATS as u64 * 4),
+        });
+        Some((binding, local as u32))
+    }
+}
