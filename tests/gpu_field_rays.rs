@@ -413,7 +413,6 @@ fn relabelling_changes_the_draws() {
     let mut p = passes(&ctx, &scene, &cfg);
     let mut index = LabelIndex {
         pixels_by_class: vec![Vec::new(); cfg.num_classes as usize],
-        balance: 0.0,
     };
     index.pixels_by_class[2] = vec![17, 5000, 5999];
     p.scene.upload_labels(&ctx, &index).unwrap();
@@ -429,44 +428,6 @@ fn relabelling_changes_the_draws() {
             assert!([17, 5000, 5999].contains(&twin.pixel));
         }
     }
-}
-
-/// With `label_balance` 1 a class is drawn as often as its share of the labelled pixels, on
-/// the GPU exactly as in the twin.
-#[test]
-fn balanced_draws_follow_the_pixel_counts() {
-    let Some(ctx) = gpu_for_tests("balanced_draws_follow_the_pixel_counts") else {
-        return;
-    };
-    let scene = test_scene();
-    let cfg = test_config(2000);
-    let mut p = passes(&ctx, &scene, &cfg);
-    let mut index = LabelIndex {
-        pixels_by_class: vec![Vec::new(); cfg.num_classes as usize],
-        balance: 1.0,
-    };
-    index.pixels_by_class[0] = (0..900).map(|i| i * 3).collect();
-    index.pixels_by_class[2] = (0..100).map(|i| 4000 + i).collect();
-    p.scene.upload_labels(&ctx, &index).unwrap();
-    p.rays.follow_labels(&ctx, &p.scene);
-    let uniforms = StepUniforms::for_step(&cfg, 5, 1, 1e-3);
-    let out = run_step(&ctx, &p, &uniforms);
-    let total = scene.frames.len() as u32 * scene.width * scene.height;
-    let mut per_class = [0u32; 3];
-    let labelled = cfg.batch_rays / 2..cfg.batch_rays;
-    for ray in 0..cfg.batch_rays {
-        let twin = pick_pixel(&uniforms, ray, total, &index);
-        assert_eq!(out.rays[ray as usize].pixel, twin.pixel, "ray {ray}");
-        if labelled.contains(&ray) {
-            let class = twin.label.expect("a labelled ray") as usize;
-            assert!(index.pixels_by_class[class].contains(&twin.pixel));
-            per_class[class] += 1;
-        }
-    }
-    // 1000 labelled rays, 90 % of the labelled pixels in class 0: about 900 draws (uniform over
-    // classes would give about 500).
-    assert!((840..=960).contains(&per_class[0]), "{per_class:?}");
-    assert_eq!(per_class[0] + per_class[2], labelled.len() as u32);
 }
 
 #[test]

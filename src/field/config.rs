@@ -160,11 +160,6 @@ pub struct FieldConfig {
     pub semantic_input: SemanticInput,
     /// How strokes spread inside their own frame before training (`field::propagate`).
     pub scribble_propagation: PropagationOptions,
-    /// How a labelled ray chooses its class: with probability proportional to the class's
-    /// labelled pixels raised to this power. 0 draws every class equally often; 1 draws every
-    /// labelled pixel equally often, so the semantic head learns how common each class is
-    /// (docs/quality.md).
-    pub label_balance: f32,
 }
 
 impl Default for FieldConfig {
@@ -196,7 +191,6 @@ impl Default for FieldConfig {
             semantic_trunk_gradient: 1.0,
             semantic_input: SemanticInput::Auto,
             scribble_propagation: PropagationOptions::default(),
-            label_balance: 0.0,
         }
     }
 }
@@ -393,9 +387,6 @@ impl FieldConfig {
             }
         }
         in_range("batch_rays", c.batch_rays, 1, 1 << 22)?;
-        if !(c.label_balance.is_finite() && (0.0..=1.0).contains(&c.label_balance)) {
-            return Err(bad("label_balance", c.label_balance, "must be in [0, 1]"));
-        }
         c.scribble_propagation.validate().map_err(|problem| ConfigError {
             field: "scribble_propagation",
             value: format!("{:?}", c.scribble_propagation),

@@ -142,17 +142,17 @@ pub fn pick_pixel(step: &StepUniforms, ray: u32, total_pixels: u32, labels: &Lab
         pixel: random_below(ray_random(base, stream::PIXEL), total_pixels),
         label: None,
     };
-    let draws = labels.draws();
+    let present = labels.present_classes();
     let first_labelled = step.batch_rays - step.labelled_rays.min(step.batch_rays);
-    if ray < first_labelled || draws.is_empty() {
+    if ray < first_labelled || present.is_empty() {
         return uniform;
     }
-    let draw = draws[random_below(ray_random(base, stream::CLASS), draws.len() as u32) as usize];
-    let pixels = &labels.pixels_by_class[draw.class as usize];
-    let entry = random_below(ray_random(base, stream::ENTRY), draw.count);
+    let class = present[random_below(ray_random(base, stream::CLASS), present.len() as u32) as usize];
+    let pixels = &labels.pixels_by_class[class as usize];
+    let entry = random_below(ray_random(base, stream::ENTRY), pixels.len() as u32);
     PickedPixel {
-        pixel: pixels[(draw.first + entry) as usize],
-        label: Some(draw.class),
+        pixel: pixels[entry as usize],
+        label: Some(class),
     }
 }
 

@@ -46,28 +46,11 @@ pub struct SceneUniforms {
 
 /// Labelled pixels grouped by class: the CPU side of the labels buffer, and what the CPU twin of
 /// the ray picker draws from.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct LabelIndex {
     /// Global pixel indices per class id, ascending.
     pub pixels_by_class: Vec<Vec<u32>>,
-    /// How a labelled ray chooses its class (`FieldConfig::label_balance`): with probability
-    /// proportional to (labelled pixels of the class)^balance, so 0 is uniform over classes and 1
-    /// uniform over labelled pixels.
-    pub balance: f32,
 }
-
-/// One entry of the labels buffer a labelled ray picks uniformly: `count` pixels of `class`
-/// starting at `first` in that class's list. A class with more weight gets more entries.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct LabelDraw {
-    pub class: u32,
-    pub first: u32,
-    pub count: u32,
-}
-
-/// Entries the classes share when `balance` > 0: enough that a class's share of the draws is
-/// within about 1/64 of its weight, few enough that the header stays small.
-const DRAW_SLOTS: f64 = 64.0;
 
 impl LabelIndex {
     /// Rasterizes every labelled frame (`labels::rasterize_frame`; later strokes win, erasers
@@ -102,47 +85,7 @@ impl LabelIndex {
                 }
             }
         }
-        LabelIndex {
-            pixels_by_class,
-            balance: 0.0,
-        }
-    }
-
-    /// The same index with labelled rays choosing classes by `balance` (see the field).
-    pub fn with_balance(self, balance: f32) -> Self {
-        LabelIndex { balance, ..self }
-    }
-
-    /// The entries a labelled ray picks from uniformly. At balance 0 each present class is one
-    /// entry; otherwise a class gets entries in proportion to its weight (at least one, at most
-    /// one per pixel), each an equal slice of its pixels, so a pixel's chance within its class
-    /// stays (nearly) uniform.
-    pub fn draws(&self) -> Vec<LabelDraw> {
-        let present = self.present_classes();
-        let counts: Vec<f64> = present
-            .iter()
-            .map(|c| self.pixels_by_class[*c as usize].len() as f64)
-            .collect();
-        let weights: Vec<f64> = counts.iter().map(|n| n.powf(self.balance as f64)).collect();
-        let total: f64 = weights.iter().sum();
-        let mut draws = Vec::new();
-        for ((class, n), w) in present.iter().zip(&counts).zip(&weights) {
-            let slices = if self.balance > 0.0 {
-                (DRAW_SLOTS * w / total).round().clamp(1.0, *n) as u64
-            } else {
-                1
-            };
-            let n = *n as u64;
-            for k in 0..slices {
-                let (first, end) = (k * n / slices, (k + 1) * n / slices);
-                draws.push(LabelDraw {
-                    class: *class,
-                    first: first as u32,
-                    count: (end - first) as u32,
-                });
-            }
-        }
-        draws
+        LabelIndex { pixels_by_class }
     }
 
     /// Class ids with at least one labelled pixel, ascending: the classes a labelled ray draws
@@ -157,22 +100,18 @@ impl LabelIndex {
         self.pixels_by_class.iter().map(Vec::len).sum()
     }
 
-    /// The buffer's words: `[K, (class, start, count) × K, pixels…]` with K entries
-    /// ([`LabelIndex::draws`]) and `start` the word index of the entry's first pixel.
+    /// The buffer's words: `[K, (class, start, count) × K, pixels…]` with K present classes and
+    /// `start` the word index of the class's first pixel.
     pub fn to_words(&self) -> Vec<u32> {
         let present = self.present_classes();
-        let draws = self.draws();
-        let header = 1 + 3 * draws.len();
+        let header = 1 + 3 * present.len();
         let mut words = Vec::with_capacity(header + self.labelled_pixel_count());
-        words.push(draws.len() as u32);
-        let mut class_start = vec![0u32; self.pixels_by_class.len()];
+        words.push(present.len() as u32);
         let mut start = header as u32;
         for class in &present {
-            class_start[*class as usize] = start;
-            start += self.pixels_by_class[*class as usize].len() as u32;
-        }
-        for d in &draws {
-            words.extend([d.class, class_start[d.class as usize] + d.first, d.count]);
+            let count = self.pixels_by_class[*class as usize].len() as u32;
+            words.extend([*class, start, count]);
+            start += count;
         }
         for class in &present {
             words.extend_from_slice(&self.pixels_by_class[*class as usize]);
@@ -381,80 +320,4 @@ pub fn scene_uniforms(scene: &Scene, cfg: &FieldConfig) -> Result<SceneUniforms,
         bounds_max: b.max.map(|v| v as f32),
         has_features,
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn index(counts: &[usize], balance: f32) -> LabelIndex {
-        let mut next = 0u32;
-        let pixels_by_class = counts
-            .iter()
-            .map(|n| {
-                let list: Vec<u32> = (next..next + *n as u32).collect();
-                next += *n as u32;
-                list
-            })
-            .collect();
-        LabelIndex {
-            pixels_by_class,
-            balance,
-        }
-    }
-
-    /// Each class's entries cover its pixels exactly once, in order.
-    fn assert_partition(index: &LabelIndex) {
-        for (class, pixels) in index.pixels_by_class.iter().enumerate() {
-            let mut next = 0;
-            for d in index.draws().iter().filter(|d| d.class as usize == class) {
-                assert_eq!(d.first, next, "class {class}");
-                assert!(d.count > 0);
-                next += d.count;
-            }
-            assert_eq!(next as usize, pixels.len(), "class {class}");
-        }
-    }
-
-    #[test]
-    fn balance_zero_is_one_entry_per_present_class() {
-        let index = index(&[500, 0, 20, 3], 0.0);
-        let classes: Vec<u32> = index.draws().iter().map(|d| d.class).collect();
-        assert_eq!(classes, vec![0, 2, 3]);
-        assert_partition(&index);
-    }
-
-    #[test]
-    fn balance_one_gives_entries_in_proportion_to_pixels() {
-        let index = index(&[6000, 0, 2000, 3], 1.0);
-        let draws = index.draws();
-        let entries = |c| draws.iter().filter(|d| d.class == c).count();
-        // 64 slots: 48 and 16, and the tiny class keeps one entry.
-        assert_eq!((entries(0), entries(2), entries(3)), (48, 16, 1));
-        assert_partition(&index);
-        // A half balance sits between: sqrt(6000) / sqrt(2000) is about 1.7.
-        let half = super::LabelIndex {
-            balance: 0.5,
-            ..index.clone()
-        };
-        let draws = half.draws();
-        let entries = |c| draws.iter().filter(|d| d.class == c).count();
-        assert!(entries(0) > entries(2) && entries(2) > entries(3));
-        assert_partition(&half);
-    }
-
-    #[test]
-    fn the_words_point_each_entry_at_its_slice() {
-        let index = index(&[7, 0, 5], 1.0);
-        let words = index.to_words();
-        let draws = index.draws();
-        assert_eq!(words[0] as usize, draws.len());
-        for (k, d) in draws.iter().enumerate() {
-            let (class, start, count) = (words[1 + 3 * k], words[2 + 3 * k], words[3 + 3 * k]);
-            assert_eq!((class, count), (d.class, d.count));
-            let got = &words[start as usize..(start + count) as usize];
-            let want = &index.pixels_by_class[d.class as usize][d.first as usize..(d.first + d.count) as usize];
-            assert_eq!(got, want);
-        }
-    }
 }

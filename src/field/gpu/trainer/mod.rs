@@ -438,8 +438,7 @@ impl Trainer {
             scene.width,
             scene.height,
             self.cfg.num_classes,
-        )
-        .with_balance(self.cfg.label_balance);
+        );
         self.labelled_pixels = index.labelled_pixel_count();
         self.scene.upload_labels(&self.ctx, &index)?;
         self.ray_batch.follow_labels(&self.ctx, &self.scene);
