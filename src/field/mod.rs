@@ -8,6 +8,7 @@
 //! 5,056 + 64·C (semantic), i.e. 16,836,352 f32 (≈ 64 MiB) for C = 2. The trainer keeps four
 //! buffers of that length (parameters, gradient, Adam m and v).
 pub mod config;
+pub mod normals;
 pub mod params;
 pub mod propagate;
 pub mod reference;

@@ -18,11 +18,12 @@
 //! is that object.
 use serde::{Deserialize, Serialize};
 
+use crate::field::normals::depth_normals;
 use crate::field::refine::Guide;
 use std::collections::HashMap;
 
 use crate::labels::{FrameLabels, LabelSet, UNLABELLED, rasterize_frame};
-use crate::scene::Scene;
+use crate::scene::{Intrinsics, Scene};
 
 /// How strokes spread inside their frame before training. `enabled: false` trains on the
 /// strokes alone.
@@ -52,6 +53,11 @@ pub struct PropagationOptions {
     pub min_probability: f32,
     /// ...and that class leads the next by this much.
     pub min_margin: f32,
+    /// Turn of the surface normal between neighbours, as 1 - cos(angle), at which the step
+    /// weight falls to e^-1 is this squared; 0 leaves normals out. Normals come from dense depth
+    /// (`field::normals`), so a crease where a box stands on a table stops the walk even where
+    /// the two surfaces share a colour and a depth.
+    pub normal_sigma: f32,
 }
 
 impl Default for PropagationOptions {
@@ -64,6 +70,7 @@ impl Default for PropagationOptions {
             reach: 0.5,
             min_probability: 0.7,
             min_margin: 0.7,
+            normal_sigma: 0.0,
         }
     }
 }
@@ -88,6 +95,12 @@ impl PropagationOptions {
                 self.depth_hole_factor
             ));
         }
+        if !(self.normal_sigma.is_finite() && self.normal_sigma >= 0.0) {
+            return Err(format!(
+                "scribble_propagation: `normal_sigma` = {}: must be 0 (off) or a positive number",
+                self.normal_sigma
+            ));
+        }
         for (name, v) in [
             ("min_probability", self.min_probability),
             ("min_margin", self.min_margin),
@@ -109,8 +122,15 @@ const TOLERANCE: f64 = 1e-4;
 /// The label map a frame trains on: the strokes, plus (when `options` are enabled and the strokes
 /// hold at least two classes) the pixels the walk assigns with confidence. Class ids at or above
 /// `classes` are dropped (the model has no logit for them). `strokes` is the frame's rasterized
-/// strokes (`labels::rasterize_frame`) at the guide's size.
-pub fn propagate_frame(strokes: &[u16], classes: usize, guide: Guide<'_>, options: &PropagationOptions) -> Vec<u16> {
+/// strokes (`labels::rasterize_frame`) at the guide's size; `camera` (the frame's intrinsics)
+/// lets the walk use surface normals (`PropagationOptions::normal_sigma`).
+pub fn propagate_frame(
+    strokes: &[u16],
+    classes: usize,
+    guide: Guide<'_>,
+    camera: Option<&Intrinsics>,
+    options: &PropagationOptions,
+) -> Vec<u16> {
     let mut seeds: Vec<u16> = strokes
         .iter()
         .map(|&c| if (c as usize) < classes { c } else { UNLABELLED })
@@ -119,7 +139,7 @@ pub fn propagate_frame(strokes: &[u16], classes: usize, guide: Guide<'_>, option
     if !options.enabled || present.len() < 2 || seeds.len() != pixel_count(guide) {
         return seeds;
     }
-    let graph = Graph::new(guide, options);
+    let graph = Graph::new(guide, camera, options);
     let probabilities: Vec<Vec<f32>> = present.iter().map(|&class| graph.walk(&seeds, class)).collect();
     for (pixel, label) in seeds.iter_mut().enumerate() {
         if *label != UNLABELLED {
@@ -194,7 +214,7 @@ impl PropagationCache {
                 Some((_, map)) => map.clone(),
                 None => {
                     let raster = rasterize_frame(Some(strokes), scene.width, scene.height);
-                    let map = propagate_frame(&raster, classes, guide, options);
+                    let map = propagate_frame(&raster, classes, guide, Some(&scene.intrinsics), options);
                     self.frames.insert(frame, (strokes.clone(), map.clone()));
                     map
                 }
@@ -222,7 +242,7 @@ struct Graph {
 }
 
 impl Graph {
-    fn new(guide: Guide<'_>, options: &PropagationOptions) -> Graph {
+    fn new(guide: Guide<'_>, camera: Option<&Intrinsics>, options: &PropagationOptions) -> Graph {
         let (width, height) = (guide.rgb.width() as usize, guide.rgb.height() as usize);
         let lab: Vec<[f32; 3]> = guide.rgb.pixels().map(|p| srgb_to_lab(p.0)).collect();
         let log_depth: Vec<Option<f32>> = match guide.depth {
@@ -235,6 +255,15 @@ impl Graph {
         let colour_scale = 0.5 / (options.colour_sigma * options.colour_sigma);
         let depth_scale = 0.5 / (options.depth_sigma * options.depth_sigma);
         let dense_depth = log_depth.iter().filter(|d| d.is_some()).count() * 2 > log_depth.len();
+        let normals = match (guide.depth, camera) {
+            (Some(depth), Some(camera)) if options.normal_sigma > 0.0 && dense_depth => depth_normals(depth, camera),
+            _ => vec![None; width * height],
+        };
+        let normal_scale = if options.normal_sigma > 0.0 {
+            1.0 / (options.normal_sigma * options.normal_sigma)
+        } else {
+            0.0
+        };
         let hole_factor = if dense_depth { options.depth_hole_factor } else { 1.0 };
         let weight = |a: usize, b: usize| {
             let dc: f32 = (0..3).map(|k| (lab[a][k] - lab[b][k]).powi(2)).sum();
@@ -243,7 +272,11 @@ impl Graph {
                 (None, None) => (0.0, 1.0),
                 _ => (0.0, hole_factor),
             };
-            ((-(dc * colour_scale + dd * depth_scale)).exp() * factor).max(MIN_WEIGHT)
+            let turn = match (normals[a], normals[b]) {
+                (Some(n), Some(m)) => 1.0 - (n[0] * m[0] + n[1] * m[1] + n[2] * m[2]),
+                _ => 0.0,
+            };
+            ((-(dc * colour_scale + dd * depth_scale + turn * normal_scale)).exp() * factor).max(MIN_WEIGHT)
         };
         let mut right = vec![0f32; width * height];
         let mut down = vec![0f32; width * height];
@@ -437,13 +470,53 @@ mod tests {
         let rgb = two_regions();
         let strokes = columns(24, 16, &[(3, 0), (20, 1)]);
         let guide = Guide { rgb: &rgb, depth: None };
-        let map = propagate_frame(&strokes, 2, guide, &PropagationOptions::default());
+        let map = propagate_frame(&strokes, 2, guide, None, &PropagationOptions::default());
         for y in 0..16 {
             for x in 0..24 {
                 let want = if x < 12 { 0 } else { 1 };
                 assert_eq!(map[y * 24 + x], want, "pixel ({x}, {y})");
             }
         }
+    }
+
+    #[test]
+    fn a_crease_in_the_depth_stops_the_walk_where_colour_and_depth_change_smoothly() {
+        // One colour; depth falls gently towards x = 12 and rises after it (a fold, no jump):
+        // only the turn of the normal marks the edge.
+        let rgb = RgbImage::from_pixel(24, 16, Rgb([150, 150, 150]));
+        let depth: ImageBuffer<Luma<u16>, Vec<u16>> =
+            ImageBuffer::from_fn(24, 16, |x, _| Luma([(1000 + 10 * (2 * x as i32 - 23).abs()) as u16]));
+        let camera = Intrinsics {
+            fx: 20.0,
+            fy: 20.0,
+            cx: 11.5,
+            cy: 7.5,
+        };
+        let strokes = columns(24, 16, &[(3, 0), (20, 1)]);
+        let guide = Guide {
+            rgb: &rgb,
+            depth: Some(&depth),
+        };
+        // A loose depth sigma and a long reach, so that neither the slope nor the walk's fading
+        // decides.
+        let no_normals = PropagationOptions {
+            depth_sigma: 1.0,
+            reach: 4.0,
+            ..PropagationOptions::default()
+        };
+        let with_normals = PropagationOptions {
+            normal_sigma: 0.1,
+            ..no_normals
+        };
+        let map = propagate_frame(&strokes, 2, guide, Some(&camera), &with_normals);
+        for x in 4..11 {
+            assert_eq!(map[8 * 24 + x], 0, "({x}, 8)");
+        }
+        for x in 13..20 {
+            assert_eq!(map[8 * 24 + x], 1, "({x}, 8)");
+        }
+        let without = propagate_frame(&strokes, 2, guide, Some(&camera), &no_normals);
+        assert_eq!(without[8 * 24 + 11], UNLABELLED, "no normals: unsure next to the fold");
     }
 
     #[test]
@@ -460,13 +533,14 @@ mod tests {
                 rgb: &rgb,
                 depth: Some(&depth),
             },
+            None,
             &options,
         );
         assert_eq!(with_depth[8 * 24 + 10], 0);
         assert_eq!(with_depth[8 * 24 + 13], 1);
         let labelled = |m: &[u16]| m.iter().filter(|&&c| c != UNLABELLED).count();
         assert_eq!(labelled(&with_depth), 24 * 16);
-        let without = propagate_frame(&strokes, 2, Guide { rgb: &rgb, depth: None }, &options);
+        let without = propagate_frame(&strokes, 2, Guide { rgb: &rgb, depth: None }, None, &options);
         for x in 9..15 {
             assert_eq!(
                 without[8 * 24 + x],
@@ -482,13 +556,16 @@ mod tests {
         let rgb = two_regions();
         let guide = Guide { rgb: &rgb, depth: None };
         let one = strokes_at(24, 16, &[(3, 8, 0), (4, 8, 0)]);
-        assert_eq!(propagate_frame(&one, 2, guide, &PropagationOptions::default()), one);
+        assert_eq!(
+            propagate_frame(&one, 2, guide, None, &PropagationOptions::default()),
+            one
+        );
         let two = strokes_at(24, 16, &[(3, 8, 0), (20, 8, 1), (5, 5, 7)]);
         let off = PropagationOptions {
             enabled: false,
             ..PropagationOptions::default()
         };
-        let kept = propagate_frame(&two, 2, guide, &off);
+        let kept = propagate_frame(&two, 2, guide, None, &off);
         assert_eq!(kept[5 * 24 + 5], UNLABELLED, "class 7 has no logit with 2 classes");
         assert_eq!(kept.iter().filter(|&&c| c != UNLABELLED).count(), 2);
     }
@@ -544,14 +621,14 @@ mod tests {
         });
         let strokes = strokes_at(96, 8, &[(2, 4, 0), (12, 4, 1)]);
         let guide = Guide { rgb: &rgb, depth: None };
-        let short = propagate_frame(&strokes, 2, guide, &PropagationOptions::default());
+        let short = propagate_frame(&strokes, 2, guide, None, &PropagationOptions::default());
         assert_eq!(short[4 * 96 + 20], 1, "near the stroke");
         assert_eq!(short[4 * 96 + 90], UNLABELLED, "48 pixels of reach do not get there");
         let long = PropagationOptions {
             reach: 4.0,
             ..PropagationOptions::default()
         };
-        assert_eq!(propagate_frame(&strokes, 2, guide, &long)[4 * 96 + 90], 1);
+        assert_eq!(propagate_frame(&strokes, 2, guide, None, &long)[4 * 96 + 90], 1);
     }
 
     #[test]

@@ -1,0 +1,82 @@
+//! Surface normals of a depth map: where two surfaces meet at a crease (a box's face and the
+//! table under it) colour and depth may both change smoothly, but the normal turns.
+use crate::scene::{DepthImage, Intrinsics};
+
+/// The unit normal at each pixel of `depth` (raw readings, any unit; 0 = no reading) seen by
+/// `camera`, from central differences of the back-projected points; `None` where the pixel or
+/// one of its four neighbours has no reading, and on the border.
+pub fn depth_normals(depth: &DepthImage, camera: &Intrinsics) -> Vec<Option<[f32; 3]>> {
+    let (w, h) = (depth.width() as usize, depth.height() as usize);
+    let z: Vec<f32> = depth.pixels().map(|p| f32::from(p.0[0])).collect();
+    let (fx, fy, cx, cy) = (camera.fx as f32, camera.fy as f32, camera.cx as f32, camera.cy as f32);
+    let point = |x: usize, y: usize| {
+        let d = z[y * w + x];
+        [(x as f32 - cx) / fx * d, (y as f32 - cy) / fy * d, d]
+    };
+    let mut normals = vec![None; w * h];
+    for y in 1..h.saturating_sub(1) {
+        for x in 1..w.saturating_sub(1) {
+            let i = y * w + x;
+            if [i, i - 1, i + 1, i - w, i + w].iter().any(|&j| z[j] <= 0.0) {
+                continue;
+            }
+            let sub = |a: [f32; 3], b: [f32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+            let gx = sub(point(x + 1, y), point(x - 1, y));
+            let gy = sub(point(x, y + 1), point(x, y - 1));
+            let n = [
+                gx[1] * gy[2] - gx[2] * gy[1],
+                gx[2] * gy[0] - gx[0] * gy[2],
+                gx[0] * gy[1] - gx[1] * gy[0],
+            ];
+            let length = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            if length > 0.0 && length.is_finite() {
+                normals[i] = Some([n[0] / length, n[1] / length, n[2] / length]);
+            }
+        }
+    }
+    normals
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use image::{ImageBuffer, Luma};
+
+    fn camera() -> Intrinsics {
+        Intrinsics {
+            fx: 50.0,
+            fy: 50.0,
+            cx: 15.5,
+            cy: 11.5,
+        }
+    }
+
+    fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+        a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    }
+
+    #[test]
+    fn a_plane_facing_the_camera_has_one_normal_along_the_axis() {
+        let depth = ImageBuffer::from_pixel(32, 24, Luma([1000u16]));
+        let normals = depth_normals(&depth, &camera());
+        let inner: Vec<[f32; 3]> = normals.iter().flatten().copied().collect();
+        assert_eq!(inner.len(), 30 * 22);
+        for n in inner {
+            assert!(dot(n, [0.0, 0.0, 1.0]).abs() > 0.999, "{n:?}");
+        }
+    }
+
+    #[test]
+    fn a_crease_turns_the_normal_and_holes_have_none() {
+        // Two planes meeting at x = 16: depth falls with x on the left, rises on the right.
+        let mut depth = ImageBuffer::from_fn(32, 24, |x, _| Luma([(1000 + 20 * (x as i32 - 16).abs()) as u16]));
+        depth.put_pixel(5, 5, Luma([0]));
+        let normals = depth_normals(&depth, &camera());
+        let at = |x: usize, y: usize| normals[y * 32 + x];
+        let (left, right) = (at(8, 12).unwrap(), at(24, 12).unwrap());
+        assert!(dot(left, right) < 0.9, "{left:?} {right:?}");
+        assert!(dot(left, at(10, 3).unwrap()) > 0.999);
+        assert!(at(5, 5).is_none() && at(6, 5).is_none() && at(5, 4).is_none());
+        assert!(at(0, 12).is_none() && at(31, 12).is_none());
+    }
+}
