@@ -10,6 +10,7 @@
 pub mod config;
 pub mod normals;
 pub mod params;
+pub mod point_walk;
 pub mod propagate;
 pub mod reference;
 pub mod refine;

@@ -19,10 +19,11 @@
 use serde::{Deserialize, Serialize};
 
 use crate::field::normals::depth_normals;
+use crate::field::point_walk::{PointWalkOptions, has_sparse_depth, label_points};
 use crate::field::refine::Guide;
 use std::collections::HashMap;
 
-use crate::labels::{FrameLabels, LabelSet, UNLABELLED, rasterize_frame};
+use crate::labels::{LabelSet, UNLABELLED, rasterize_frame};
 use crate::scene::{Intrinsics, Scene};
 
 /// How strokes spread inside their frame before training. `enabled: false` trains on the
@@ -58,6 +59,10 @@ pub struct PropagationOptions {
     /// (`field::normals`), so a crease where a box stands on a table stops the walk even where
     /// the two surfaces share a colour and a depth.
     pub normal_sigma: f32,
+    /// On a capture whose depth is a reconstruction's points (sparse), carry the strokes to
+    /// every frame through the points first (`field::point_walk`), so each frame walks from the
+    /// labels of its own points.
+    pub across_views: bool,
 }
 
 impl Default for PropagationOptions {
@@ -71,6 +76,7 @@ impl Default for PropagationOptions {
             min_probability: 0.7,
             min_margin: 0.7,
             normal_sigma: 0.0,
+            across_views: true,
         }
     }
 }
@@ -174,16 +180,19 @@ pub fn propagate_labels(
     PropagationCache::default().maps(scene, labels, classes, options)
 }
 
-/// Keeps each frame's propagated map until that frame's strokes change, so an edit on one frame
-/// (the page sends the whole label set after every stroke) walks that frame alone.
+/// Keeps each frame's propagated map until that frame's seeds change, so an edit on one frame
+/// (the page sends the whole label set after every stroke) walks that frame alone; on a capture
+/// with sparse depth the walk over the points reruns on every edit, and the frames whose point
+/// labels it changed walk again.
 #[derive(Default)]
 pub struct PropagationCache {
     settings: Option<(usize, PropagationOptions)>,
-    frames: HashMap<u32, (FrameLabels, Vec<u16>)>,
+    /// Per frame: the seeds it walked from and the map that gave.
+    frames: HashMap<u32, (Vec<u16>, Vec<u16>)>,
 }
 
 impl PropagationCache {
-    /// As [`propagate_labels`], reusing the maps of frames whose strokes are unchanged.
+    /// As [`propagate_labels`], reusing the maps of frames whose seeds are unchanged.
     pub fn maps(
         &mut self,
         scene: &Scene,
@@ -195,34 +204,98 @@ impl PropagationCache {
             self.frames.clear();
             self.settings = Some((classes, *options));
         }
-        let mut frames: Vec<u32> = labels
-            .frames
-            .iter()
-            .map(|f| f.frame)
-            .filter(|f| (*f as usize) < scene.frames.len())
-            .collect();
-        frames.sort_unstable();
-        frames.dedup();
-        self.frames.retain(|frame, _| frames.contains(frame));
-        let mut maps = Vec::with_capacity(frames.len());
-        for frame in frames {
-            let (Some(strokes), Some(guide)) = (labels.frame(frame), Guide::of_frame(scene, frame as usize)) else {
-                continue;
+        let seeds = frame_seeds(scene, labels, classes, options);
+        self.frames.retain(|frame, _| seeds.iter().any(|s| s.frame == *frame));
+        let mut maps = Vec::with_capacity(seeds.len());
+        for FrameSeeds {
+            frame,
+            strokes,
+            carried,
+        } in seeds
+        {
+            // Only strokes walk. The points of a frame may all be one object's, and a walk from
+            // those would paint the whole frame with it; where they have a label it is more
+            // often right than the walk's, so it replaces the walk's (never a stroke).
+            let walked = match (&strokes, Guide::of_frame(scene, frame as usize)) {
+                (Some(strokes), Some(guide)) => {
+                    Some(match self.frames.get(&frame).filter(|(seen, _)| seen == strokes) {
+                        Some((_, map)) => map.clone(),
+                        None => {
+                            let map = propagate_frame(strokes, classes, guide, Some(&scene.intrinsics), options);
+                            self.frames.insert(frame, (strokes.clone(), map.clone()));
+                            map
+                        }
+                    })
+                }
+                (Some(strokes), None) => Some(strokes.clone()),
+                (None, _) => None,
             };
-            let cached = self.frames.get(&frame).filter(|(seen, _)| seen == strokes);
-            let map = match cached {
-                Some((_, map)) => map.clone(),
-                None => {
-                    let raster = rasterize_frame(Some(strokes), scene.width, scene.height);
-                    let map = propagate_frame(&raster, classes, guide, Some(&scene.intrinsics), options);
-                    self.frames.insert(frame, (strokes.clone(), map.clone()));
+            let map = match (walked, carried) {
+                (Some(mut map), Some(carried)) => {
+                    let drawn = strokes.unwrap_or_default();
+                    for ((m, c), d) in map.iter_mut().zip(carried).zip(drawn) {
+                        if c != UNLABELLED && d == UNLABELLED {
+                            *m = c;
+                        }
+                    }
                     map
                 }
+                (Some(map), None) | (None, Some(map)) => map,
+                (None, None) => continue,
             };
             maps.push((frame, map));
         }
         maps
     }
+}
+
+/// A frame's labels before its own walk.
+struct FrameSeeds {
+    frame: u32,
+    /// The frame's rasterized strokes, if it has any.
+    strokes: Option<Vec<u16>>,
+    /// Labels the points carried to it, if any.
+    carried: Option<Vec<u16>>,
+}
+
+/// What each frame starts from: its rasterized strokes, and on a capture with sparse depth
+/// (when `across_views`) the labels the points carry to it. Frames in ascending order.
+fn frame_seeds(scene: &Scene, labels: &LabelSet, classes: usize, options: &PropagationOptions) -> Vec<FrameSeeds> {
+    let mut frames: Vec<u32> = labels
+        .frames
+        .iter()
+        .map(|f| f.frame)
+        .filter(|f| (*f as usize) < scene.frames.len())
+        .collect();
+    frames.sort_unstable();
+    frames.dedup();
+    let mut seeds: Vec<FrameSeeds> = frames
+        .into_iter()
+        .map(|frame| FrameSeeds {
+            frame,
+            strokes: Some(rasterize_frame(labels.frame(frame), scene.width, scene.height)),
+            carried: None,
+        })
+        .collect();
+    if !(options.enabled && options.across_views && has_sparse_depth(scene)) {
+        return seeds;
+    }
+    let strokes: Vec<(u32, Vec<u16>)> = seeds
+        .iter()
+        .filter_map(|s| s.strokes.clone().map(|m| (s.frame, m)))
+        .collect();
+    for (frame, carried) in label_points(scene, &strokes, classes, &PointWalkOptions::default()) {
+        match seeds.iter_mut().find(|s| s.frame == frame) {
+            Some(own) => own.carried = Some(carried),
+            None => seeds.push(FrameSeeds {
+                frame,
+                strokes: None,
+                carried: Some(carried),
+            }),
+        }
+    }
+    seeds.sort_by_key(|s| s.frame);
+    seeds
 }
 
 fn pixel_count(guide: Guide<'_>) -> usize {
@@ -363,7 +436,7 @@ impl Graph {
 
 /// Solves `A x = b` for a symmetric positive definite `A` given as `apply(x, out)`, with the
 /// Jacobi preconditioner `diagonal`, from x = 0, for at most `max_iterations` iterations.
-fn conjugate_gradient(
+pub(crate) fn conjugate_gradient(
     apply: impl Fn(&[f64], &mut [f64]),
     b: &[f64],
     diagonal: &[f64],
@@ -407,7 +480,7 @@ fn conjugate_gradient(
 }
 
 /// CIE L*a*b* (D65) of an 8-bit sRGB pixel.
-fn srgb_to_lab(rgb: [u8; 3]) -> [f32; 3] {
+pub(crate) fn srgb_to_lab(rgb: [u8; 3]) -> [f32; 3] {
     let linear = |c: u8| {
         let c = f32::from(c) / 255.0;
         if c <= 0.04045 {

@@ -189,3 +189,63 @@ fn real_capture_downscaled() {
         assert_eq!(gt.dimensions(), (200, 200));
     }
 }
+
+/// Strokes on two photos reach every photo through the model's points (`field::point_walk`):
+/// the labels the trainer draws from cover most photos, and nearly all of them are right.
+#[test]
+fn strokes_on_two_photos_reach_the_others_through_the_points() {
+    use scribblefield::field::point_walk::{PointWalkOptions, label_points};
+    use scribblefield::field::propagate::{PropagationOptions, propagate_labels};
+    use scribblefield::labels::rasterize_frame;
+    use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
+    let Some(dir) = real_data(CAPTURE) else { return };
+    let opts = ImportOptions {
+        max_size: Some(200),
+        ..ImportOptions::default()
+    };
+    let scene = run_with(&dir, &opts).unwrap().scene;
+    let labels = scribble_frames(&scene, &[0, 26], &ScribbleOptions::default());
+    let score = |options: &PropagationOptions| right_share(&scene, &propagate_labels(&scene, &labels, 2, options));
+    // The points alone: every label they give is checked against the masks.
+    let strokes: Vec<(u32, Vec<u16>)> = [0u32, 26]
+        .iter()
+        .map(|&f| (f, rasterize_frame(labels.frame(f), scene.width, scene.height)))
+        .collect();
+    let (point_frames, point_labels, point_right) =
+        right_share(&scene, &label_points(&scene, &strokes, 2, &PointWalkOptions::default()));
+    let (frames, labelled, right) = score(&PropagationOptions::default());
+    let within = PropagationOptions {
+        across_views: false,
+        ..PropagationOptions::default()
+    };
+    let (frames_within, labelled_within, right_within) = score(&within);
+    eprintln!(
+        "the points alone: {point_frames} frames, {point_labels} labelled pixels, {point_right:.4} right; \
+         with the walks: {frames} frames, {labelled} labelled pixels, {right:.4} right; \
+         within the two photos: {frames_within} frames, {labelled_within} pixels, {right_within:.4} right"
+    );
+    assert_eq!(frames_within, 2);
+    assert!(
+        point_frames >= 40 && point_right > 0.99,
+        "{point_frames} frames, {point_right}"
+    );
+    assert!(frames >= 40, "{frames} frames labelled");
+    assert!(labelled > 3 * labelled_within, "{labelled} against {labelled_within}");
+    assert!(right > 0.95, "{right}");
+}
+
+/// How many frames `maps` label, how many of their pixels (where the masks say anything), and
+/// the share of those that match the masks.
+fn right_share(scene: &Scene, maps: &[(u32, Vec<u16>)]) -> (usize, usize, f64) {
+    let (mut labelled, mut right) = (0usize, 0usize);
+    for (frame, map) in maps {
+        let gt = scene.frames[*frame as usize].gt.as_ref().unwrap();
+        for (label, truth) in map.iter().zip(gt.pixels()) {
+            if *label != u16::MAX && truth.0[0] != 255 {
+                labelled += 1;
+                right += usize::from(*label == u16::from(truth.0[0]));
+            }
+        }
+    }
+    (maps.len(), labelled, right as f64 / labelled.max(1) as f64)
+}

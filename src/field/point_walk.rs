@@ -1,0 +1,346 @@
+//! Labels carried between views through a reconstruction's points (docs/quality.md).
+//!
+//! A photo capture without a depth sensor has depth only where its structure-from-motion model
+//! put a 3D point (the COLMAP importer stores each image's tracks as sparse depth). On such a
+//! capture the walk inside one frame has little to go on (soft edges, one colour for an object
+//! and the wall behind it), and the field learns geometry slowly, so strokes on two frames say
+//! little about the other fifty. The points know more: every reading of every frame is a point
+//! in the world, the same 3D point seen from several frames lands in one place, and an object is
+//! a cluster of points apart from the wall behind it. A random walk over the points' nearest
+//! neighbours, started from the readings under the strokes, labels the points of every frame;
+//! each frame then trains on (and walks from) the labels of its own readings.
+use glam::DVec3;
+
+use super::propagate::{conjugate_gradient, srgb_to_lab};
+use crate::labels::UNLABELLED;
+use crate::scene::Scene;
+
+/// Neighbours each point links to (the graph is made symmetric, so some have more).
+const NEIGHBOURS: usize = 10;
+/// Points per occupied cell the neighbour search aims at.
+const POINTS_PER_CELL: f64 = 4.0;
+/// Smallest edge weight: keeps the graph connected so each system has one solution.
+const MIN_WEIGHT: f64 = 1e-9;
+
+/// How the points carry labels. Distances are in units of the median distance between a point
+/// and its nearest neighbours, so the setting does not depend on the model's scale.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointWalkOptions {
+    /// Distance at which an edge's weight falls to e^-1.
+    pub distance_sigma: f64,
+    /// CIE L*a*b* difference at which an edge's weight falls to e^-1.
+    pub colour_sigma: f64,
+    /// A point takes a label where its most likely class leads the next by this much.
+    pub min_margin: f64,
+}
+
+impl Default for PointWalkOptions {
+    fn default() -> Self {
+        PointWalkOptions {
+            distance_sigma: 1.0,
+            colour_sigma: 20.0,
+            min_margin: 0.2,
+        }
+    }
+}
+
+/// True when most frames with depth have readings at fewer than half their pixels: the depth of
+/// a reconstruction's points, not of a sensor.
+pub fn has_sparse_depth(scene: &Scene) -> bool {
+    let mut sparse = 0;
+    let mut with_depth = 0;
+    for depth in scene.frames.iter().filter_map(|f| f.depth.as_ref()) {
+        with_depth += 1;
+        let readings = depth.pixels().filter(|p| p.0[0] > 0).count();
+        if readings * 2 < depth.len() {
+            sparse += 1;
+        }
+    }
+    with_depth > 0 && sparse * 2 > with_depth
+}
+
+/// Every depth reading of a scene as a world point.
+struct Points {
+    xyz: Vec<DVec3>,
+    lab: Vec<[f32; 3]>,
+    /// (frame, pixel index) of each reading.
+    at: Vec<(u32, u32)>,
+}
+
+impl Points {
+    fn of_scene(scene: &Scene) -> Points {
+        let mut points = Points {
+            xyz: Vec::new(),
+            lab: Vec::new(),
+            at: Vec::new(),
+        };
+        let width = scene.width as usize;
+        for (f, frame) in scene.frames.iter().enumerate() {
+            let Some(depth) = &frame.depth else { continue };
+            for (i, (d, rgb)) in depth.pixels().zip(frame.rgb.pixels()).enumerate() {
+                if d.0[0] == 0 {
+                    continue;
+                }
+                let z = f64::from(d.0[0]) * scene.depth_scale;
+                let (u, v) = ((i % width) as f64, (i / width) as f64);
+                let camera = scene.intrinsics.ray_dir(u, v) * z;
+                points.xyz.push(frame.pose.transform_point(camera));
+                points.lab.push(srgb_to_lab(rgb.0));
+                points.at.push((f as u32, i as u32));
+            }
+        }
+        points
+    }
+}
+
+/// The symmetric nearest-neighbour graph, as an adjacency list with weights.
+struct PointGraph {
+    edges: Vec<Vec<(u32, f64)>>,
+}
+
+impl PointGraph {
+    fn new(points: &Points, options: &PointWalkOptions) -> PointGraph {
+        let near = nearest_neighbours(&points.xyz, NEIGHBOURS);
+        let mut distances: Vec<f64> = near.iter().flatten().map(|(_, d)| *d).collect();
+        let scale = median(&mut distances).max(1e-12);
+        let mut edges: Vec<Vec<(u32, f64)>> = vec![Vec::new(); points.xyz.len()];
+        for (i, list) in near.iter().enumerate() {
+            for &(j, d) in list {
+                let dc: f32 = (0..3)
+                    .map(|k| (points.lab[i][k] - points.lab[j as usize][k]).powi(2))
+                    .sum();
+                let w = (-(d / (options.distance_sigma * scale)).powi(2)
+                    - f64::from(dc) / options.colour_sigma.powi(2))
+                .exp()
+                .max(MIN_WEIGHT);
+                edges[i].push((j, w));
+                edges[j as usize].push((i as u32, w));
+            }
+        }
+        // An edge found from both ends is one edge: merge the duplicates.
+        for list in &mut edges {
+            list.sort_by_key(|(j, _)| *j);
+            list.dedup_by_key(|(j, _)| *j);
+        }
+        PointGraph { edges }
+    }
+
+    /// The probability that a walk from each point reaches a seed of `class` before a seed of
+    /// another class (seeds fixed at 1 or 0; see `propagate`'s walk, here without fading).
+    fn walk(&self, seeds: &[u16], class: u16) -> Vec<f64> {
+        let n = seeds.len();
+        let free: Vec<usize> = (0..n).filter(|&i| seeds[i] == UNLABELLED).collect();
+        let mut slot = vec![usize::MAX; n];
+        for (k, &i) in free.iter().enumerate() {
+            slot[i] = k;
+        }
+        let mut degree = vec![0f64; free.len()];
+        let mut rhs = vec![0f64; free.len()];
+        for (k, &i) in free.iter().enumerate() {
+            for &(j, w) in &self.edges[i] {
+                degree[k] += w;
+                if seeds[j as usize] == class {
+                    rhs[k] += w;
+                }
+            }
+        }
+        let apply = |x: &[f64], out: &mut [f64]| {
+            for (k, &i) in free.iter().enumerate() {
+                let mut sum = degree[k] * x[k];
+                for &(j, w) in &self.edges[i] {
+                    if slot[j as usize] != usize::MAX {
+                        sum -= w * x[slot[j as usize]];
+                    }
+                }
+                out[k] = sum;
+            }
+        };
+        let x = conjugate_gradient(apply, &rhs, &degree, 2000);
+        let mut p: Vec<f64> = seeds.iter().map(|&s| if s == class { 1.0 } else { 0.0 }).collect();
+        for (k, &i) in free.iter().enumerate() {
+            p[i] = x[k].clamp(0.0, 1.0);
+        }
+        p
+    }
+}
+
+/// Label maps for every frame of `scene` with readings: each reading takes the class the walk
+/// over the points gives it from the readings under `strokes` (per annotated frame, its
+/// rasterized strokes at the scene's size), where that class clearly wins. Frames whose readings
+/// get no label are left out. Nothing is labelled unless the strokes cover readings of at least
+/// two classes.
+pub fn label_points(
+    scene: &Scene,
+    strokes: &[(u32, Vec<u16>)],
+    classes: usize,
+    options: &PointWalkOptions,
+) -> Vec<(u32, Vec<u16>)> {
+    let points = Points::of_scene(scene);
+    let seeds: Vec<u16> = points
+        .at
+        .iter()
+        .map(|&(f, i)| {
+            strokes
+                .iter()
+                .find(|(frame, _)| *frame == f)
+                .and_then(|(_, map)| map.get(i as usize).copied())
+                .filter(|&c| (c as usize) < classes)
+                .unwrap_or(UNLABELLED)
+        })
+        .collect();
+    let present: Vec<u16> = (0..classes as u16).filter(|c| seeds.contains(c)).collect();
+    if present.len() < 2 {
+        return Vec::new();
+    }
+    let graph = PointGraph::new(&points, options);
+    let probabilities: Vec<Vec<f64>> = present.iter().map(|&c| graph.walk(&seeds, c)).collect();
+    let pixels = (scene.width * scene.height) as usize;
+    let mut maps: Vec<Option<Vec<u16>>> = vec![None; scene.frames.len()];
+    for (p, &(frame, pixel)) in points.at.iter().enumerate() {
+        let (mut best, mut first, mut second) = (0, f64::MIN, f64::MIN);
+        for (k, probability) in probabilities.iter().enumerate() {
+            let v = probability[p];
+            if v > first {
+                (second, first, best) = (first, v, k);
+            } else if v > second {
+                second = v;
+            }
+        }
+        if first - second >= options.min_margin {
+            let map = maps[frame as usize].get_or_insert_with(|| vec![UNLABELLED; pixels]);
+            map[pixel as usize] = present[best];
+        }
+    }
+    maps.into_iter()
+        .enumerate()
+        .filter_map(|(f, m)| m.map(|m| (f as u32, m)))
+        .collect()
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let mid = values.len() / 2;
+    *values.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+/// For each point, up to `k` nearest other points with their distances, found through a uniform
+/// grid: the 27 cells around a point's own. Points farther than a cell away may be missed where
+/// a cell's neighbourhood holds fewer than `k`; the walk needs near neighbours, not exactly k.
+fn nearest_neighbours(xyz: &[DVec3], k: usize) -> Vec<Vec<(u32, f64)>> {
+    if xyz.len() < 2 {
+        return vec![Vec::new(); xyz.len()];
+    }
+    let (lo, hi) = xyz
+        .iter()
+        .fold((xyz[0], xyz[0]), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+    // Points lie on surfaces: start from the spacing of n points over the box's largest face,
+    // then adjust once towards POINTS_PER_CELL points in each occupied cell.
+    let extent = (hi - lo).max(DVec3::splat(1e-9));
+    let face = (extent.x * extent.y).max(extent.y * extent.z).max(extent.x * extent.z);
+    let mut cell = (face / xyz.len() as f64).sqrt() * POINTS_PER_CELL.sqrt();
+    for _ in 0..2 {
+        let occupied = grid(xyz, lo, cell).len() as f64;
+        cell *= (POINTS_PER_CELL * occupied / xyz.len() as f64).sqrt();
+    }
+    let cells = grid(xyz, lo, cell);
+    xyz.iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let c = cell_of(*p, lo, cell);
+            let mut near: Vec<(u32, f64)> = Vec::new();
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        if let Some(list) = cells.get(&(c.0 + dx, c.1 + dy, c.2 + dz)) {
+                            near.extend(
+                                list.iter()
+                                    .filter(|&&j| j as usize != i)
+                                    .map(|&j| (j, p.distance(xyz[j as usize]))),
+                            );
+                        }
+                    }
+                }
+            }
+            let keep = k.min(near.len());
+            if keep > 0 && keep < near.len() {
+                near.select_nth_unstable_by(keep - 1, |a, b| a.1.total_cmp(&b.1));
+            }
+            near.truncate(keep);
+            near
+        })
+        .collect()
+}
+
+type Cell = (i64, i64, i64);
+
+fn cell_of(p: DVec3, lo: DVec3, cell: f64) -> Cell {
+    let c = ((p - lo) / cell).floor();
+    (c.x as i64, c.y as i64, c.z as i64)
+}
+
+fn grid(xyz: &[DVec3], lo: DVec3, cell: f64) -> std::collections::HashMap<Cell, Vec<u32>> {
+    let mut cells: std::collections::HashMap<Cell, Vec<u32>> = std::collections::HashMap::new();
+    for (i, p) in xyz.iter().enumerate() {
+        cells.entry(cell_of(*p, lo, cell)).or_default().push(i as u32);
+    }
+    cells
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_grid_finds_the_true_nearest_neighbours_of_a_surface() {
+        // A 40 x 40 lattice on a tilted plane with a little jitter: the nearest neighbours by
+        // brute force and through the grid agree.
+        let mut xyz = Vec::new();
+        for a in 0..40 {
+            for b in 0..40 {
+                let jitter = ((a * 7 + b * 13) % 10) as f64 * 0.01;
+                xyz.push(DVec3::new(a as f64, b as f64 * 0.8, 0.3 * a as f64 + jitter));
+            }
+        }
+        let near = nearest_neighbours(&xyz, 6);
+        for i in [0usize, 41, 820, 1599] {
+            let mut brute: Vec<(usize, f64)> = (0..xyz.len())
+                .filter(|&j| j != i)
+                .map(|j| (j, xyz[i].distance(xyz[j])))
+                .collect();
+            brute.sort_by(|a, b| a.1.total_cmp(&b.1));
+            let mut got: Vec<f64> = near[i].iter().map(|(_, d)| *d).collect();
+            got.sort_by(f64::total_cmp);
+            let want: Vec<f64> = brute.iter().take(6).map(|(_, d)| *d).collect();
+            for (g, w) in got.iter().zip(&want) {
+                assert!((g - w).abs() < 1e-9, "point {i}: {got:?} against {want:?}");
+            }
+            assert_eq!(got.len(), 6);
+        }
+    }
+
+    #[test]
+    fn two_clusters_take_the_classes_of_their_own_seeds() {
+        // Two blobs of points a distance apart, one seed each: every point follows its blob.
+        let mut xyz = Vec::new();
+        for (centre, n) in [(DVec3::ZERO, 200), (DVec3::new(10.0, 0.0, 0.0), 150)] {
+            for i in 0..n {
+                let t = i as f64;
+                xyz.push(centre + DVec3::new((t * 0.37).sin(), (t * 0.61).cos(), (t * 0.13).sin()));
+            }
+        }
+        let points = Points {
+            lab: vec![[50.0, 0.0, 0.0]; xyz.len()],
+            at: (0..xyz.len() as u32).map(|i| (0, i)).collect(),
+            xyz,
+        };
+        let graph = PointGraph::new(&points, &PointWalkOptions::default());
+        let mut seeds = vec![UNLABELLED; points.xyz.len()];
+        seeds[3] = 0;
+        seeds[260] = 1;
+        let p = graph.walk(&seeds, 1);
+        assert!(p[..200].iter().all(|&v| v < 0.1), "the first blob is class 0");
+        assert!(p[200..].iter().all(|&v| v > 0.9), "the second blob is class 1");
+    }
+}
