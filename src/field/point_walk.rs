@@ -164,57 +164,87 @@ impl PointGraph {
     }
 }
 
-/// Label maps for every frame of `scene` with readings: each reading takes the class the walk
-/// over the points gives it from the readings under `strokes` (per annotated frame, its
-/// rasterized strokes at the scene's size), where that class clearly wins. Frames whose readings
-/// get no label are left out. Nothing is labelled unless the strokes cover readings of at least
-/// two classes.
+/// A scene's readings as points and their neighbour graph: built once per scene (the
+/// expensive part), then asked for labels after every edit.
+pub struct PointLabeller {
+    points: Points,
+    graph: PointGraph,
+    width: u32,
+    height: u32,
+    frames: usize,
+    min_margin: f64,
+}
+
+impl PointLabeller {
+    pub fn new(scene: &Scene, options: &PointWalkOptions) -> PointLabeller {
+        let points = Points::of_scene(scene);
+        let graph = PointGraph::new(&points, options);
+        PointLabeller {
+            points,
+            graph,
+            width: scene.width,
+            height: scene.height,
+            frames: scene.frames.len(),
+            min_margin: options.min_margin,
+        }
+    }
+
+    /// Label maps for every frame with readings: each reading takes the class the walk over the
+    /// points gives it from the readings under `strokes` (per annotated frame, its rasterized
+    /// strokes at the scene's size), where that class clearly wins. Frames whose readings get
+    /// no label are left out. Nothing is labelled unless the strokes cover readings of at least
+    /// two classes.
+    pub fn label(&self, strokes: &[(u32, Vec<u16>)], classes: usize) -> Vec<(u32, Vec<u16>)> {
+        let seeds: Vec<u16> = self
+            .points
+            .at
+            .iter()
+            .map(|&(f, i)| {
+                strokes
+                    .iter()
+                    .find(|(frame, _)| *frame == f)
+                    .and_then(|(_, map)| map.get(i as usize).copied())
+                    .filter(|&c| (c as usize) < classes)
+                    .unwrap_or(UNLABELLED)
+            })
+            .collect();
+        let present: Vec<u16> = (0..classes as u16).filter(|c| seeds.contains(c)).collect();
+        if present.len() < 2 {
+            return Vec::new();
+        }
+        let probabilities: Vec<Vec<f64>> = present.iter().map(|&c| self.graph.walk(&seeds, c)).collect();
+        let pixels = (self.width * self.height) as usize;
+        let mut maps: Vec<Option<Vec<u16>>> = vec![None; self.frames];
+        for (p, &(frame, pixel)) in self.points.at.iter().enumerate() {
+            let (mut best, mut first, mut second) = (0, f64::MIN, f64::MIN);
+            for (k, probability) in probabilities.iter().enumerate() {
+                let v = probability[p];
+                if v > first {
+                    (second, first, best) = (first, v, k);
+                } else if v > second {
+                    second = v;
+                }
+            }
+            if first - second >= self.min_margin {
+                let map = maps[frame as usize].get_or_insert_with(|| vec![UNLABELLED; pixels]);
+                map[pixel as usize] = present[best];
+            }
+        }
+        maps.into_iter()
+            .enumerate()
+            .filter_map(|(f, m)| m.map(|m| (f as u32, m)))
+            .collect()
+    }
+}
+
+/// [`PointLabeller::label`] for a scene labelled once.
 pub fn label_points(
     scene: &Scene,
     strokes: &[(u32, Vec<u16>)],
     classes: usize,
     options: &PointWalkOptions,
 ) -> Vec<(u32, Vec<u16>)> {
-    let points = Points::of_scene(scene);
-    let seeds: Vec<u16> = points
-        .at
-        .iter()
-        .map(|&(f, i)| {
-            strokes
-                .iter()
-                .find(|(frame, _)| *frame == f)
-                .and_then(|(_, map)| map.get(i as usize).copied())
-                .filter(|&c| (c as usize) < classes)
-                .unwrap_or(UNLABELLED)
-        })
-        .collect();
-    let present: Vec<u16> = (0..classes as u16).filter(|c| seeds.contains(c)).collect();
-    if present.len() < 2 {
-        return Vec::new();
-    }
-    let graph = PointGraph::new(&points, options);
-    let probabilities: Vec<Vec<f64>> = present.iter().map(|&c| graph.walk(&seeds, c)).collect();
-    let pixels = (scene.width * scene.height) as usize;
-    let mut maps: Vec<Option<Vec<u16>>> = vec![None; scene.frames.len()];
-    for (p, &(frame, pixel)) in points.at.iter().enumerate() {
-        let (mut best, mut first, mut second) = (0, f64::MIN, f64::MIN);
-        for (k, probability) in probabilities.iter().enumerate() {
-            let v = probability[p];
-            if v > first {
-                (second, first, best) = (first, v, k);
-            } else if v > second {
-                second = v;
-            }
-        }
-        if first - second >= options.min_margin {
-            let map = maps[frame as usize].get_or_insert_with(|| vec![UNLABELLED; pixels]);
-            map[pixel as usize] = present[best];
-        }
-    }
-    maps.into_iter()
-        .enumerate()
-        .filter_map(|(f, m)| m.map(|m| (f as u32, m)))
-        .collect()
+    PointLabeller::new(scene, options).label(strokes, classes)
 }
 
 fn median(values: &mut [f64]) -> f64 {

@@ -19,7 +19,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::field::normals::depth_normals;
-use crate::field::point_walk::{PointWalkOptions, has_sparse_depth, label_points};
+use crate::field::point_walk::{PointLabeller, PointWalkOptions, has_sparse_depth};
 use crate::field::refine::Guide;
 use std::collections::HashMap;
 
@@ -182,13 +182,15 @@ pub fn propagate_labels(
 
 /// Keeps each frame's propagated map until that frame's seeds change, so an edit on one frame
 /// (the page sends the whole label set after every stroke) walks that frame alone; on a capture
-/// with sparse depth the walk over the points reruns on every edit, and the frames whose point
-/// labels it changed walk again.
+/// with sparse depth the points' neighbour graph is built once, the walk over it reruns on every
+/// edit, and only frames whose strokes changed walk again.
 #[derive(Default)]
 pub struct PropagationCache {
     settings: Option<(usize, PropagationOptions)>,
     /// Per frame: the seeds it walked from and the map that gave.
     frames: HashMap<u32, (Vec<u16>, Vec<u16>)>,
+    /// The scene's points and their graph, once a capture with sparse depth needs them.
+    points: Option<PointLabeller>,
 }
 
 impl PropagationCache {
@@ -204,7 +206,7 @@ impl PropagationCache {
             self.frames.clear();
             self.settings = Some((classes, *options));
         }
-        let seeds = frame_seeds(scene, labels, classes, options);
+        let seeds = frame_seeds(scene, labels, classes, options, &mut self.points);
         self.frames.retain(|frame, _| seeds.iter().any(|s| s.frame == *frame));
         let mut maps = Vec::with_capacity(seeds.len());
         for FrameSeeds {
@@ -260,7 +262,13 @@ struct FrameSeeds {
 
 /// What each frame starts from: its rasterized strokes, and on a capture with sparse depth
 /// (when `across_views`) the labels the points carry to it. Frames in ascending order.
-fn frame_seeds(scene: &Scene, labels: &LabelSet, classes: usize, options: &PropagationOptions) -> Vec<FrameSeeds> {
+fn frame_seeds(
+    scene: &Scene,
+    labels: &LabelSet,
+    classes: usize,
+    options: &PropagationOptions,
+    points: &mut Option<PointLabeller>,
+) -> Vec<FrameSeeds> {
     let mut frames: Vec<u32> = labels
         .frames
         .iter()
@@ -284,7 +292,8 @@ fn frame_seeds(scene: &Scene, labels: &LabelSet, classes: usize, options: &Propa
         .iter()
         .filter_map(|s| s.strokes.clone().map(|m| (s.frame, m)))
         .collect();
-    for (frame, carried) in label_points(scene, &strokes, classes, &PointWalkOptions::default()) {
+    let labeller = points.get_or_insert_with(|| PointLabeller::new(scene, &PointWalkOptions::default()));
+    for (frame, carried) in labeller.label(&strokes, classes) {
         match seeds.iter_mut().find(|s| s.frame == frame) {
             Some(own) => own.carried = Some(carried),
             None => seeds.push(FrameSeeds {
