@@ -1,5 +1,4 @@
 //! scribblefield: scribbles on a few RGB-D frames, propagated to dense masks by a neural field.
-#[cfg(target_arch = "wasm32")]
 pub mod app;
 pub mod colors;
 pub mod eval;

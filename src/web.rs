@@ -7,20 +7,24 @@ use eframe::wgpu;
 use wasm_bindgen::JsCast;
 use wasm_bindgen::prelude::*;
 
-use crate::app::{App, browser, loading, page_status};
+use crate::app::page_options::PageOptions;
+use crate::app::status::PageStatus;
+use crate::app::{App, browser, page_status};
 
-/// Starts the app in the canvas `canvas_id`, loading the scene named by the page's
-/// `#scene=<url>` fragment, or `demo.scene.zip` next to the page.
+/// Starts the app in the canvas `canvas_id`, with the options in the page's fragment (the scene
+/// named by `#scene=<url>`, or `demo.scene.zip` next to the page).
 ///
 /// Resolves once the app runs (the scene keeps loading in the background); rejects with a
 /// message when the canvas is missing or WebGPU cannot be initialised.
 #[wasm_bindgen]
 pub async fn start(canvas_id: String) -> Result<(), JsValue> {
-    page_status::set("loading");
+    page_status::set(&PageStatus::Loading);
     report_panics_in_the_page();
     let result = run(&canvas_id).await;
     if let Err(e) = &result {
-        page_status::set(&format!("error: {}", browser::js_error_text(e)));
+        page_status::set(&PageStatus::Error {
+            message: browser::js_error_text(e),
+        });
     }
     result
 }
@@ -34,14 +38,16 @@ async fn run(canvas_id: &str) -> Result<(), JsValue> {
         .ok_or_else(|| format!("no element with id {canvas_id:?} in the page"))?
         .dyn_into::<web_sys::HtmlCanvasElement>()
         .map_err(|_| format!("element {canvas_id:?} is not a <canvas>"))?;
-    let scene_url = loading::scene_url_from_page();
+    // Read once: the app keeps them for the page's life (`index.html` reloads the page when
+    // the address's fragment changes).
+    let (options, errors) = PageOptions::parse(&browser::page_fragment());
 
     // The runner lives on in the event handlers it installs; this handle may go.
     eframe::WebRunner::new()
         .start(
             canvas,
             web_options(),
-            Box::new(move |cc| Ok(Box::new(App::new(cc, scene_url)))),
+            Box::new(move |cc| Ok(Box::new(App::new(cc, options, errors)))),
         )
         .await
 }
@@ -52,7 +58,9 @@ async fn run(canvas_id: &str) -> Result<(), JsValue> {
 fn report_panics_in_the_page() {
     let previous = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
-        page_status::set(&format!("crashed: {info}"));
+        page_status::set(&PageStatus::Crashed {
+            message: info.to_string(),
+        });
         previous(info);
     }));
 }

@@ -13,8 +13,8 @@ use wasm_bindgen::JsCast;
 use wasm_bindgen::prelude::*;
 use wasm_bindgen_futures::JsFuture;
 
-use super::browser::{js_error_text, now_ms, page_fragment, sleep_ms};
-use crate::labels::share::parse_fragment;
+use super::browser::{js_error_text, now_ms, sleep_ms};
+use super::page_options::PageOptions;
 use crate::scene::archive::ArchiveReader;
 use crate::scene::{Scene, SceneError};
 
@@ -28,12 +28,10 @@ pub const MAX_ARCHIVE_BYTES: u64 = 1 << 30;
 /// Decoding works this long between yields to the browser (a frame at 30 fps is 33 ms).
 pub const DECODE_SLICE_MS: f64 = 25.0;
 
-/// The scene to load: `scene=<url>` from the page's fragment (`#scene=...&labels=...`,
-/// percent-encoded), else [`DEFAULT_SCENE_URL`]. A relative URL is relative to the page.
-pub fn scene_url_from_page() -> String {
-    parse_fragment(&page_fragment())
-        .scene
-        .unwrap_or_else(|| DEFAULT_SCENE_URL.to_string())
+/// The scene to load: the page's `#scene=<url>` option, else [`DEFAULT_SCENE_URL`]. A
+/// relative URL is relative to the page.
+pub fn scene_url(options: &PageOptions) -> String {
+    options.scene.clone().unwrap_or_else(|| DEFAULT_SCENE_URL.to_string())
 }
 
 /// Why a scene could not be loaded; each message names the URL.

@@ -2,319 +2,48 @@
 //! then annotates it (`annotator`), training the field live on the page's WebGPU device
 //! (`training`). The modules below each draw or do one thing; the plain logic they use (undo,
 //! share codec, autosave entries, brush and view maths) is in `crate::labels`, tested natively.
+//!
+//! `page_options`, `status` and `model_size` are plain data and build natively too (their tests
+//! run with `cargo test --lib`); the rest needs the browser. docs/architecture.md ("The web
+//! app") shows how the parts talk.
+#[cfg(target_arch = "wasm32")]
 pub mod annotator;
+#[cfg(target_arch = "wasm32")]
 pub mod browser;
+#[cfg(target_arch = "wasm32")]
 pub mod canvas;
+#[cfg(target_arch = "wasm32")]
 pub mod frame_strip;
+#[cfg(target_arch = "wasm32")]
 pub mod frame_view;
+#[cfg(target_arch = "wasm32")]
 pub mod loading;
 pub mod model_size;
+#[cfg(target_arch = "wasm32")]
 pub mod overlays;
+#[cfg(target_arch = "wasm32")]
+mod page;
+pub mod page_options;
+#[cfg(target_arch = "wasm32")]
 pub mod page_status;
+#[cfg(target_arch = "wasm32")]
 pub mod palette;
+#[cfg(target_arch = "wasm32")]
 pub mod persistence;
+#[cfg(target_arch = "wasm32")]
 pub mod scene_panel;
+#[cfg(target_arch = "wasm32")]
 pub mod side_panel;
+pub mod status;
+#[cfg(target_arch = "wasm32")]
 pub mod training;
-pub mod training_scene;
 
-use std::cell::RefCell;
-use std::rc::Rc;
-
-use egui::RichText;
-
-use self::annotator::Annotator;
-use self::loading::{LoadPhase, SceneLoad};
-use self::model_size::ModelSize;
-use crate::gpu::GpuContext;
-use crate::labels::autosave::SceneSource;
-use crate::labels::share::fragment_value;
+#[cfg(target_arch = "wasm32")]
+pub use page::App;
 
 /// How often progress (training numbers, decoded frames) asks for a repaint, at most. On a CPU
 /// rasterizer (SwiftShader) one repaint of the page keeps the device busy for about a second,
 /// and the work being reported on waits behind it; on a GPU a repaint is cheap.
 pub fn repaint_interval_ms(software: bool) -> u64 {
     if software { 1000 } else { 100 }
-}
-
-pub struct App {
-    stage: Stage,
-    /// Adapter and backend, for the scene panel (and for bug reports).
-    gpu_name: String,
-    /// eframe's device, shared with the trainer; `None` without WebGPU.
-    gpu: Option<GpuContext>,
-    model: ModelSize,
-    /// Files read by async tasks (picker, drop), handled at the next frame.
-    inbox: Rc<RefCell<Vec<OpenedFile>>>,
-}
-
-struct OpenedFile {
-    name: String,
-    bytes: Result<Vec<u8>, String>,
-}
-
-enum Stage {
-    Loading { load: SceneLoad, source: SceneSource },
-    Annotating(Box<Annotator>),
-    Failed { url: String, message: String },
-}
-
-impl App {
-    pub fn new(cc: &eframe::CreationContext<'_>, scene_url: String) -> App {
-        let (gpu_name, gpu, default_model) = match &cc.wgpu_render_state {
-            Some(rs) => {
-                let info = rs.adapter.get_info();
-                let name = format!(
-                    "{} ({:?})",
-                    if info.name.is_empty() {
-                        "unnamed adapter"
-                    } else {
-                        &info.name
-                    },
-                    info.backend
-                );
-                let ctx = GpuContext::from_device(rs.device.clone(), rs.queue.clone());
-                (name, Some(ctx), ModelSize::for_adapter(&info))
-            }
-            None => ("none".into(), None, ModelSize::Small),
-        };
-        let model = fragment_value(&browser::page_fragment(), "model")
-            .and_then(|m| ModelSize::parse(&m))
-            .unwrap_or(default_model);
-        let source = SceneSource::Url(browser::absolute_url(&scene_url));
-        let software = gpu.as_ref().is_some_and(|g| g.is_software());
-        let load = SceneLoad::start(scene_url, cc.egui_ctx.clone(), repaint_interval_ms(software));
-        App {
-            stage: Stage::Loading { load, source },
-            gpu_name,
-            gpu,
-            model,
-            inbox: Rc::default(),
-        }
-    }
-
-    fn repaint_ms(&self) -> u64 {
-        repaint_interval_ms(self.gpu.as_ref().is_some_and(|g| g.is_software()))
-    }
-
-    /// Asks for a scene archive and opens it.
-    fn pick_scene(&self, ctx: &egui::Context) {
-        let inbox = self.inbox.clone();
-        let ctx = ctx.clone();
-        wasm_bindgen_futures::spawn_local(async move {
-            let opened = match browser::pick_file(".zip,application/zip").await {
-                Ok(Some((name, bytes))) => OpenedFile { name, bytes: Ok(bytes) },
-                Ok(None) => return,
-                Err(e) => OpenedFile {
-                    name: "the chosen file".into(),
-                    bytes: Err(e.to_string()),
-                },
-            };
-            inbox.borrow_mut().push(opened);
-            ctx.request_repaint();
-        });
-    }
-
-    /// Reads files dropped on the page (browsers only hand them over asynchronously).
-    fn take_dropped_files(&self, ctx: &egui::Context) {
-        let dropped = ctx.input(|i| i.raw.dropped_files.clone());
-        for file in dropped {
-            let inbox = self.inbox.clone();
-            let ctx = ctx.clone();
-            wasm_bindgen_futures::spawn_local(async move {
-                let name = file
-                    .path()
-                    .file_name()
-                    .map(|n| n.to_string_lossy().into_owned())
-                    .unwrap_or_else(|| "dropped file".into());
-                let bytes = file.bytes_async().await;
-                inbox.borrow_mut().push(OpenedFile { name, bytes });
-                ctx.request_repaint();
-            });
-        }
-    }
-
-    /// A picked or dropped file: annotations go to the annotator, anything else is opened as a
-    /// scene archive (which says clearly when it is not one).
-    fn open_files(&mut self, ctx: &egui::Context) {
-        let files: Vec<OpenedFile> = self.inbox.borrow_mut().drain(..).collect();
-        for file in files {
-            let bytes = match file.bytes {
-                Ok(b) => b,
-                Err(e) => {
-                    self.stage = Stage::Failed {
-                        url: file.name,
-                        message: format!("cannot read the file: {e}"),
-                    };
-                    continue;
-                }
-            };
-            let is_labels = file.name.to_ascii_lowercase().ends_with(".json");
-            if let (true, Stage::Annotating(a)) = (is_labels, &mut self.stage) {
-                a.import_labels_bytes(&file.name, &bytes);
-                continue;
-            }
-            let source = SceneSource::File {
-                name: file.name.clone(),
-                bytes: bytes.len() as u64,
-            };
-            // The old scene's training stops when its annotator is dropped here.
-            self.stage = Stage::Loading {
-                load: SceneLoad::from_bytes(file.name, bytes, ctx.clone(), self.repaint_ms()),
-                source,
-            };
-        }
-    }
-}
-
-impl eframe::App for App {
-    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
-        let ctx = ui.ctx().clone();
-        self.take_dropped_files(&ctx);
-        self.open_files(&ctx);
-        if let Stage::Loading { load, source } = &self.stage
-            && let Some(result) = load.take_result()
-        {
-            let url = load.url().to_string();
-            self.stage = match result {
-                Ok(scene) => Stage::Annotating(Box::new(Annotator::new(
-                    &ctx,
-                    scene,
-                    source.clone(),
-                    self.gpu.clone(),
-                    self.model,
-                ))),
-                Err(e) => Stage::Failed {
-                    url,
-                    message: e.to_string(),
-                },
-            };
-        }
-
-        let mut pick = false;
-        egui::Panel::top("title").show(ui, |ui| {
-            ui.horizontal(|ui| {
-                ui.strong("scribblefield");
-                ui.separator();
-                pick = ui
-                    .button("open scene…")
-                    .on_hover_text("a .scene.zip archive; or drop one (or a labels.json) on the page")
-                    .clicked();
-                if let Stage::Annotating(a) = &self.stage {
-                    ui.separator();
-                    ui.label(RichText::new(a.source().describe()).monospace().small());
-                }
-                ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
-                    ui.label(RichText::new(format!("model: {}", self.model.name())).small())
-                        .on_hover_text("#model=tiny|small|full in the address picks another");
-                });
-            });
-        });
-        if pick {
-            self.pick_scene(&ctx);
-        }
-        match &mut self.stage {
-            Stage::Loading { load, .. } => show_loading(ui, load),
-            Stage::Annotating(a) => a.show(ui, &self.gpu_name),
-            Stage::Failed { url, message } => show_failure(ui, url, message),
-        }
-        show_drop_hint(&ctx);
-    }
-}
-
-/// While files are dragged over the page, say what dropping them does.
-fn show_drop_hint(ctx: &egui::Context) {
-    if ctx.input(|i| i.raw.hovered_files.is_empty()) {
-        return;
-    }
-    let screen = ctx.content_rect();
-    let painter = ctx.layer_painter(egui::LayerId::new(
-        egui::Order::Foreground,
-        egui::Id::unique("drop hint"),
-    ));
-    painter.rect_filled(screen, 0.0, egui::Color32::from_black_alpha(180));
-    painter.text(
-        screen.center(),
-        egui::Align2::CENTER_CENTER,
-        "Drop a scene archive (.zip) to open it, or annotations (.json) to import them",
-        egui::FontId::proportional(20.0),
-        egui::Color32::WHITE,
-    );
-}
-
-fn show_loading(ui: &mut egui::Ui, load: &SceneLoad) {
-    let (status, text, fraction): (String, String, Option<f32>) = load.with_phase(|phase| match *phase {
-        LoadPhase::Connecting => ("loading".into(), format!("Connecting to {}", load.url()), None),
-        LoadPhase::Downloading { received, total } => {
-            let text = match total {
-                Some(t) => format!(
-                    "Downloading {}: {} of {}",
-                    load.url(),
-                    megabytes(received),
-                    megabytes(t)
-                ),
-                None => format!("Downloading {}: {}", load.url(), megabytes(received)),
-            };
-            (
-                "loading".into(),
-                text,
-                total.filter(|&t| t > 0).map(|t| (received as f32 / t as f32).min(1.0)),
-            )
-        }
-        LoadPhase::Decoding { bytes, done, frames } => (
-            if frames > 0 {
-                format!("decoding {done}/{frames}")
-            } else {
-                "decoding".into()
-            },
-            if frames > 0 {
-                format!(
-                    "Decoding {} ({}): frame {done} of {frames}",
-                    load.url(),
-                    megabytes(bytes)
-                )
-            } else {
-                format!("Decoding {} ({})", load.url(), megabytes(bytes))
-            },
-            Some(if frames > 0 { done as f32 / frames as f32 } else { 0.0 }),
-        ),
-        LoadPhase::Finished(_) | LoadPhase::Taken => ("loading".into(), "Opening the scene".into(), Some(1.0)),
-    });
-    page_status::set(&status);
-    egui::CentralPanel::default().show(ui, |ui| {
-        ui.vertical_centered(|ui| {
-            ui.add_space(ui.available_height() * 0.35);
-            ui.label(RichText::new(text).size(16.0));
-            ui.add_space(8.0);
-            let bar = match fraction {
-                Some(f) => egui::ProgressBar::new(f).show_percentage(),
-                None => egui::ProgressBar::new(0.0).animate(true),
-            };
-            ui.add(bar.desired_width(ui.available_width().min(480.0)));
-        });
-    });
-}
-
-fn show_failure(ui: &mut egui::Ui, url: &str, message: &str) {
-    page_status::set(&format!("error: {message}"));
-    egui::CentralPanel::default().show(ui, |ui| {
-        ui.vertical_centered(|ui| {
-            ui.add_space(ui.available_height() * 0.3);
-            ui.label(
-                RichText::new(format!("Cannot open the scene {url}"))
-                    .size(18.0)
-                    .strong(),
-            );
-            ui.add_space(8.0);
-            ui.label(RichText::new(message).color(ui.visuals().error_fg_color).monospace());
-            ui.add_space(12.0);
-            ui.label("Open a scene file with the button above or drop one on the page, or open the page");
-            ui.label("with #scene=<url of a .scene.zip> in the address (without it: the demo scene).");
-            ui.label("`scribblefield pack` makes an archive from a capture.");
-        });
-    });
-}
-
-fn megabytes(bytes: u64) -> String {
-    format!("{:.1} MB", bytes as f64 / 1e6)
 }

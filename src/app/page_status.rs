@@ -1,16 +1,19 @@
-//! A one-line status on `<body data-status="...">` for scripts and tests to read: the canvas
-//! itself cannot be inspected from outside. Forms: `loading`, `decoding[ D/N]` (frames decoded),
-//! `ready frames=N size=WxH frame=I`, `error: <message>` (shown in the app too), and
-//! `crashed: <message>` (the app is gone; `index.html` shows the message over the canvas).
+//! Writes what scripts and tests read on `<body>`: the status (`data-status`, JSON: see
+//! [`PageStatus`]), the latest share link, a lost GPU device, the `#profile` result.
 use std::cell::RefCell;
+
+use super::status::PageStatus;
 
 thread_local! {
     // Writing the DOM every frame is cheap but pointless; remember what is already there.
     static LAST: RefCell<String> = const { RefCell::new(String::new()) };
 }
 
-/// Sets `document.body.dataset.status` when it differs from what was last set.
-pub fn set(status: &str) {
+/// Sets `document.body.dataset.status` to `status` as JSON when it differs from what was last
+/// set.
+pub fn set(status: &PageStatus) {
+    let status = status.to_json();
+    let status = status.as_str();
     let unchanged = LAST.with(|last| match last.try_borrow_mut() {
         Ok(last) if *last == status => true,
         Ok(mut last) => {

@@ -2,7 +2,7 @@
 //! the annotations file (export and import).
 use super::browser::{self, BrowserError};
 use crate::labels::autosave::{Autosave, SceneSource};
-use crate::labels::share::{ShareError, decode_labels, parse_fragment, share_fragment};
+use crate::labels::share::{ShareError, decode_labels, share_fragment};
 use crate::labels::{ClassInfo, LabelSet};
 use crate::scene::Scene;
 
@@ -29,9 +29,9 @@ pub struct Restored {
     pub displaced: bool,
 }
 
-/// The labels to start with: a shared link's, else the autosave's, else the archive's, else
-/// none (with the scene's classes, or two generic ones).
-pub fn initial_labels(scene: &Scene, source: &SceneSource) -> Restored {
+/// The labels to start with: a shared link's (`link_labels`, the page's `#labels=` code), else
+/// the autosave's, else the archive's, else none (with the scene's classes, or two generic ones).
+pub fn initial_labels(scene: &Scene, source: &SceneSource, link_labels: Option<&str>) -> Restored {
     let frames = scene.frames.len() as u32;
     let mut warnings = Vec::new();
     let key = source.storage_key();
@@ -51,9 +51,8 @@ pub fn initial_labels(scene: &Scene, source: &SceneSource) -> Restored {
             None
         }
     };
-    let fragment = parse_fragment(&browser::page_fragment());
-    if let Some(code) = fragment.labels {
-        match decode_labels(&code).and_then(|l| {
+    if let Some(code) = link_labels {
+        match decode_labels(code).and_then(|l| {
             l.check("the link's annotations", frames)
                 .map_err(|e| ShareError::Corrupt(e.to_string()))?;
             Ok(l)

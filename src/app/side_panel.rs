@@ -5,8 +5,7 @@ use egui::{Color32, RichText};
 
 use super::frame_view::show_image;
 use super::overlays::RenderedTextures;
-use super::training::{Phase, Shared};
-use crate::field::FieldConfig;
+use super::training::{Phase, Training};
 
 #[derive(Default)]
 pub struct SideActions {
@@ -33,8 +32,7 @@ pub struct SideFacts {
 pub fn show(
     ui: &mut egui::Ui,
     rendered: Option<&RenderedTextures>,
-    training: Option<&Shared>,
-    config: Option<&FieldConfig>,
+    training: Option<&Training>,
     facts: &SideFacts,
 ) -> SideActions {
     let SideFacts {
@@ -46,11 +44,13 @@ pub fn show(
     } = *facts;
     let mut actions = SideActions::default();
     ui.heading("Training");
-    let Some(s) = training else {
+    let Some(t) = training else {
         ui.label(RichText::new("not running: no GPU device").color(ui.visuals().error_fg_color));
         return actions;
     };
-    match &s.phase {
+    let (reports, cfg) = (t.reports(), &t.config);
+    let s = &reports.progress;
+    match &reports.phase {
         Phase::Starting => {
             ui.horizontal(|ui| {
                 if animate {
@@ -60,7 +60,7 @@ pub fn show(
             });
         }
         Phase::Running | Phase::Exporting { .. } => {
-            let label = if s.paused { "resume (space)" } else { "pause (space)" };
+            let label = if t.paused() { "resume (space)" } else { "pause (space)" };
             if ui.button(label).clicked() {
                 actions.toggle_pause = true;
             }
@@ -84,7 +84,7 @@ pub fn show(
             };
             row("steps", s.steps.to_string());
             row("steps/s", format!("{:.1}", s.steps_per_second));
-            if let (Some(l), Some(cfg)) = (s.losses, config) {
+            if let Some(l) = s.losses {
                 let per_ray = |v: f64| v / f64::from(cfg.batch_rays);
                 row("loss", format!("{:.3e}", per_ray(l.terms.total())));
                 row(
@@ -95,8 +95,8 @@ pub fn show(
             }
             row("labelled px", labelled_pixels.to_string());
             row("steps per batch", s.batch.to_string());
-            row("render", format!("{:.0} ms", s.render_ms));
-            if let Some(r) = s.refresh {
+            row("render", format!("{:.0} ms", reports.render_ms));
+            if let Some(r) = reports.refresh {
                 let full = r.full_ms.map_or("…".to_string(), |ms| format!("{:.1} s", ms / 1000.0));
                 row("mask refresh", format!("{:.1} s, full {full}", r.first_ms / 1000.0));
             }
@@ -114,17 +114,15 @@ pub fn show(
                     "full".into()
                 },
             );
-            if let Some(cfg) = config {
-                row(
-                    "model",
-                    format!(
-                        "{} rays, width {}, {} samples",
-                        cfg.batch_rays,
-                        cfg.density_width,
-                        cfg.samples_per_ray()
-                    ),
-                );
-            }
+            row(
+                "model",
+                format!(
+                    "{} rays, width {}, {} samples",
+                    cfg.batch_rays,
+                    cfg.density_width,
+                    cfg.samples_per_ray()
+                ),
+            );
         });
 
     ui.add_space(8.0);

@@ -16,7 +16,7 @@ import { join } from "node:path";
 import { chromium } from "playwright-core";
 import {
   CHROMIUM_ARGS, Checks, assert, decodePng, openPage, readZip, saturatedColours, settledStatus,
-  status, statusField, waitForStatus,
+  show, status, waitForStatus,
 } from "./lib.mjs";
 
 const url = process.env.E2E_URL;
@@ -112,22 +112,22 @@ function planStrokes(frame) {
 }
 
 function viewRect(statusText) {
-  const [x, y, w, h] = statusField(statusText, "view").split(",").map(Number);
+  const [x, y, w, h] = statusText.view;
   return { x, y, w, h };
 }
 
 async function goToFrame(page, frame) {
   let s = await status(page);
-  const current = Number(statusField(s, "frame"));
+  const current = s.frame;
   const key = frame > current ? "ArrowRight" : "ArrowLeft";
   for (let i = 0; i < Math.abs(frame - current); i++) await page.keyboard.press(key);
-  await waitForStatus(page, (t) => statusField(t, "frame") === String(frame), `frame ${frame}`, 60_000);
+  await waitForStatus(page, (t) => t.frame === frame, `frame ${frame}`, 60_000);
 }
 
 /// Draws `stroke` with the mouse: select the class by its number key, press, move, release.
 async function drawStroke(page, stroke) {
   await page.keyboard.press(String(stroke.class + 1));
-  await waitForStatus(page, (t) => statusField(t, "class") === String(stroke.class), `class ${stroke.class}`, 30_000);
+  await waitForStatus(page, (t) => t.class === stroke.class, `class ${stroke.class}`, 30_000);
   const v = viewRect(await status(page));
   const toScreen = ([x, y]) => [v.x + (x / W) * v.w, v.y + (y / H) * v.h];
   const [first, ...rest] = stroke.points.map(toScreen);
@@ -138,7 +138,7 @@ async function drawStroke(page, stroke) {
 }
 
 function labelledOf(s) {
-  return [statusField(s, "strokes"), statusField(s, "labelled")];
+  return [s.strokes, s.labelled];
 }
 
 /// Per-class IoU over every frame (void pixels ignored) and their mean over the classes the
@@ -180,12 +180,12 @@ try {
   const loadStart = Date.now();
   let s = await settledStatus(page, LOAD_TIMEOUT_MS);
   const loadSeconds = (Date.now() - loadStart) / 1000;
-  console.log(`demo scene loaded in ${loadSeconds.toFixed(1)} s: ${s}`);
+  console.log(`demo scene loaded in ${loadSeconds.toFixed(1)} s: ${show(s)}`);
   await checks.check("the demo scene loads and starts training", async () => {
-    assert(s.startsWith("ready"), `status is "${s}"`);
+    assert(s.state === "ready", `status is ${show(s)}`);
     s = await waitForStatus(page, (t) => {
-      if (statusField(t, "training") === "failed") throw new Error(`training failed: ${t.split(" failure: ")[1]}`);
-      return statusField(t, "training") === "running";
+      if (t.training === "failed") throw new Error(`training failed: ${t.failure}`);
+      return t.training === "running";
     }, "training to start", LOAD_TIMEOUT_MS);
     console.log(`     training started at ${elapsed()}`);
   });
@@ -198,7 +198,7 @@ try {
     // Paused while drawing, as one would on a slow device: on SwiftShader a training step takes
     // seconds and every repaint of the page waits for it.
     await page.keyboard.press("Space");
-    await waitForStatus(page, (t) => statusField(t, "training") === "paused", "the pause", 120_000);
+    await waitForStatus(page, (t) => t.training === "paused", "the pause", 120_000);
     const frames = [...SCRIBBLE_FRAMES];
     for (const spare of SPARE_FRAMES) {
       const seen = new Set(frames.flatMap((f) => planStrokes(f).map((st) => st.class)));
@@ -211,30 +211,30 @@ try {
         await drawStroke(page, stroke);
         expectedStrokes += 1;
         drawn.add(stroke.class);
-        await waitForStatus(page, (t) => statusField(t, "strokes") === String(expectedStrokes),
+        await waitForStatus(page, (t) => t.strokes === expectedStrokes,
           `stroke ${expectedStrokes}`, 60_000);
         console.log(`     stroke ${expectedStrokes}: class ${stroke.class} on frame ${frame} (${elapsed()})`);
       }
     }
     await page.keyboard.press("Space");
-    await waitForStatus(page, (t) => statusField(t, "training") === "running", "the resume", 120_000);
+    await waitForStatus(page, (t) => t.training === "running", "the resume", 120_000);
     const missing = classes.map((_, c) => c).filter((c) => !drawn.has(c));
     assert(missing.length === 0, `classes never scribbled: ${missing}`);
-    s = await waitForStatus(page, (t) => statusField(t, "saved") === "1", "the autosave", 30_000);
-    console.log(`     ${expectedStrokes} strokes, ${statusField(s, "labelled")} labelled pixels (${elapsed()})`);
+    s = await waitForStatus(page, (t) => t.saved === true, "the autosave", 30_000);
+    console.log(`     ${expectedStrokes} strokes, ${s.labelled} labelled pixels (${elapsed()})`);
   });
   const labelledAfterDrawing = labelledOf(s);
   await page.screenshot({ path: join(outDir, "annotate-scribbles.png") });
 
   // Train, then look at a frame nobody scribbled on.
-  const stepsAtLastStroke = Number(statusField(s, "steps"));
+  const stepsAtLastStroke = s.steps;
   const trainStart = Date.now();
   await checks.check(`the field trains ${STEPS} more steps with the labels`, async () => {
-    s = await waitForStatus(page, (t) => Number(statusField(t, "steps")) >= stepsAtLastStroke + STEPS,
+    s = await waitForStatus(page, (t) => t.steps >= stepsAtLastStroke + STEPS,
       `${STEPS} steps`, TRAIN_TIMEOUT_MS);
     const seconds = (Date.now() - trainStart) / 1000;
     console.log(`     ${STEPS} steps in ${seconds.toFixed(0)} s (${(STEPS / seconds).toFixed(2)} steps/s; page says ` +
-      `sps=${statusField(s, "sps")}, loss=${statusField(s, "loss")})`);
+      `sps=${s.sps}, loss=${s.loss})`);
   });
   await checks.check("a frame shown is refreshed at low resolution first, then in full", async () => {
     await goToFrame(page, 5);
@@ -243,22 +243,22 @@ try {
     let last;
     while (Date.now() - shown < 240_000) {
       last = await status(page);
-      const mask = statusField(last, "mask");
-      if (statusField(last, "frame") === "5" && seen[seen.length - 1]?.[0] !== mask) seen.push([mask, Date.now() - shown]);
+      const mask = last.mask;
+      if (last.frame === 5 && seen[seen.length - 1]?.[0] !== mask) seen.push([mask, Date.now() - shown]);
       if (mask === "full") break;
       await new Promise((r) => setTimeout(r, 100));
     }
     console.log(`     masks of frame 5: ${seen.map(([m, ms]) => `${m} at ${(ms / 1000).toFixed(1)} s`).join(", ")}; ` +
-      `page says refresh_ms=${statusField(last, "refresh_ms")}, step_ms=${statusField(last, "step_ms")}`);
+      `page says refresh_ms=${JSON.stringify(last.refresh_ms)}, step_ms=${JSON.stringify(last.step_ms)}`);
     const order = seen.map(([m]) => m).filter((m) => m !== "none");
     assert(order[0] === "coarse" && order.includes("full"), `masks came as ${order.join(", ") || "nothing"}`);
   });
   const shot = await page.screenshot({ path: join(outDir, "annotate-mask-frame5.png") });
   console.log(`     (screenshot of frame 5 with the mask: ${saturatedColours(shot)} saturated colours)`);
   await checks.check("the side panel shows the rendered features through a PCA", async () => {
-    const field = statusField(await status(page), "features");
+    const field = (await status(page)).features;
     assert(field, "the status gives no features panel (no render of this frame shown?)");
-    const [x, y, width, height] = field.split(",").map(Number);
+    const [x, y, width, height] = field;
     assert(width > 20 && height > 10, `the features image is ${width} x ${height}`);
     const png = await page.screenshot({ path: join(outDir, "annotate-features.png"), clip: { x, y, width, height } });
     const { data, channels } = decodePng(png);
@@ -279,7 +279,7 @@ try {
     // the same build passed on the next run): press again until the export shows in the status.
     for (let attempt = 1; attempt <= 3; attempt++) {
       await page.keyboard.press("d");
-      const started = await waitForStatus(page, (t) => downloaded || /training=exporting/.test(t),
+      const started = await waitForStatus(page, (t) => downloaded || t.training === "exporting",
         "the export to start", 20_000).then(() => true, () => false);
       if (started) break;
       console.log(`     no export ${attempt * 20} s after pressing d; pressing it again`);
@@ -309,7 +309,7 @@ try {
   await checks.check("after a reload the scribbles are restored", async () => {
     await page.reload({ waitUntil: "load" });
     const r = await settledStatus(page, LOAD_TIMEOUT_MS);
-    assert(r.startsWith("ready"), `status is "${r}"`);
+    assert(r.state === "ready", `status is ${show(r)}`);
     assert(JSON.stringify(labelledOf(r)) === JSON.stringify(labelledAfterDrawing),
       `strokes/labelled pixels are ${labelledOf(r)}, were ${labelledAfterDrawing}`);
     await page.screenshot({ path: join(outDir, "annotate-reloaded.png") });
@@ -328,7 +328,7 @@ try {
     await page.close();
     const shared = await openPage(context, link, "share link", consoleLog);
     const r = await settledStatus(shared, LOAD_TIMEOUT_MS);
-    assert(r.startsWith("ready"), `status is "${r}"`);
+    assert(r.state === "ready", `status is ${show(r)}`);
     assert(JSON.stringify(labelledOf(r)) === JSON.stringify(labelledAfterDrawing),
       `strokes/labelled pixels are ${labelledOf(r)}, were ${labelledAfterDrawing}`);
     const hash = await shared.evaluate(() => location.hash);

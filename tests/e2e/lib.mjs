@@ -129,32 +129,49 @@ export function readZip(zip) {
   return entries;
 }
 
-export async function status(page) {
-  return page.evaluate(() => document.body.dataset.status || "");
+/// The page's status (`data-status`, a JSON object with a `state`; docs/web-app.md lists its
+/// fields), or `{state: "unreadable", text}` when the attribute holds no JSON.
+export function parseStatus(text) {
+  try {
+    const parsed = JSON.parse(text || "{}");
+    return parsed && typeof parsed === "object" ? parsed : { state: "unreadable", text };
+  } catch {
+    return { state: "unreadable", text };
+  }
 }
 
-export function statusField(statusText, name) {
-  const match = statusText.match(new RegExp(`\\b${name}=(\\S+)`));
-  return match ? match[1] : undefined;
+export async function status(page) {
+  return parseStatus(await page.evaluate(() => document.body.dataset.status || ""));
+}
+
+/// A status for messages.
+export function show(status) {
+  return JSON.stringify(status);
 }
 
 /// Waits until `predicate(status)` holds (polling the page); returns the status.
 export async function waitForStatus(page, predicate, what, timeoutMs) {
   const start = Date.now();
-  let last = "";
+  let last = {};
   while (Date.now() - start < timeoutMs) {
     last = await status(page);
     if (predicate(last)) return last;
-    if (/^(error|crashed)/.test(last)) throw new Error(`waiting for ${what}: the page says "${last}"`);
+    if (last.state === "error" || last.state === "crashed") throw new Error(`waiting for ${what}: the page says ${show(last)}`);
     await new Promise((r) => setTimeout(r, 250));
   }
-  throw new Error(`waiting for ${what}: timed out after ${timeoutMs / 1000} s; status "${last}"`);
+  throw new Error(`waiting for ${what}: timed out after ${timeoutMs / 1000} s; status ${show(last)}`);
 }
 
 /// Waits until data-status is no longer a loading state; returns it.
 export async function settledStatus(page, timeoutMs) {
   await page.waitForFunction(
-    () => /^(ready|error|crashed)/.test(document.body.dataset.status || ""),
+    () => {
+      try {
+        return ["ready", "error", "crashed"].includes(JSON.parse(document.body.dataset.status).state);
+      } catch {
+        return false;
+      }
+    },
     null,
     { timeout: timeoutMs, polling: 250 },
   );

@@ -18,7 +18,7 @@ import { mkdtempSync, rmSync } from "node:fs";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
 import { chromium } from "playwright-core";
-import { CHROMIUM_ARGS, openPage, settledStatus, status, statusField, waitForStatus } from "./lib.mjs";
+import { CHROMIUM_ARGS, openPage, parseStatus, settledStatus, status, waitForStatus } from "./lib.mjs";
 
 const url = process.env.E2E_URL;
 if (!url) {
@@ -62,16 +62,16 @@ try {
     const s = await settledStatus(page, 600_000);
     const m = await page.evaluate(() => window.__m);
     const at = (pred) => m.statuses.find(([, st]) => pred(st))?.[0];
-    const decodeStart = at((st) => st.startsWith("decoding"));
-    const ready = at((st) => st.startsWith("ready"));
+    const decodeStart = at((st) => parseStatus(st).state === "decoding");
+    const ready = at((st) => parseStatus(st).state === "ready");
     const inDecode = (t) => t >= decodeStart && t <= ready;
     const frames = m.frames.filter(inDecode);
     let gap = 0;
     for (let i = 1; i < frames.length; i++) gap = Math.max(gap, frames[i] - frames[i - 1]);
     const long = m.longTasks.filter(([t]) => inDecode(t));
     const longest = long.reduce((a, [, d]) => Math.max(a, d), 0);
-    const progress = m.statuses.filter(([t, st]) => inDecode(t) && /^decoding \d+\//.test(st)).length;
-    console.log(`big scene: ${s.slice(0, 60)}`);
+    const progress = m.statuses.filter(([t, st]) => inDecode(t) && parseStatus(st).frames > 0).length;
+    console.log(`big scene: ${JSON.stringify(s).slice(0, 60)}`);
     console.log(`  download ${((decodeStart - m.statuses[0][0]) / 1000).toFixed(1)} s, decode ${((ready - decodeStart) / 1000).toFixed(1)} s`);
     console.log(`  while decoding: ${frames.length} animation frames, longest gap ${gap.toFixed(0)} ms, ` +
       `${progress} progress updates, ${long.length} long tasks (longest ${longest.toFixed(0)} ms)`);
@@ -85,29 +85,29 @@ try {
     await page.waitForFunction(() => !!document.body.dataset.profile, null, { timeout: 600_000, polling: 500 });
     console.log(`profile (ms; after ${((Date.now() - started) / 1000).toFixed(0)} s): ` +
       await page.evaluate(() => document.body.dataset.profile));
-    let s = await waitForStatus(page, (t) => Number(statusField(t, "steps")) >= 6 && statusField(t, "mask") === "full",
+    let s = await waitForStatus(page, (t) => t.steps >= 6 && t.mask === "full",
       "training", 600_000);
-    console.log(`training: step_ms=${statusField(s, "step_ms")} (submit+wait per step) sps=${statusField(s, "sps")} batch=${statusField(s, "batch")}`);
+    console.log(`training: step_ms=${s.step_ms.join("+")} (submit+wait per step) sps=${s.sps} batch=${s.batch}`);
     // A stroke while training runs: how soon the mask is refreshed for it.
-    const [x, y, w, h] = statusField(s, "view").split(",").map(Number);
+    const [x, y, w, h] = s.view;
     await page.mouse.move(x + w * 0.3, y + h * 0.5);
     await page.mouse.down();
     await page.mouse.move(x + w * 0.5, y + h * 0.5);
     await page.mouse.up();
     const drawn = Date.now();
-    s = await waitForStatus(page, (t) => statusField(t, "strokes") === "1", "the stroke", 60_000);
-    const stepAtStroke = Number(statusField(s, "steps"));
+    s = await waitForStatus(page, (t) => t.strokes === 1, "the stroke", 60_000);
+    const stepAtStroke = s.steps;
     let coarseAt, fullAt;
     while (!fullAt && Date.now() - drawn < 600_000) {
       s = await status(page);
-      const fresh = Number(statusField(s, "rendered")) > stepAtStroke;
-      if (fresh && statusField(s, "mask") === "coarse" && !coarseAt) coarseAt = Date.now();
-      if (fresh && statusField(s, "mask") === "full") fullAt = Date.now();
+      const fresh = s.rendered > stepAtStroke;
+      if (fresh && s.mask === "coarse" && !coarseAt) coarseAt = Date.now();
+      if (fresh && s.mask === "full") fullAt = Date.now();
       await new Promise((r) => setTimeout(r, 100));
     }
     const secs = (t) => (t ? `${((t - drawn) / 1000).toFixed(1)} s` : "never");
     console.log(`stroke while training: quick mask after ${secs(coarseAt)}, full after ${secs(fullAt)}; ` +
-      `page says refresh_ms=${statusField(s, "refresh_ms")}`);
+      `page says refresh_ms=${JSON.stringify(s.refresh_ms)}`);
   }
 } catch (e) {
   console.log(`FAIL ${e.message}`);

@@ -1,0 +1,191 @@
+//! The page's options, from its address fragment (`#scene=...&model=tiny&res=4`), read once
+//! when the page starts. Every key is listed in docs/web-app.md ("Page options"). A value that
+//! cannot be used is reported ([`PageOptionError`], shown as a notice) and the default is used
+//! instead, so a typo never keeps the page from opening. Plain logic: tested natively.
+use super::model_size::ModelSize;
+use crate::labels::share::{parse_fragment, percent_decode};
+
+/// Which dense kernels the trainer uses, whatever the adapter is (`#kernels=`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kernels {
+    /// The workgroup-tiled kernels of GPUs.
+    Tiled,
+    /// The uniform-weight kernels of CPU rasterizers.
+    Uniform,
+}
+
+/// Everything the address can ask for. `None` (or `false`) where it asks nothing: the page
+/// then picks for itself.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PageOptions {
+    /// `scene=`: the archive's URL, percent-decoded.
+    pub scene: Option<String>,
+    /// `labels=`: annotations from a share link (the raw share code).
+    pub labels: Option<String>,
+    /// `model=tiny|small|full`.
+    pub model: Option<ModelSize>,
+    /// `res=N`: train and render at 1/N of the frames' resolution (1 to 16).
+    pub res: Option<u32>,
+    /// `rays=N`: rays per training batch and per render tile.
+    pub rays: Option<u32>,
+    /// `coarse=N`: the quick first render of a stale mask at 1/N (clamped to 1..=64), even
+    /// where it is not quicker than the full one.
+    pub coarse: Option<u32>,
+    /// `refine=N`: rounds of edge-aware refinement (at most 16).
+    pub refine: Option<u32>,
+    /// `profile=1`: time a step before training.
+    pub profile: bool,
+    /// `split=1`: submit each stage of a step on its own.
+    pub split: bool,
+    /// `kernels=tiled|uniform`.
+    pub kernels: Option<Kernels>,
+}
+
+/// A value in the address the page cannot use; the option keeps its default.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("#{key}={value} in the address: expected {expected}; using the default")]
+pub struct PageOptionError {
+    pub key: &'static str,
+    pub value: String,
+    pub expected: &'static str,
+}
+
+/// Most `res=`: beyond it a frame is a few pixels.
+pub const MAX_RES: u32 = 16;
+
+impl PageOptions {
+    /// Reads a fragment (the leading `#` optional). Unknown keys are left alone (other pages
+    /// or later versions may add some); bad values come back as errors beside the options.
+    pub fn parse(fragment: &str) -> (PageOptions, Vec<PageOptionError>) {
+        let shared = parse_fragment(fragment);
+        let mut options = PageOptions {
+            scene: shared.scene,
+            labels: shared.labels,
+            ..PageOptions::default()
+        };
+        let mut errors = Vec::new();
+        let fragment = fragment.strip_prefix('#').unwrap_or(fragment);
+        let mut seen = Vec::new();
+        for pair in fragment.split('&') {
+            let Some((key, raw)) = pair.split_once('=') else {
+                continue;
+            };
+            // The first occurrence of a key counts.
+            if seen.contains(&key) {
+                continue;
+            }
+            seen.push(key);
+            let value = percent_decode(raw);
+            let mut bad = |key: &'static str, expected: &'static str| {
+                errors.push(PageOptionError {
+                    key,
+                    value: value.clone(),
+                    expected,
+                })
+            };
+            match key {
+                "model" => match ModelSize::parse(&value) {
+                    Some(m) => options.model = Some(m),
+                    None => bad("model", "tiny, small or full"),
+                },
+                "res" => match value.parse::<u32>() {
+                    Ok(n) if (1..=MAX_RES).contains(&n) => options.res = Some(n),
+                    _ => bad("res", "a whole number from 1 to 16"),
+                },
+                "rays" => match value.parse::<u32>() {
+                    Ok(n) => options.rays = Some(n),
+                    Err(_) => bad("rays", "a whole number of rays"),
+                },
+                "coarse" => match value.parse::<u32>() {
+                    Ok(n) => options.coarse = Some(n.clamp(1, 64)),
+                    Err(_) => bad("coarse", "a whole number (1: no quick render)"),
+                },
+                "refine" => match value.parse::<u32>() {
+                    Ok(n) => options.refine = Some(n.min(16)),
+                    Err(_) => bad("refine", "a whole number of rounds (0: none)"),
+                },
+                "profile" => options.profile = value != "0",
+                "split" => options.split = value != "0",
+                "kernels" => match value.as_str() {
+                    "tiled" => options.kernels = Some(Kernels::Tiled),
+                    "uniform" => options.kernels = Some(Kernels::Uniform),
+                    _ => bad("kernels", "tiled or uniform"),
+                },
+                _ => {}
+            }
+        }
+        (options, errors)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_empty_fragment_asks_nothing() {
+        assert_eq!(PageOptions::parse(""), (PageOptions::default(), vec![]));
+        assert_eq!(PageOptions::parse("#"), (PageOptions::default(), vec![]));
+    }
+
+    #[test]
+    fn reads_every_option() {
+        let (o, errors) = PageOptions::parse(
+            "#scene=a%20b.zip&labels=xyz&model=tiny&res=4&rays=1200&coarse=4&refine=2&profile=1&split=1&kernels=uniform",
+        );
+        assert!(errors.is_empty(), "{errors:?}");
+        assert_eq!(
+            o,
+            PageOptions {
+                scene: Some("a b.zip".into()),
+                labels: Some("xyz".into()),
+                model: Some(ModelSize::Tiny),
+                res: Some(4),
+                rays: Some(1200),
+                coarse: Some(4),
+                refine: Some(2),
+                profile: true,
+                split: true,
+                kernels: Some(Kernels::Uniform),
+            }
+        );
+    }
+
+    #[test]
+    fn clamps_as_before() {
+        let (o, errors) = PageOptions::parse("coarse=0&refine=99&profile=0&split=0");
+        assert!(errors.is_empty());
+        assert_eq!(
+            (o.coarse, o.refine, o.profile, o.split),
+            (Some(1), Some(16), false, false)
+        );
+        assert_eq!(PageOptions::parse("coarse=1000").0.coarse, Some(64));
+    }
+
+    #[test]
+    fn a_bad_value_is_named_and_keeps_the_default() {
+        let (o, errors) = PageOptions::parse("model=huge&res=0&rays=many&kernels=fast&res=2");
+        assert_eq!((o.model, o.res, o.rays, o.kernels), (None, None, None, None));
+        let keys: Vec<_> = errors.iter().map(|e| e.key).collect();
+        assert_eq!(keys, ["model", "res", "rays", "kernels"]);
+        assert_eq!(
+            errors[1].to_string(),
+            "#res=0 in the address: expected a whole number from 1 to 16; using the default"
+        );
+        assert_eq!(PageOptions::parse("res=17").1.len(), 1);
+    }
+
+    #[test]
+    fn unknown_keys_and_bare_words_are_ignored() {
+        assert_eq!(
+            PageOptions::parse("future=1&profile&model=full"),
+            (
+                PageOptions {
+                    model: Some(ModelSize::Full),
+                    ..PageOptions::default()
+                },
+                vec![]
+            )
+        );
+    }
+}

@@ -1,0 +1,506 @@
+//! The training task: owns the [`Trainer`] and, each turn, applies the page's commands, then
+//! does one thing ([`Action`]): wait, export, refresh the visible mask, render it again, or
+//! train a batch of steps. It waits for the GPU without blocking and adapts the batch to the
+//! time it took.
+//!
+//! The batch is sized so one batch takes about [`TARGET_BATCH_MS`] of GPU time: the UI shares the
+//! GPU, and a longer queue of training work would delay every repaint behind it.
+use std::rc::Rc;
+
+use futures_channel::mpsc::{TryRecvError, UnboundedReceiver, UnboundedSender};
+use image::GrayImage;
+
+use super::super::browser::{now_ms, sleep_ms};
+use super::device::{GpuFaults, RateMeter, gpu_done};
+use super::messages::{Phase, Progress, RefreshTimes, Rendered, TrainCommand, TrainError, TrainEvent};
+use super::scene::upscale_mask;
+use super::{TrainingOptions, TrainingSetup};
+use crate::export::MaskSet;
+use crate::field::FieldConfig;
+use crate::field::gpu::refine::RefinePass;
+use crate::field::gpu::trainer::{DepthGuide, RenderedFrame, Trainer, ViewCamera};
+use crate::field::gpu::view::frame_depth_at;
+use crate::field::refine::Guide;
+use crate::gpu::GpuContext;
+use crate::labels::LabelSet;
+use crate::scene::Scene;
+
+/// GPU time one batch of steps should take.
+const TARGET_BATCH_MS: f64 = 20.0;
+/// Most steps in one batch (a fast GPU would otherwise queue seconds of work on a slow frame).
+const MAX_BATCH: u32 = 64;
+/// The visible frame is re-rendered at most this often while training (a render costs as much
+/// as tens of steps).
+const RENDER_INTERVAL_MS: f64 = 1500.0;
+
+/// What the page has asked for, as of the latest commands.
+struct Requests {
+    paused: bool,
+    busy_until_ms: f64,
+    visible_frame: u32,
+    /// New labels to train on, with their version.
+    labels: Option<(u64, LabelSet)>,
+    /// Render the visible frame as soon as possible (it changed).
+    render_soon: bool,
+    /// When the latest refresh was asked for (page clock, ms): a frame shown or labels given.
+    refresh_requested_ms: f64,
+    export: Option<LabelSet>,
+    /// The page has not taken the latest render yet.
+    render_untaken: bool,
+}
+
+/// What the task does next.
+enum Action {
+    /// The user is at work: give the page the device for a moment.
+    Wait,
+    /// Paused: look again in a while.
+    Paused,
+    Export(LabelSet),
+    /// The mask shown is out of date: quick render first (when quicker), then the full one.
+    RefreshStale,
+    /// The full render after a quick one, asked for at `requested_ms`.
+    FinishRefresh {
+        requested_ms: f64,
+    },
+    /// The periodic render while training.
+    RenderAgain,
+    TrainBatch,
+}
+
+pub struct TrainingTask {
+    options: TrainingOptions,
+    ctx: GpuContext,
+    scene: Rc<Scene>,
+    config: FieldConfig,
+    full_size: (u32, u32),
+    commands: UnboundedReceiver<TrainCommand>,
+    events: UnboundedSender<TrainEvent>,
+    egui_ctx: egui::Context,
+    faults: GpuFaults,
+    /// The refinement kernel, built when training starts (refinement runs on the GPU here so a
+    /// large frame's filter does not hold up the page's thread).
+    refine_pass: Option<RefinePass>,
+    requests: Requests,
+    /// Steps per batch, adapted to [`TARGET_BATCH_MS`].
+    batch: u32,
+    /// The labels version the trainer has.
+    trained_version: u64,
+    last_render_end: f64,
+    render_ms: f64,
+    rate: RateMeter,
+    /// New labels wait for one batch of training before the mask is refreshed for them.
+    labels_refresh: bool,
+    trained_since_labels: bool,
+    /// A coarse render of this frame is shown; the full one is next. With the request time.
+    full_pending: Option<(u32, f64)>,
+    refresh: Option<RefreshTimes>,
+}
+
+impl TrainingTask {
+    pub fn new(
+        ctx: GpuContext,
+        setup: TrainingSetup,
+        visible_frame: u32,
+        commands: UnboundedReceiver<TrainCommand>,
+        events: UnboundedSender<TrainEvent>,
+        egui_ctx: egui::Context,
+    ) -> TrainingTask {
+        let faults = GpuFaults::watch(&ctx.device, &egui_ctx);
+        TrainingTask {
+            options: setup.options,
+            ctx,
+            scene: setup.scene,
+            config: setup.config,
+            full_size: setup.full_size,
+            commands,
+            events,
+            egui_ctx,
+            faults,
+            refine_pass: None,
+            requests: Requests {
+                paused: false,
+                busy_until_ms: 0.0,
+                visible_frame,
+                labels: None,
+                render_soon: true,
+                refresh_requested_ms: now_ms(),
+                export: None,
+                render_untaken: false,
+            },
+            batch: 1,
+            trained_version: 0,
+            last_render_end: f64::NEG_INFINITY,
+            render_ms: 0.0,
+            rate: RateMeter::default(),
+            labels_refresh: false,
+            trained_since_labels: false,
+            full_pending: None,
+            refresh: None,
+        }
+    }
+
+    pub async fn run(mut self) {
+        let mut trainer = match self.prepare().await {
+            Ok(t) => t,
+            Err(e) => return self.report(TrainEvent::Phase(Phase::Failed(e))),
+        };
+        self.report(TrainEvent::Phase(Phase::Running));
+        if let Err(e) = self.train(&mut trainer).await {
+            self.report(TrainEvent::Phase(Phase::Failed(e)));
+        }
+    }
+
+    /// Sends an event and asks the page to repaint for it. A closed channel means the page has
+    /// dropped its handle; the task sees that at its next turn.
+    fn report(&self, event: TrainEvent) {
+        let _ = self.events.unbounded_send(event);
+        self.egui_ctx.request_repaint();
+    }
+
+    /// Builds the trainer and the refinement kernel, and profiles a step when asked to.
+    async fn prepare(&mut self) -> Result<Trainer, TrainError> {
+        let mut trainer = Trainer::new(&self.ctx, &self.scene, &self.config, 0)
+            .await
+            .map_err(TrainError::Start)?;
+        if !self.options.refine.is_off() {
+            self.refine_pass = Some(RefinePass::new(&self.ctx).await.map_err(TrainError::RefineKernel)?);
+        }
+        if self.options.profile {
+            let text = self
+                .profile(&mut trainer)
+                .await
+                .map_err(|e| TrainError::Profile(Box::new(e)))?;
+            let _ = self.events.unbounded_send(TrainEvent::Profile(text));
+        }
+        Ok(trainer)
+    }
+
+    /// Applies every queued command. `false` once the page has dropped its handle.
+    fn take_commands(&mut self) -> bool {
+        loop {
+            let command = match self.commands.try_recv() {
+                Ok(c) => c,
+                Err(TryRecvError::Empty) => return true,
+                Err(TryRecvError::Closed) => return false,
+            };
+            let r = &mut self.requests;
+            match command {
+                TrainCommand::SetLabels {
+                    version,
+                    labels,
+                    requested_ms,
+                } => {
+                    r.labels = Some((version, labels));
+                    r.refresh_requested_ms = requested_ms;
+                }
+                TrainCommand::ShowFrame { frame, requested_ms } => {
+                    if r.visible_frame != frame {
+                        r.visible_frame = frame;
+                        r.render_soon = true;
+                        r.refresh_requested_ms = requested_ms;
+                    }
+                }
+                TrainCommand::UserActive { until_ms } => r.busy_until_ms = r.busy_until_ms.max(until_ms),
+                TrainCommand::SetPaused(paused) => r.paused = paused,
+                TrainCommand::Export(labels) => r.export = Some(labels),
+                TrainCommand::RenderTaken => r.render_untaken = false,
+            }
+        }
+    }
+
+    /// The visible frame, within the scene.
+    fn frame(&self) -> u32 {
+        self.requests
+            .visible_frame
+            .min((self.scene.frames.len() as u32).saturating_sub(1))
+    }
+
+    /// Decides what to do this turn, in order of urgency.
+    fn next_action(&mut self) -> Action {
+        let frame = self.frame();
+        if now_ms() < self.requests.busy_until_ms {
+            return Action::Wait;
+        }
+        if let Some(labels) = self.requests.export.take() {
+            return Action::Export(labels);
+        }
+        // A paused field still renders a frame the user steps to.
+        if self.requests.render_soon || (self.labels_refresh && self.trained_since_labels) {
+            return Action::RefreshStale;
+        }
+        if let Some((pending, requested_ms)) = self.full_pending.take()
+            && pending == frame
+        {
+            return Action::FinishRefresh { requested_ms };
+        }
+        // At most a quarter of the time goes to renders the user did not ask for.
+        let due = now_ms() - self.last_render_end > RENDER_INTERVAL_MS.max(3.0 * self.render_ms);
+        if self.requests.paused {
+            return Action::Paused;
+        }
+        if due && !self.requests.render_untaken {
+            return Action::RenderAgain;
+        }
+        Action::TrainBatch
+    }
+
+    async fn train(&mut self, trainer: &mut Trainer) -> Result<(), TrainError> {
+        loop {
+            self.faults.check()?;
+            if !self.take_commands() {
+                return Ok(());
+            }
+            self.upload_labels(trainer)?;
+            match self.next_action() {
+                Action::Wait => sleep_ms(30).await,
+                Action::Paused => {
+                    self.rate.reset();
+                    sleep_ms(100).await;
+                }
+                Action::Export(labels) => {
+                    let zip = self.export(trainer, &labels).await;
+                    let _ = self.events.unbounded_send(TrainEvent::Exported(zip));
+                    self.report(TrainEvent::Phase(Phase::Running));
+                }
+                Action::RefreshStale => self.refresh_stale(trainer).await?,
+                Action::FinishRefresh { requested_ms } => self.finish_refresh(trainer, requested_ms).await?,
+                Action::RenderAgain => {
+                    let image = self.render_full(trainer, self.frame()).await?;
+                    self.publish(trainer, image, false);
+                }
+                Action::TrainBatch => self.train_batch(trainer).await?,
+            }
+        }
+    }
+
+    /// Hands the trainer the latest labels, if any came.
+    fn upload_labels(&mut self, trainer: &mut Trainer) -> Result<(), TrainError> {
+        if let Some((version, labels)) = self.requests.labels.take() {
+            trainer
+                .set_labels(Some(&labels), &self.scene)
+                .map_err(TrainError::Labels)?;
+            self.trained_version = version;
+            self.labels_refresh = true;
+            self.trained_since_labels = false;
+        }
+        Ok(())
+    }
+
+    /// The mask shown is out of date: renders it quickly at low resolution when that comes
+    /// sooner (the full render follows, [`Action::FinishRefresh`]), else in full.
+    async fn refresh_stale(&mut self, trainer: &mut Trainer) -> Result<(), TrainError> {
+        let frame = self.frame();
+        let requested = self.requests.refresh_requested_ms;
+        self.requests.render_soon = false;
+        self.labels_refresh = false;
+        self.full_pending = None;
+        let (w, h) = (self.scene.width, self.scene.height);
+        let coarse = self.options.refresh.coarse_size(w, h, trainer.config().batch_rays);
+        let image = match coarse {
+            Some((cw, ch)) => {
+                let view =
+                    ViewCamera::of_frame(&self.scene, frame as usize, cw, ch).ok_or(TrainError::NoSuchFrame(frame))?;
+                let depth = frame_depth_at(&self.scene, frame as usize, cw, ch);
+                trainer
+                    .render_view(&view, DepthGuide::Measured(&depth))
+                    .await
+                    .map_err(|source| TrainError::Render { frame, source })?
+            }
+            None => self.render_full(trainer, frame).await?,
+        };
+        if coarse.is_some() {
+            self.full_pending = Some((frame, requested));
+        }
+        self.publish(trainer, image, coarse.is_some());
+        let took = self.last_render_end - requested;
+        self.update_refresh(RefreshTimes {
+            first_ms: took,
+            full_ms: coarse.is_none().then_some(took),
+        });
+        Ok(())
+    }
+
+    /// The full render after a quick one.
+    async fn finish_refresh(&mut self, trainer: &mut Trainer, requested_ms: f64) -> Result<(), TrainError> {
+        let image = self.render_full(trainer, self.frame()).await?;
+        self.publish(trainer, image, false);
+        if let Some(mut times) = self.refresh {
+            times.full_ms = Some(self.last_render_end - requested_ms);
+            self.update_refresh(times);
+        }
+        Ok(())
+    }
+
+    fn update_refresh(&mut self, times: RefreshTimes) {
+        self.refresh = Some(times);
+        let _ = self.events.unbounded_send(TrainEvent::Refresh(times));
+    }
+
+    /// Trains one batch of steps and adapts the batch size to the time it took.
+    async fn train_batch(&mut self, trainer: &mut Trainer) -> Result<(), TrainError> {
+        let batch = self.batch;
+        let start = now_ms();
+        if self.options.split_steps {
+            train_split(trainer, batch);
+        } else {
+            trainer.train(batch);
+        }
+        trainer.request_losses();
+        let submitted = now_ms();
+        gpu_done(&self.ctx.queue).await;
+        let done = now_ms();
+        let elapsed = (done - start).max(0.1);
+        self.rate.add(batch, elapsed);
+        self.trained_since_labels = true;
+        // Aim the next batch at the target time, changing by at most 2x at a time so one
+        // slow frame (a tab switch, a render in between) does not swing it wildly.
+        let steps = f64::from(batch);
+        let wanted = steps * TARGET_BATCH_MS / elapsed;
+        self.batch = (wanted.clamp(steps / 2.0, steps * 2.0).round() as u32).clamp(1, MAX_BATCH);
+        let losses = trainer.poll_losses().map_err(TrainError::Losses)?;
+        let _ = self.events.unbounded_send(TrainEvent::Progress(Progress {
+            steps: trainer.steps_done(),
+            steps_per_second: self.rate.per_second(),
+            losses,
+            batch: self.batch,
+            step_submit_ms: (submitted - start) / steps,
+            step_wait_ms: (done - submitted) / steps,
+        }));
+        self.egui_ctx
+            .request_repaint_after(std::time::Duration::from_millis(self.options.repaint_ms.max(50)));
+        // Let the browser run the UI's frame before the next batch.
+        sleep_ms(0).await;
+        Ok(())
+    }
+
+    /// Renders `frame` at the training resolution, noting how long it took.
+    async fn render_full(&mut self, trainer: &mut Trainer, frame: u32) -> Result<RenderedFrame, TrainError> {
+        let start = now_ms();
+        let image = self.render_refined(trainer, frame).await?;
+        self.render_ms = now_ms() - start;
+        let _ = self.events.unbounded_send(TrainEvent::RenderTime(self.render_ms));
+        Ok(image)
+    }
+
+    /// Renders `frame` at the training resolution and refines its class map (`options.refine`).
+    async fn render_refined(&self, trainer: &mut Trainer, frame: u32) -> Result<RenderedFrame, TrainError> {
+        let mut image = trainer
+            .render_frame(frame, self.scene.width, self.scene.height)
+            .await
+            .map_err(|source| TrainError::Render { frame, source })?;
+        if let (Some(guide), Some(pass)) = (Guide::of_frame(&self.scene, frame as usize), &self.refine_pass) {
+            image
+                .refine_on_gpu(&self.ctx, pass, guide, &self.options.refine)
+                .await
+                .map_err(|source| TrainError::Refine { frame, source })?;
+        }
+        Ok(image)
+    }
+
+    /// Hands a render of the visible frame to the page.
+    fn publish(&mut self, trainer: &Trainer, image: RenderedFrame, coarse: bool) {
+        self.last_render_end = now_ms();
+        self.requests.render_untaken = true;
+        self.report(TrainEvent::Rendered(Box::new(Rendered {
+            frame: self.frame(),
+            labels_version: self.trained_version,
+            step: trainer.steps_done(),
+            image,
+            coarse,
+        })));
+    }
+
+    /// Where a step's time goes, by the wall clock (browsers offer no timestamp queries by
+    /// default): an empty submission, whole steps, each stage submitted alone, and a render
+    /// of frame 0, each timed from submission until the GPU reports it done. One line of
+    /// `name=ms` pairs (the stages' best of two).
+    async fn profile(&mut self, trainer: &mut Trainer) -> Result<String, TrainError> {
+        let timed = |start: f64| now_ms() - start;
+        let mut out = Vec::new();
+        // Warm up (first use of every pipeline).
+        trainer.train(1);
+        gpu_done(&self.ctx.queue).await;
+        let mut empty = f64::MAX;
+        for _ in 0..3 {
+            let start = now_ms();
+            self.ctx.queue.submit(std::iter::empty::<wgpu::CommandBuffer>());
+            gpu_done(&self.ctx.queue).await;
+            empty = empty.min(timed(start));
+        }
+        out.push(format!("empty_submit={empty:.1}"));
+        let mut step = f64::MAX;
+        let mut step_submit = 0.0;
+        for _ in 0..2 {
+            let start = now_ms();
+            trainer.train(1);
+            step_submit = timed(start);
+            gpu_done(&self.ctx.queue).await;
+            step = step.min(timed(start));
+        }
+        out.push(format!("step={step:.1} step_submit={step_submit:.1}"));
+        let mut split = f64::MAX;
+        for _ in 0..2 {
+            let start = now_ms();
+            train_split(trainer, 1);
+            gpu_done(&self.ctx.queue).await;
+            split = split.min(timed(start));
+        }
+        out.push(format!("step_split={split:.1}"));
+        let stages = trainer.stage_count();
+        let mut best = vec![(String::new(), f64::MAX); stages];
+        for _ in 0..2 {
+            for (i, slot) in best.iter_mut().enumerate() {
+                let start = now_ms();
+                let name = trainer.submit_stage(i).unwrap_or("?");
+                gpu_done(&self.ctx.queue).await;
+                let ms = timed(start);
+                slot.0 = name.replace(' ', "_");
+                slot.1 = slot.1.min(ms);
+            }
+        }
+        let sum: f64 = best.iter().map(|b| b.1).sum();
+        out.push(format!("stages_sum={sum:.1}"));
+        out.extend(best.iter().map(|(name, ms)| format!("{name}={ms:.1}")));
+        let start = now_ms();
+        self.render_full(trainer, 0).await?;
+        out.push(format!("render_frame={:.1}", timed(start)));
+        self.faults.check()?;
+        Ok(out.join(" "))
+    }
+
+    /// Renders every frame into a masks zip (class ids, previews, labels, class manifest).
+    async fn export(&mut self, trainer: &mut Trainer, labels: &LabelSet) -> Result<Vec<u8>, TrainError> {
+        let total = self.scene.frames.len() as u32;
+        let mut masks = Vec::with_capacity(total as usize);
+        for frame in 0..total {
+            // Later commands wait for the export; a dropped handle ends it.
+            if !self.take_commands() {
+                return Err(TrainError::Stopped);
+            }
+            self.report(TrainEvent::Phase(Phase::Exporting { done: frame, total }));
+            self.faults.check()?;
+            let rendered = self.render_refined(trainer, frame).await?;
+            let mask = GrayImage::from_raw(self.scene.width, self.scene.height, rendered.classes)
+                .ok_or(TrainError::MaskSize(frame))?;
+            masks.push(upscale_mask(mask, self.full_size.0, self.full_size.1));
+        }
+        self.report(TrainEvent::Phase(Phase::Exporting { done: total, total }));
+        // Let the page show "packing" before the zip takes the thread.
+        sleep_ms(20).await;
+        let set = MaskSet {
+            classes: labels.classes.clone(),
+            masks,
+        };
+        Ok(set.to_zip(Some(labels)))
+    }
+}
+
+/// Trains `steps` steps submitting each stage on its own (see [`TrainingOptions::split_steps`]).
+fn train_split(trainer: &mut Trainer, steps: u32) {
+    let stages = trainer.stage_count();
+    for _ in 0..steps {
+        for i in 0..stages {
+            trainer.submit_stage(i);
+        }
+    }
+}
