@@ -55,7 +55,7 @@ pub struct PropagationOptions {
     /// ...and that class leads the next by this much.
     pub min_margin: f32,
     /// Turn of the surface normal between neighbours, as 1 - cos(angle), at which the step
-    /// weight falls to e^-1 is this squared; 0 leaves normals out. Normals come from dense depth
+    /// weight falls to e^-1 is this squared (0.15: about 12 degrees); 0 leaves normals out. Normals come from dense depth
     /// (`field::normals`), so a crease where a box stands on a table stops the walk even where
     /// the two surfaces share a colour and a depth.
     pub normal_sigma: f32,
@@ -73,9 +73,9 @@ impl Default for PropagationOptions {
             depth_sigma: 0.02,
             depth_hole_factor: 3e-4,
             reach: 0.5,
-            min_probability: 0.7,
-            min_margin: 0.7,
-            normal_sigma: 0.0,
+            min_probability: 0.5,
+            min_margin: 0.5,
+            normal_sigma: 0.15,
             across_views: true,
         }
     }
