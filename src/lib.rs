@@ -9,6 +9,9 @@ pub mod features;
 pub mod field;
 pub mod gpu;
 pub mod labels;
+#[cfg(test)]
+mod module_layers;
+pub mod rng;
 pub mod scene;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod serve;

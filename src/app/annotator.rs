@@ -21,9 +21,9 @@ use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
 use crate::labels::autosave::SceneSource;
 use crate::labels::brush::{MAX_RADIUS, MIN_RADIUS, StrokeBuilder};
+use crate::labels::canvas_zoom::ViewTransform;
 use crate::labels::history::{Edit, History};
 use crate::labels::summary::{classes_used, labelled_pixels_per_frame};
-use crate::labels::view::ViewTransform;
 use crate::scene::Scene;
 
 const UNDO: KeyboardShortcut = KeyboardShortcut::new(Modifiers::COMMAND, Key::Z);

@@ -7,7 +7,7 @@
 //! small), and without it the reconstruction loss would only see the largest. Training splits
 //! every minibatch across threads, each computing the gradient of its rows; the partial
 //! gradients are summed in thread order, so a fit is deterministic for a given thread count.
-use crate::field::rng::SplitMix64;
+use crate::rng::SplitMix64;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct AutoencoderConfig {

@@ -4,7 +4,7 @@ use half::f16;
 
 use super::autoencoder::{Autoencoder, AutoencoderConfig, FitReport};
 use super::{FeatureError, FeatureMap};
-use crate::field::rng::SplitMix64;
+use crate::rng::SplitMix64;
 use crate::scene::{FeatureCodes, Pca};
 
 #[derive(Clone, Debug, PartialEq)]

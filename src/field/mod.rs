@@ -12,7 +12,6 @@ pub mod params;
 pub mod propagate;
 pub mod reference;
 pub mod refine;
-pub mod rng;
 
 pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LossWeights, SemanticInput};
 pub use params::{MlpLayout, ParamLayout};

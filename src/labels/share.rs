@@ -20,8 +20,9 @@ use flate2::Compression;
 use flate2::read::DeflateDecoder;
 use flate2::write::DeflateEncoder;
 
-use super::format::limits::{MAX_POINTS_PER_STROKE, MAX_TOTAL_POINTS};
-use super::format::{ClassInfo, FrameLabels, LabelSet, Stroke, check_stroke};
+use super::limits::{MAX_POINTS_PER_STROKE, MAX_TOTAL_POINTS};
+use super::{ClassInfo, FrameLabels, LabelSet, Stroke};
+use crate::scene::label_set::check_stroke;
 
 const CODE_VERSION: u8 = 1;
 /// Steps per pixel of coordinates and radii in the code.
