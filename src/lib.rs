@@ -1,4 +1,5 @@
 //! scribblefield: scribbles on a few RGB-D frames, propagated to dense masks by a neural field.
+pub mod adam;
 #[cfg(target_arch = "wasm32")]
 pub mod app;
 pub mod colors;
@@ -11,6 +12,7 @@ pub mod gpu;
 pub mod labels;
 #[cfg(test)]
 mod module_layers;
+pub mod percent;
 pub mod rng;
 pub mod scene;
 #[cfg(not(target_arch = "wasm32"))]

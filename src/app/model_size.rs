@@ -36,12 +36,11 @@ impl ModelSize {
     /// The default for an adapter: tiny on software rasterizers, small elsewhere (the full
     /// model wants a desktop GPU; the user can ask for it).
     pub fn for_adapter(info: &wgpu::AdapterInfo) -> ModelSize {
-        let name = info.name.to_ascii_lowercase();
-        let software = info.device_type == wgpu::DeviceType::Cpu
-            || ["swiftshader", "llvmpipe", "lavapipe", "software", "warp"]
-                .iter()
-                .any(|s| name.contains(s) || info.driver.to_ascii_lowercase().contains(s));
-        if software { ModelSize::Tiny } else { ModelSize::Small }
+        if crate::gpu::context::is_software_adapter(info) {
+            ModelSize::Tiny
+        } else {
+            ModelSize::Small
+        }
     }
 
     /// Whether this model trains on the scene's feature codes. The tiny model does not: on a CPU
