@@ -219,20 +219,10 @@ const MAX_HASH_RESOLUTION: f64 = (1u32 << 20) as f64;
 const MAX_WIDTH: u32 = 1024;
 
 impl FieldConfig {
-    /// A small model for tests and quick browser sessions: 2^14 entries, 8 levels, width 32.
+    /// A small model for tests and quick browser sessions: 2^14 entries, 8 levels, width 32
+    /// (the `small` preset).
     pub fn small() -> FieldConfig {
-        FieldConfig {
-            hash_levels: 8,
-            log2_hash_table_size: 14,
-            density_width: 32,
-            color_width: 32,
-            feature_width: 32,
-            semantic_width: 32,
-            samples_coarse: 8,
-            samples_fine: 24,
-            batch_rays: 1024,
-            ..FieldConfig::default()
-        }
+        super::presets::Preset::Small.config()
     }
 
     pub fn hash_table_size(&self) -> usize {

@@ -9,10 +9,12 @@
 //! buffers of that length (parameters, gradient, Adam m and v).
 pub mod config;
 pub mod params;
+pub mod presets;
 pub mod propagate;
 pub mod reference;
 pub mod refine;
 
 pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LossWeights, SemanticInput};
 pub use params::{MlpLayout, ParamLayout};
+pub use presets::Preset;
 pub mod gpu;
