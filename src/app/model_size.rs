@@ -45,8 +45,7 @@ impl ModelSize {
 
     /// Whether this model trains on the scene's feature codes. The tiny model does not: on a CPU
     /// rasterizer a page gets a few dozen steps in a minute, and there the 64-d feature branch
-    /// and its loss cost more than they give (browser e2e on the built-in demo with codes: mean
-    /// IoU 0.21 after its 30 labelled steps, against 0.27-0.30 without; steps 30 % slower).
+    /// and its loss cost more time than they give back in quality (docs/results/measurements.md).
     pub fn trains_on_feature_codes(self) -> bool {
         self != ModelSize::Tiny
     }

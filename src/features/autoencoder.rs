@@ -1,4 +1,4 @@
-//! The autoencoder of DESIGN §4 that compresses an extractor's M-dimensional features to the
+//! The autoencoder (docs/features.md) that compresses an extractor's M-dimensional features to the
 //! archive's 64-d codes: M → 128 → 64 (ReLU code) → 128 → M, ReLU hidden layers, trained with
 //! ‖dec(enc(f)) − f‖² + λ·|enc(f)|₁ (λ = 0.01) by Adam on minibatches of cells.
 //!

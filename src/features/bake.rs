@@ -1,4 +1,4 @@
-//! Making the archive's codes (DESIGN §4): every frame's feature map, an autoencoder fitted on
+//! Making the archive's codes (docs/features.md): every frame's feature map, an autoencoder fitted on
 //! all of them, the codes of every cell, and their PCA for display.
 use half::f16;
 

@@ -73,8 +73,8 @@ impl Preset {
                 batch_rays: 1024,
                 ..FieldConfig::default()
             },
-            // At short budgets the interactive default learning rate (1e-3) learns labels too
-            // slowly, and larger ones overshoot (docs/results/README.md has the numbers).
+            // At short budgets the interactive default learning rate learns labels too slowly,
+            // and a larger one than this overshoots (docs/results/measurements.md).
             Preset::Budget => FieldConfig {
                 batch_rays: 256,
                 samples_coarse: 4,
