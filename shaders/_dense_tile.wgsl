@@ -1,4 +1,4 @@
-// Shared by the dense-layer kernels (src/field/gpu/dense.rs): the uniform describing one layer
+// Shared by the dense-layer kernels (src/field/gpu/dense/): the uniform describing one layer
 // and the register-tiled product C += A·B of a TM x KC tile of A and a KC x TN tile of B staged
 // in workgroup memory. Each invocation owns RM x RN (4 x 4) elements of the TM x TN tile of C, strided by
 // the invocation grid (row ty + r·TY, column tx + c·TX) so neighbouring invocations read
@@ -8,7 +8,7 @@
 // `dense::TileShape` (wide layers 16x16 invocations over 64x64 tiles, narrow outputs tall thin
 // tiles); the staging arrays are sized for the largest shape: 12 KiB, under WebGPU's 16 KiB.
 
-// Mirrors `DenseDims` in src/field/gpu/dense.rs (16 u32, 64 bytes). Offsets and strides count
+// Mirrors `DenseDims` in src/field/gpu/dense/layer.rs (16 u32, 64 bytes). Offsets and strides count
 // f32 elements; a view (stride, offset) addresses element j of row n at n·stride + offset + j.
 struct DenseDims {
     rows: u32,

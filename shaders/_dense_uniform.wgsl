@@ -1,12 +1,12 @@
-// Shared by the dense kernels that read the weights from a UNIFORM binding (src/field/gpu/dense.rs, `DenseFamily::UniformWeights`): the kernels CPU devices
+// Shared by the dense kernels that read the weights from a UNIFORM binding (src/field/gpu/dense/, `DenseFamily::UniformWeights`): the kernels CPU devices
 // (lavapipe, SwiftShader) run instead of the workgroup-tiled ones.
 //
 // Why: those devices run a SIMD group of invocations in lock-step lanes, and every storage or
 // workgroup load becomes a per-lane gather; a uniform-buffer load with an index that is the same
 // in every lane is one scalar load. Each invocation owns one row n and a block of BLOCK outputs,
 // so per step of the reduction it gathers one value of its own row and reads the BLOCK weights
-// it multiplies with as uniform scalars. Measured on lavapipe: about 6x the GFLOP/s of the same
-// loop reading the weights from storage, and several times the tiled kernels'.
+// it multiplies with as uniform scalars, which on those devices is several times faster than
+// reading the weights from storage or the tiled kernels (docs/results/measurements.md).
 //
 // Same uniform block and bindings as the tiled kernels (`_dense_tile.wgsl`), except `weights`:
 // 64 KiB of the parameter buffer bound as uniform from a 256-byte aligned offset, the layer's

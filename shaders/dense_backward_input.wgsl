@@ -1,4 +1,4 @@
-// Input gradient of one dense layer (src/field/gpu/dense.rs):
+// Input gradient of one dense layer (src/field/gpu/dense/):
 // dX[n][i] = Σ_o dZ[n][o] · W[o][i] with dZ = dY ⊙ act'(Y) formed while staging (ReLU: Y > 0).
 // dX is overwritten (not accumulated). Workgroups: x, y spread the row tiles, z the input-column
 // tiles.

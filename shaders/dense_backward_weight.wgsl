@@ -1,4 +1,4 @@
-// Weight gradient of one dense layer (src/field/gpu/dense.rs): dW[o][i] = Σ_n dZ[n][o] · X[n][i],
+// Weight gradient of one dense layer (src/field/gpu/dense/): dW[o][i] = Σ_n dZ[n][o] · X[n][i],
 // dZ = dY ⊙ act'(Y). A reduction over all N rows done deterministically in two steps:
 // `partial_sums` gives every chunk of dims.chunk_rows rows its own [out][in] partial matrix
 // (workgroups: x the input-column tiles, y the output-row tiles, z the chunk), then

@@ -1,4 +1,4 @@
-// Weight gradient of one dense layer on CPU devices (src/field/gpu/dense.rs,
+// Weight gradient of one dense layer on CPU devices (src/field/gpu/dense/,
 // `DenseFamily::UniformWeights`): dW[o][i] = Σ_n dZ[n][o] · X[n][i], dZ = dY ⊙ act'(Y), summed
 // deterministically like `dense_backward_weight.wgsl` (per-chunk partial matrices, then its
 // `reduce_chunks` in order), but with dZ read through a uniform binding so that a SIMD group of

@@ -1,4 +1,4 @@
-// Forward of one bias-free dense layer over N rows (src/field/gpu/dense.rs):
+// Forward of one bias-free dense layer over N rows (src/field/gpu/dense/):
 // Y[n][o] = act(Σ_i X[n][i] · W[o][i]), act ReLU or none, X and Y row views (stride, offset),
 // W the layer's row-major [out][in] matrix at dims.weight_offset of the bound params.
 // Workgroups: x, y spread the row tiles (Dispatch1d), z the output-column tiles.

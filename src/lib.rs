@@ -1,4 +1,5 @@
 //! scribblefield: scribbles on a few RGB-D frames, propagated to dense masks by a neural field.
+pub mod adam;
 pub mod app;
 pub mod colors;
 pub mod eval;
@@ -8,6 +9,10 @@ pub mod features;
 pub mod field;
 pub mod gpu;
 pub mod labels;
+#[cfg(test)]
+mod module_layers;
+pub mod percent;
+pub mod rng;
 pub mod scene;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod serve;

@@ -294,8 +294,8 @@ fn resolve_target(root: &Path, target: &str) -> Result<PathBuf, Refusal> {
             "request target {target:?} is not an absolute path"
         )));
     }
-    let decoded =
-        percent_decode(path).ok_or_else(|| Refusal::BadPath(format!("bad percent-encoding in {target:?}")))?;
+    let decoded = crate::percent::decode_strict(path)
+        .ok_or_else(|| Refusal::BadPath(format!("bad percent-encoding in {target:?}")))?;
     let mut relative = PathBuf::new();
     for segment in decoded.split('/') {
         match segment {
@@ -319,24 +319,6 @@ fn resolve_target(root: &Path, target: &str) -> Result<PathBuf, Refusal> {
         return Err(Refusal::NotFound);
     }
     Ok(real)
-}
-
-/// Decodes `%XX` escapes; `None` for a truncated escape, bad hex or bytes that are not UTF-8.
-fn percent_decode(s: &str) -> Option<String> {
-    let bytes = s.as_bytes();
-    let mut out = Vec::with_capacity(bytes.len());
-    let mut i = 0;
-    while i < bytes.len() {
-        if bytes[i] == b'%' {
-            let hex = std::str::from_utf8(bytes.get(i + 1..i + 3)?).ok()?;
-            out.push(u8::from_str_radix(hex, 16).ok()?);
-            i += 3;
-        } else {
-            out.push(bytes[i]);
-            i += 1;
-        }
-    }
-    String::from_utf8(out).ok()
 }
 
 /// The Content-Type for a file, by extension. Browsers refuse to stream-compile wasm and to run
@@ -365,11 +347,14 @@ mod tests {
 
     #[test]
     fn percent_decoding() {
-        assert_eq!(percent_decode("/a%20b/c%2Fd").as_deref(), Some("/a b/c/d"));
-        assert_eq!(percent_decode("/plain").as_deref(), Some("/plain"));
-        assert_eq!(percent_decode("/bad%2"), None);
-        assert_eq!(percent_decode("/bad%zz"), None);
-        assert_eq!(percent_decode("/notutf8%ff"), None);
+        assert_eq!(
+            crate::percent::decode_strict("/a%20b/c%2Fd").as_deref(),
+            Some("/a b/c/d")
+        );
+        assert_eq!(crate::percent::decode_strict("/plain").as_deref(), Some("/plain"));
+        assert_eq!(crate::percent::decode_strict("/bad%2"), None);
+        assert_eq!(crate::percent::decode_strict("/bad%zz"), None);
+        assert_eq!(crate::percent::decode_strict("/notutf8%ff"), None);
     }
 
     #[test]

@@ -4,9 +4,9 @@ use std::collections::HashMap;
 use std::sync::OnceLock;
 
 use glam::DVec3;
+use scribblefield::scene::GT_VOID;
 use scribblefield::scene::archive::write_archive_bytes;
 use scribblefield::scene::demo::{DEMO_CLASSES, DemoOptions, DemoWorld, demo_scene};
-use scribblefield::scene::scene::GT_VOID;
 use scribblefield::scene::{Scene, read_archive};
 
 /// The default scene, rendered once for all tests of this file.

@@ -11,12 +11,12 @@ use scribblefield::field::FieldConfig;
 use scribblefield::field::gpu::adam::{AdamBuffers, AdamPass};
 use scribblefield::field::gpu::rays::StepUniforms;
 use scribblefield::field::reference::Adam;
-use scribblefield::field::rng::SplitMix64;
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{
     read_buffer_blocking, storage_buffer_from, storage_buffer_zeroed, uniform_buffer_from,
 };
 use scribblefield::gpu::test_support::gpu_for_tests;
+use scribblefield::rng::SplitMix64;
 
 const STEPS: u32 = 5;
 const RELATIVE_TOLERANCE: f32 = 1e-6;

@@ -14,10 +14,10 @@ use scribblefield::field::gpu::rays::{
 };
 use scribblefield::field::reference::loss::{RayTarget, ray_loss};
 use scribblefield::field::reference::{Channels, activations, render};
-use scribblefield::field::rng::SplitMix64;
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{fill_with_garbage, read_buffer_blocking, storage_buffer_from, uniform_buffer_from};
 use scribblefield::gpu::test_support::gpu_for_tests;
+use scribblefield::rng::SplitMix64;
 
 /// Stride of the density MLP's output rows in these tests ([h₀, geometry feature]).
 const DENSITY_STRIDE: u32 = 16;

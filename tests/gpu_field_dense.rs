@@ -12,7 +12,6 @@ use scribblefield::field::gpu::dense::{
 };
 use scribblefield::field::params::{MlpLayout, ParamLayout};
 use scribblefield::field::reference::mlp::{MlpTrace, backward, forward};
-use scribblefield::field::rng::SplitMix64;
 use scribblefield::field::{Encoding, FieldConfig};
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{
@@ -20,6 +19,7 @@ use scribblefield::gpu::buffers::{
     storage_buffer_padded, storage_buffer_zeroed,
 };
 use scribblefield::gpu::test_support::gpu_for_tests;
+use scribblefield::rng::SplitMix64;
 
 const ROWS: usize = 777;
 const FORWARD_TOLERANCE: f64 = 1e-5;

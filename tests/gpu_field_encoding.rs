@@ -8,12 +8,12 @@ use scribblefield::field::gpu::encoding::{
 };
 use scribblefield::field::reference::hash_grid::{self, HashGrid};
 use scribblefield::field::reference::{frequency, sh};
-use scribblefield::field::rng::SplitMix64;
 use scribblefield::field::{Encoding, FieldConfig};
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{GARBAGE_WORDS, read_buffer_blocking, storage_buffer_from, storage_buffer_garbage};
 use scribblefield::gpu::test_support::gpu_for_tests;
 use scribblefield::gpu::timing::{PassTimer, Stopwatch};
+use scribblefield::rng::SplitMix64;
 
 /// Where the tests put the table in the flat buffer: not at 0, to prove the offset is honoured.
 const TABLE_OFFSET: usize = 37;

@@ -9,10 +9,10 @@ use image::{ImageBuffer, Luma, Rgb, RgbImage};
 use scribblefield::field::gpu::refine::{GuideBuffers, RefinePass, RefineUniforms};
 use scribblefield::field::gpu::view::FrameAssembler;
 use scribblefield::field::refine::{Guide, RefineOptions, refine_probabilities};
-use scribblefield::field::rng::SplitMix64;
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{read_buffer_blocking, storage_buffer_from, storage_buffer_garbage};
 use scribblefield::gpu::test_support::gpu_for_tests;
+use scribblefield::rng::SplitMix64;
 use scribblefield::scene::DepthImage;
 
 const CLASSES: usize = 5;

@@ -18,7 +18,7 @@ use scribblefield::gpu::test_support::gpu_for_tests;
 use scribblefield::labels::LabelSet;
 use scribblefield::scene::archive::{write_archive_bytes, write_archive_path};
 use scribblefield::scene::demo::{DemoOptions, demo_scene};
-use scribblefield::scene::scene::{FeatureCodes, GT_VOID};
+use scribblefield::scene::{FeatureCodes, GT_VOID};
 use scribblefield::scene::{Pca, Scene};
 
 fn small_demo() -> Scene {

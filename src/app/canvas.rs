@@ -9,7 +9,7 @@ use egui::{Color32, Event, PointerButton, Pos2, Rect, Sense, Stroke as Line, Tex
 
 use crate::labels::Stroke;
 use crate::labels::brush::StrokeBuilder;
-use crate::labels::view::{ScreenRect, ViewTransform};
+use crate::labels::canvas_zoom::{ScreenRect, ViewTransform};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Tool {

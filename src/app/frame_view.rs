@@ -5,7 +5,7 @@ use egui::{Color32, ColorImage, Rect, Sense, TextureHandle, TextureOptions, Vec2
 use image::GrayImage;
 
 use crate::labels::ClassInfo;
-use crate::scene::scene::GT_VOID;
+use crate::scene::GT_VOID;
 use crate::scene::{DepthImage, Scene};
 
 /// Depth shown for pixels without a reading.

@@ -1,17 +1,17 @@
 //! Which field the page trains: sized to the device, since the same page runs on a discrete GPU
 //! and on a CPU rasterizer (SwiftShader in headless browsers, where one dense layer of width 32
 //! over a thousand rays takes tens of milliseconds).
-use crate::field::{AdamConfig, FieldConfig};
+use crate::field::{FieldConfig, Preset};
 use crate::scene::Scene;
 
 /// The choices, by name in the page's `#model=` fragment key.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ModelSize {
-    /// For software rasterizers: 128 rays, widths 16, 12 samples per ray.
+    /// The `tiny` preset (`field::Preset`), for software rasterizers.
     Tiny,
-    /// `FieldConfig::small()`: laptops and integrated GPUs.
+    /// The `small` preset: laptops and integrated GPUs.
     Small,
-    /// DESIGN §5's model.
+    /// The `full` preset.
     Full,
 }
 
@@ -36,18 +36,16 @@ impl ModelSize {
     /// The default for an adapter: tiny on software rasterizers, small elsewhere (the full
     /// model wants a desktop GPU; the user can ask for it).
     pub fn for_adapter(info: &wgpu::AdapterInfo) -> ModelSize {
-        let name = info.name.to_ascii_lowercase();
-        let software = info.device_type == wgpu::DeviceType::Cpu
-            || ["swiftshader", "llvmpipe", "lavapipe", "software", "warp"]
-                .iter()
-                .any(|s| name.contains(s) || info.driver.to_ascii_lowercase().contains(s));
-        if software { ModelSize::Tiny } else { ModelSize::Small }
+        if crate::gpu::context::is_software_adapter(info) {
+            ModelSize::Tiny
+        } else {
+            ModelSize::Small
+        }
     }
 
     /// Whether this model trains on the scene's feature codes. The tiny model does not: on a CPU
     /// rasterizer a page gets a few dozen steps in a minute, and there the 64-d feature branch
-    /// and its loss cost more than they give (browser e2e on the built-in demo with codes: mean
-    /// IoU 0.21 after its 30 labelled steps, against 0.27-0.30 without; steps 30 % slower).
+    /// and its loss cost more time than they give back in quality (docs/results/measurements.md).
     pub fn trains_on_feature_codes(self) -> bool {
         self != ModelSize::Tiny
     }
@@ -56,28 +54,11 @@ impl ModelSize {
     /// without codes, see [`ModelSize::trains_on_feature_codes`]).
     pub fn config(self, scene: &Scene, classes: usize) -> FieldConfig {
         let mut cfg = match self {
-            ModelSize::Tiny => FieldConfig {
-                hash_levels: 6,
-                log2_hash_table_size: 12,
-                density_width: 16,
-                color_width: 16,
-                feature_width: 16,
-                semantic_width: 16,
-                samples_coarse: 4,
-                samples_fine: 8,
-                batch_rays: 128,
-                // Few steps happen on a CPU rasterizer: larger steps than the interactive
-                // default so scribbles show in the masks within a minute.
-                adam: AdamConfig {
-                    lr_warmup: 1e-2,
-                    lr_annotating: 1e-2,
-                    ..AdamConfig::default()
-                },
-                ..FieldConfig::small()
-            },
-            ModelSize::Small => FieldConfig::small(),
-            ModelSize::Full => FieldConfig::default(),
-        };
+            ModelSize::Tiny => Preset::Tiny,
+            ModelSize::Small => Preset::Small,
+            ModelSize::Full => Preset::Full,
+        }
+        .config();
         cfg.num_classes = classes.max(2) as u32;
         match &scene.features {
             Some(f) => cfg.feature_dim = f.dim,

@@ -1,4 +1,4 @@
-//! `--features` of `pack` and `demo-scene`: bake feature codes into the archive (DESIGN §4).
+//! `--features` of `pack` and `demo-scene`: bake feature codes into the archive (docs/features.md).
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};

@@ -2,26 +2,16 @@
 //! field config a command trains.
 use std::path::{Path, PathBuf};
 
-use clap::{Args, ValueEnum};
-use scribblefield::field::FieldConfig;
+use clap::Args;
+use scribblefield::field::{FieldConfig, Preset};
 use scribblefield::scene::{FeatureCodes, Scene};
-
-/// The base field config, before `--config` changes fields of it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum Preset {
-    /// DESIGN §5 (hash table 2^19, widths 128, 4096 rays): for a real GPU.
-    Default,
-    /// 8 levels, 2^14 table, widths 32, 1024 rays.
-    Small,
-    /// The quality tests' CPU budget: `small` with 256 rays of 4 + 12 samples, no feature
-    /// supervision, annotating lr 5e-3 (about 0.2-0.5 s a step on lavapipe).
-    Budget,
-}
 
 #[derive(Args, Clone, Debug)]
 pub struct FieldConfigArgs {
-    /// Base field config; `--config` overrides fields of it.
-    #[arg(long, value_enum, default_value_t = Preset::Default)]
+    /// Base field config, from `field::Preset`: tiny, small, budget (a CPU device's budget, as
+    /// the quality tests train) or full (the full model, for a real GPU; `default` is its older
+    /// name). `--config` overrides fields of it.
+    #[arg(long, value_parser = parse_preset, default_value = "full")]
     pub preset: Preset,
     /// Field config as JSON, inline (`'{"feature_supervision": true}'`) or a file: fields given
     /// replace the preset's (`adam`, `loss` and `scribble_propagation` field by field, `encoding`
@@ -39,11 +29,7 @@ impl FieldConfigArgs {
         classes: u32,
         codes: Option<&FeatureCodes>,
     ) -> Result<FieldConfig, Box<dyn std::error::Error>> {
-        let preset = match self.preset {
-            Preset::Default => FieldConfig::default(),
-            Preset::Small => FieldConfig::small(),
-            Preset::Budget => scribblefield::eval::headless::budget_config(classes),
-        };
+        let preset = self.preset.config();
         let mut cfg = match &self.config {
             Some(arg) => {
                 let (text, source) = config_text(arg)?;
@@ -62,13 +48,20 @@ impl FieldConfigArgs {
 
     /// How the config was chosen, for reports: `budget` or `budget with cfg.json`.
     pub fn describe(&self) -> String {
-        let preset = format!("{:?}", self.preset).to_lowercase();
+        let preset = self.preset.name();
         match &self.config {
             Some(arg) if is_inline(arg) => format!("{preset} with {}", arg.trim()),
             Some(path) => format!("{preset} with {path}"),
-            None => preset,
+            None => preset.to_string(),
         }
     }
+}
+
+fn parse_preset(name: &str) -> Result<Preset, String> {
+    Preset::parse(name).ok_or_else(|| {
+        let names: Vec<&str> = Preset::ALL.iter().map(|p| p.name()).collect();
+        format!("unknown preset {name:?}: one of {}", names.join(", "))
+    })
 }
 
 /// Turns feature supervision off, with a note naming `archive`, when the scene has no codes to

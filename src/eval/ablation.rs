@@ -1,4 +1,4 @@
-//! The configurations `ablate` compares (DESIGN §5's baselines) and the files it writes from
+//! The configurations `ablate` compares (the paper's baselines, docs/evaluation.md) and the files it writes from
 //! their curves: `ablation.csv`, `table.md` and a plot per scene (`plot-<scene>.svg`, `.png`).
 use std::path::{Path, PathBuf};
 

@@ -5,30 +5,20 @@
 //! join and `steps` more steps train with them.
 use crate::field::gpu::trainer::{RenderedFrame, Trainer};
 use crate::field::refine::{Guide, RefineOptions};
-use crate::field::{AdamConfig, FieldConfig};
+use crate::field::{FieldConfig, Preset};
 use crate::gpu::GpuError;
 use crate::labels::LabelSet;
 use crate::scene::Scene;
 
 use super::metrics::{Confusion, EvalReport};
 
-/// A config that trains in reasonable time on a CPU device (lavapipe on 2 cores, about 0.2-0.5 s
-/// a step): the small widths, 256 rays of 4 + 12 samples, no feature supervision, and the
-/// annotating learning rate 5e-3 (at short budgets the interactive default 1e-3 learns labels
-/// too slowly; 1e-2 was worse than 5e-3, 0.44 vs 0.58 mean IoU on the demo scene). The quality
-/// tests and `--preset budget` of `simulate` and `ablate` use it.
+/// The `budget` preset (`field::Preset::Budget`) for `classes` classes: a config that trains
+/// in reasonable time on a CPU device. The quality tests and `--preset budget` of `simulate`
+/// and `ablate` use it.
 pub fn budget_config(classes: u32) -> FieldConfig {
     FieldConfig {
         num_classes: classes,
-        batch_rays: 256,
-        samples_coarse: 4,
-        samples_fine: 12,
-        feature_supervision: false,
-        adam: AdamConfig {
-            lr_annotating: 5e-3,
-            ..AdamConfig::default()
-        },
-        ..FieldConfig::small()
+        ..Preset::Budget.config()
     }
 }
 

@@ -1,7 +1,7 @@
 //! Per-class IoU, mean IoU and pixel accuracy from a confusion matrix, ignoring void pixels.
 use serde::Serialize;
 
-use crate::scene::scene::GT_VOID;
+use crate::scene::GT_VOID;
 
 /// Counts of (ground truth, prediction) pairs over any number of frames.
 #[derive(Clone, Debug)]

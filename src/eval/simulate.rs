@@ -27,11 +27,11 @@ use serde::{Deserialize, Serialize};
 use crate::field::FieldConfig;
 use crate::field::gpu::trainer::{Trainer, TrainerState};
 use crate::field::refine::RefineOptions;
-use crate::field::rng::SplitMix64;
 use crate::gpu::{GpuContext, GpuError};
 use crate::labels::{LabelSet, Stroke, UNLABELLED, rasterize_frame};
+use crate::rng::SplitMix64;
+use crate::scene::GT_VOID;
 use crate::scene::Scene;
-use crate::scene::scene::GT_VOID;
 
 use super::curves::{CurvePoint, curve_csv};
 use super::headless::render_and_score;

@@ -1,4 +1,4 @@
-//! The autoencoder of DESIGN §4 that compresses an extractor's M-dimensional features to the
+//! The autoencoder (docs/features.md) that compresses an extractor's M-dimensional features to the
 //! archive's 64-d codes: M → 128 → 64 (ReLU code) → 128 → M, ReLU hidden layers, trained with
 //! ‖dec(enc(f)) − f‖² + λ·|enc(f)|₁ (λ = 0.01) by Adam on minibatches of cells.
 //!
@@ -7,7 +7,8 @@
 //! small), and without it the reconstruction loss would only see the largest. Training splits
 //! every minibatch across threads, each computing the gradient of its rows; the partial
 //! gradients are summed in thread order, so a fit is deterministic for a given thread count.
-use crate::field::rng::SplitMix64;
+use crate::adam::{Adam, AdamHyper};
+use crate::rng::SplitMix64;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct AutoencoderConfig {
@@ -200,7 +201,15 @@ impl Autoencoder {
         };
         let sizes: Vec<usize> = ae.layers.iter().map(Dense::params).collect();
         let total: usize = sizes.iter().sum();
-        let mut adam = Adam::new(total);
+        // The usual defaults for a small network (the field's β₂ and ε are tuned for hash grids).
+        let mut adam = Adam::new(
+            AdamHyper {
+                beta1: 0.9,
+                beta2: 0.999,
+                epsilon: 1e-8,
+            },
+            total,
+        );
         let threads = cfg.threads.clamp(1, cfg.batch.max(1));
         let mut batch = vec![0.0f32; cfg.batch * dim];
         for step in 0..cfg.steps {
@@ -231,7 +240,9 @@ impl Autoencoder {
             grad.iter_mut().for_each(|g| *g *= scale);
             // Linear decay to a tenth: big steps early, a settled fit at the end.
             let lr = cfg.learning_rate * (1.0 - 0.9 * step as f32 / cfg.steps.max(1) as f32);
-            adam.step(&mut ae.layers, &grad, lr);
+            // Laid out `[w0, b0, w1, b1, ...]` like the gradient.
+            let parts = ae.layers.iter_mut().flat_map(|l| [&mut l.w[..], &mut l.b[..]]);
+            adam.update_parts(parts, &grad, lr);
             if (step + 1) % 100 == 0 || step + 1 == cfg.steps {
                 progress(step + 1, cfg.steps, loss / cfg.batch as f64);
             }
@@ -372,41 +383,6 @@ fn standardization(rows: &[f32], dim: usize) -> (Vec<f32>, Vec<f32>) {
         })
         .collect();
     (mean, inv_std)
-}
-
-/// Adam over all layers' parameters, laid out `[w0, b0, w1, b1, ...]` like the gradient.
-struct Adam {
-    m: Vec<f32>,
-    v: Vec<f32>,
-    t: i32,
-}
-
-impl Adam {
-    fn new(n: usize) -> Adam {
-        Adam {
-            m: vec![0.0; n],
-            v: vec![0.0; n],
-            t: 0,
-        }
-    }
-
-    fn step(&mut self, layers: &mut [Dense], grad: &[f32], lr: f32) {
-        const B1: f32 = 0.9;
-        const B2: f32 = 0.999;
-        self.t += 1;
-        let c1 = 1.0 - B1.powi(self.t);
-        let c2 = 1.0 - B2.powi(self.t);
-        let mut i = 0;
-        for layer in layers.iter_mut() {
-            for p in layer.w.iter_mut().chain(layer.b.iter_mut()) {
-                let g = grad[i];
-                self.m[i] = B1 * self.m[i] + (1.0 - B1) * g;
-                self.v[i] = B2 * self.v[i] + (1.0 - B2) * g * g;
-                *p -= lr * (self.m[i] / c1) / ((self.v[i] / c2).sqrt() + 1e-8);
-                i += 1;
-            }
-        }
-    }
 }
 
 #[cfg(test)]

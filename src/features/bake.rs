@@ -1,10 +1,10 @@
-//! Making the archive's codes (DESIGN §4): every frame's feature map, an autoencoder fitted on
+//! Making the archive's codes (docs/features.md): every frame's feature map, an autoencoder fitted on
 //! all of them, the codes of every cell, and their PCA for display.
 use half::f16;
 
 use super::autoencoder::{Autoencoder, AutoencoderConfig, FitReport};
 use super::{FeatureError, FeatureMap};
-use crate::field::rng::SplitMix64;
+use crate::rng::SplitMix64;
 use crate::scene::{FeatureCodes, Pca};
 
 #[derive(Clone, Debug, PartialEq)]

@@ -8,9 +8,8 @@
 //! is lit more or less: a shadow on a table, or the side of the table away from the light, keeps
 //! the table's values. With brightness in the features instead (CIE L\*a\*b\* means and gradient
 //! energies, this extractor's first version), the trained field gave every dark unlabelled region
-//! the class of whichever scribbled object had dark pixels: on the demo scene with scribbles on two
-//! frames, mean IoU 0.60-0.70 over three seeds against 0.64-0.87 with these features (0.81-0.82
-//! with the relu(f)-only semantic head; docs/features.md). Where brightness itself tells classes
+//! the class of whichever scribbled object had dark pixels, and the masks were worse
+//! (docs/results/measurements.md, docs/features.md). Where brightness itself tells classes
 //! apart (a white box on a grey desk) they give up some of it. Windows of a few sizes let a cell
 //! see both its own texture and its surroundings. Box sums come from integral images, so the cost
 //! is a few passes over the image whatever the window size.

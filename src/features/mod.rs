@@ -1,4 +1,4 @@
-//! Dense image features for the archive (DESIGN §4): an extractor turns each frame into a
+//! Dense image features for the archive (docs/features.md): an extractor turns each frame into a
 //! feature map, the autoencoder compresses all frames' maps to 64-d codes, and a PCA of the
 //! codes is kept for display. Everything here runs on the CPU in the native packer.
 mod autoencoder;

@@ -1,4 +1,4 @@
-//! The field's configuration: architecture, sampling, losses and optimiser (DESIGN §5).
+//! The field's configuration: architecture, sampling, losses and optimiser (docs/architecture.md, "The model").
 //!
 //! Every size the CPU reference and the GPU kernels need is derived from here (see the
 //! `*_dims` methods), so the two cannot disagree about a shape. Deserialising fills missing
@@ -56,15 +56,14 @@ pub enum SemanticInput {
     /// [relu(f), g]: the paper's head.
     FeatureAndGeometry,
     /// relu(f) alone, so classes follow the rendered features, which feature supervision ties
-    /// to the image's codes, and not the shading g carries for the colour head. Measured with
-    /// scribbles on two frames of the demo scene (issue 3's note): mean IoU 0.64-0.87 over three
-    /// seeds with g, 0.81-0.82 without; YCB 0.46 with, 0.54 without. Without feature supervision
-    /// f holds nothing the codes put there, and this head generalized worse than the paper's
-    /// (`tests/gpu_trainer.rs`: 0.29 against 0.67 accuracy on an unscribbled frame), hence `Auto`.
+    /// to the image's codes, and not the shading g carries for the colour head: with it, the
+    /// masks were better and far less seed-dependent. Without feature supervision f holds
+    /// nothing the codes put there, and this head generalized worse than the paper's, hence
+    /// `Auto` (docs/results/measurements.md has the numbers).
     Feature,
 }
 
-/// Weights of the four loss terms (DESIGN §5).
+/// Weights of the four loss terms (docs/architecture.md, "The model").
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct LossWeights {
@@ -110,7 +109,7 @@ impl Default for AdamConfig {
     }
 }
 
-/// The whole model configuration. `Default` is DESIGN §5 (hash table 2^19 per level).
+/// The whole model configuration. `Default` is the full model (the `full` preset; hash table 2^19 per level).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct FieldConfig {
@@ -213,20 +212,10 @@ const MAX_HASH_RESOLUTION: f64 = (1u32 << 20) as f64;
 const MAX_WIDTH: u32 = 1024;
 
 impl FieldConfig {
-    /// A small model for tests and quick browser sessions: 2^14 entries, 8 levels, width 32.
+    /// A small model for tests and quick browser sessions: 2^14 entries, 8 levels, width 32
+    /// (the `small` preset).
     pub fn small() -> FieldConfig {
-        FieldConfig {
-            hash_levels: 8,
-            log2_hash_table_size: 14,
-            density_width: 32,
-            color_width: 32,
-            feature_width: 32,
-            semantic_width: 32,
-            samples_coarse: 8,
-            samples_fine: 24,
-            batch_rays: 1024,
-            ..FieldConfig::default()
-        }
+        super::presets::Preset::Small.config()
     }
 
     pub fn hash_table_size(&self) -> usize {

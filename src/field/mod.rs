@@ -11,11 +11,12 @@ pub mod config;
 pub mod normals;
 pub mod params;
 pub mod point_walk;
+pub mod presets;
 pub mod propagate;
 pub mod reference;
 pub mod refine;
-pub mod rng;
 
 pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LossWeights, SemanticInput};
 pub use params::{MlpLayout, ParamLayout};
+pub use presets::Preset;
 pub mod gpu;

@@ -19,7 +19,7 @@
 use std::ops::Range;
 
 use super::config::FieldConfig;
-use super::rng::SplitMix64;
+use crate::rng::SplitMix64;
 
 /// Half-width of the uniform initialisation of the hash table.
 pub const HASH_INIT_RANGE: f32 = 1e-4;

@@ -8,13 +8,11 @@
 //! probabilities, weighted by how close they are in the image, in colour and in depth) let a
 //! region agree with itself and stop at edges, so the halo goes to the table it looks like.
 //!
-//! Measured on the demo scene (scribbles on frames 0 and 12, budget preset with feature
-//! supervision, seeds 0/1/2): mean IoU 0.813/0.817/0.815 for the field's own maps,
-//! 0.932/0.922/0.900 refined; YCB 0.536 → 0.594 (README, Quality). Without the depth term the
-//! gain is about a third smaller: colour alone lets the red ball and the red box of the demo leak
-//! into each other where they touch in the image. Cost: one pass over 7 x 7 taps per round, 7 ms
-//! per 80 x 60 frame and 0.44 s per 640 x 480 frame on one core (`tests::bench`). The page runs
-//! the GPU twin (`field::gpu::refine`, `shaders/refine.wgsl`); the CLI runs this one.
+//! Depth is in the weights because colour alone lets objects of the same colour (the demo's red
+//! ball and red box) leak into each other where they touch in the image. Cost: one pass over
+//! 7 x 7 taps per round (`tests::bench` times it); docs/results/measurements.md has the gains
+//! and timings measured. The page runs the GPU twin (`field::gpu::refine`,
+//! `shaders/refine.wgsl`); the CLI runs this one.
 use image::RgbImage;
 
 use crate::scene::{DepthImage, Scene};

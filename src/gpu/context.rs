@@ -140,10 +140,7 @@ impl GpuContext {
         if let Some(software) = self.software_override {
             return software;
         }
-        let named = |s: &str| s.to_ascii_lowercase().contains("swiftshader");
-        self.adapter_info.device_type == wgpu::DeviceType::Cpu
-            || named(&self.adapter_info.name)
-            || named(&self.adapter_info.driver)
+        is_software_adapter(&self.adapter_info)
     }
 
     /// Native only: blocks until all submitted work is done and its callbacks have run.
@@ -237,6 +234,19 @@ fn ensure_at_most(what: &str, limit: &'static str, needed: u64, allowed: u64) ->
             allowed,
         })
     }
+}
+
+/// Whether an adapter is a software rasterizer (lavapipe/llvmpipe, SwiftShader, WARP): a CPU
+/// device type, or one of their names in the adapter's name or driver (browsers often report
+/// no device type). The kernels pick their CPU-friendly family and the page its smallest model
+/// from this one list.
+pub fn is_software_adapter(info: &wgpu::AdapterInfo) -> bool {
+    const NAMES: [&str; 5] = ["swiftshader", "llvmpipe", "lavapipe", "software", "warp"];
+    let named = |s: &str| {
+        let s = s.to_ascii_lowercase();
+        NAMES.iter().any(|n| s.contains(n))
+    };
+    info.device_type == wgpu::DeviceType::Cpu || named(&info.name) || named(&info.driver)
 }
 
 fn describe_adapter(info: &wgpu::AdapterInfo) -> String {

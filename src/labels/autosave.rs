@@ -3,7 +3,7 @@
 //! and enough about the scene to refuse restoring them onto a different one.
 use serde::{Deserialize, Serialize};
 
-use super::format::LabelSet;
+use super::LabelSet;
 use crate::scene::error::SceneError;
 
 pub const AUTOSAVE_FORMAT: &str = "scribblefield-autosave";

@@ -1,12 +1,13 @@
 //! Turning a pointer drag into a stroke: points snapped to the share codec's grid (so links
 //! carry exactly what was drawn), spaced so a slow drag does not record thousands of points.
-use super::format::Stroke;
+use super::Stroke;
 use super::share::snap;
 
 /// Smallest brush radius in pixels (the rasterizer's pixel-centre test needs half a pixel to
 /// cover anything on a single click).
 pub const MIN_RADIUS: f32 = 0.5;
-pub const MAX_RADIUS: f32 = 200.0;
+/// Largest brush radius in pixels: the limit every label set is checked against.
+pub const MAX_RADIUS: f32 = crate::scene::label_set::limits::MAX_RADIUS;
 
 /// A stroke being drawn.
 #[derive(Clone, Debug, PartialEq)]

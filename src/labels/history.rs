@@ -2,7 +2,7 @@
 //! through [`History::apply`] as an [`Edit`]; undo applies the inverse of the latest one. Edits
 //! are small (one stroke, one class change) so the history can be long without holding copies
 //! of the whole label set; only whole-set replacements (import, restore) keep both sets.
-use super::format::{ClassInfo, LabelSet, Stroke};
+use super::{ClassInfo, LabelSet, Stroke};
 
 /// Edits kept for undo; the oldest are forgotten beyond this.
 pub const MAX_UNDO: usize = 1000;

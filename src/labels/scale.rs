@@ -1,8 +1,8 @@
 //! Labels drawn on full-resolution frames, carried to a field trained on smaller frames (the
 //! page trains at a fraction of the resolution on slow devices, where rendering every pixel of
 //! every frame would take minutes).
+use super::LabelSet;
 use super::brush::MIN_RADIUS;
-use super::format::LabelSet;
 
 /// `labels` for frames `factor` times smaller on each axis: coordinates in the same pixel
 /// convention ((0.5, 0.5) the centre of the top-left pixel), radii shrunk but never below half a

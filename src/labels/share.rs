@@ -20,8 +20,9 @@ use flate2::Compression;
 use flate2::read::DeflateDecoder;
 use flate2::write::DeflateEncoder;
 
-use super::format::limits::{MAX_POINTS_PER_STROKE, MAX_TOTAL_POINTS};
-use super::format::{ClassInfo, FrameLabels, LabelSet, Stroke, check_stroke};
+use super::limits::{MAX_POINTS_PER_STROKE, MAX_TOTAL_POINTS};
+use super::{ClassInfo, FrameLabels, LabelSet, Stroke};
+use crate::scene::label_set::check_stroke;
 
 const CODE_VERSION: u8 = 1;
 /// Steps per pixel of coordinates and radii in the code.
@@ -246,41 +247,8 @@ pub fn share_fragment(scene_url: &str, labels: &LabelSet) -> Result<String, Shar
     Ok(fragment)
 }
 
-/// Percent-encodes everything but unreserved characters and `/ : ? @ ! $ ' ( ) * + , ;`, which
-/// keeps URLs readable while `&`, `=`, `#` and `%` cannot break the fragment apart.
-pub fn percent_encode(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for b in s.bytes() {
-        if b.is_ascii_alphanumeric() || b"-._~/:?@!$'()*+,;".contains(&b) {
-            out.push(b as char);
-        } else {
-            out.push_str(&format!("%{b:02X}"));
-        }
-    }
-    out
-}
-
-/// Decodes `%XX` escapes; malformed escapes and invalid UTF-8 are kept as written, so a bad URL
-/// reaches the loader (which says what is wrong with it) rather than vanishing.
-pub fn percent_decode(s: &str) -> String {
-    let bytes = s.as_bytes();
-    let mut out = Vec::with_capacity(bytes.len());
-    let mut i = 0;
-    while i < bytes.len() {
-        let hex = |b: u8| (b as char).to_digit(16);
-        if bytes[i] == b'%'
-            && i + 2 < bytes.len()
-            && let (Some(h), Some(l)) = (hex(bytes[i + 1]), hex(bytes[i + 2]))
-        {
-            out.push((h * 16 + l) as u8);
-            i += 3;
-        } else {
-            out.push(bytes[i]);
-            i += 1;
-        }
-    }
-    String::from_utf8(out).unwrap_or_else(|_| s.to_string())
-}
+// The page's fragment uses the crate's one percent codec; these names are what the page calls.
+pub use crate::percent::{decode_lenient as percent_decode, encode as percent_encode};
 
 fn zigzag(v: i64) -> u64 {
     ((v << 1) ^ (v >> 63)) as u64

@@ -1,6 +1,6 @@
 //! Counting what has been annotated, for the status line and the frame strip.
-use super::format::LabelSet;
-use super::raster::{UNLABELLED, rasterize_frame};
+use super::LabelSet;
+use super::{UNLABELLED, rasterize_frame};
 
 /// Labelled pixels of each annotated frame, as (frame, pixels), after erasing.
 pub fn labelled_pixels_per_frame(labels: &LabelSet, width: u32, height: u32) -> Vec<(u32, u64)> {

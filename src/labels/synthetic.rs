@@ -3,9 +3,9 @@
 //! careful annotator keeps the brush inside an object.
 use image::GrayImage;
 
-use super::format::{LabelSet, Stroke};
-use crate::field::rng::SplitMix64;
-use crate::scene::scene::GT_VOID;
+use super::{LabelSet, Stroke};
+use crate::rng::SplitMix64;
+use crate::scene::GT_VOID;
 
 #[derive(Clone, Debug)]
 pub struct ScribbleOptions {

@@ -9,10 +9,10 @@ use zip::write::SimpleFileOptions;
 use zip::{CompressionMethod, ZipArchive, ZipWriter};
 
 use super::camera::{Pose, f32_finite};
+use super::decoded::{DepthImage, FeatureCodes, Frame, GT_VOID, Scene};
 use super::error::{Result, SceneError};
+use super::label_set::LabelSet;
 use super::manifest::{FeatureEntry, FrameEntry, MANIFEST_FILE, Manifest, SCENE_FORMAT, SCENE_VERSION};
-use super::scene::{DepthImage, FeatureCodes, Frame, GT_VOID, Scene};
-use crate::labels::LabelSet;
 
 /// Limits that keep a hostile or corrupt archive from exhausting memory. docs/limits.md lists
 /// them with their reasons; every refusal names the entry and the limit it broke.

@@ -2,7 +2,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::camera::{Bounds, Intrinsics};
-use crate::labels::ClassInfo;
+use super::label_set::ClassInfo;
 
 pub const SCENE_FORMAT: &str = "scribblefield-scene";
 pub const SCENE_VERSION: u32 = 1;

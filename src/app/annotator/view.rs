@@ -8,7 +8,7 @@ use super::super::palette::color_of;
 use super::document::Document;
 use crate::labels::Stroke;
 use crate::labels::brush::{MAX_RADIUS, MIN_RADIUS, StrokeBuilder};
-use crate::labels::view::ViewTransform;
+use crate::labels::canvas_zoom::ViewTransform;
 
 /// What is drawn over the frame.
 pub struct Layers {

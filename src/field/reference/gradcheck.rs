@@ -1,5 +1,5 @@
 //! Finite-difference helpers for the gradient tests (f64 central differences).
-use crate::field::rng::SplitMix64;
+use crate::rng::SplitMix64;
 
 /// Central differences `(f(x + h·e_i) − f(x − h·e_i)) / 2h` for every coordinate.
 pub fn central_differences(f: impl Fn(&[f64]) -> f64, x: &[f64], h: f64) -> Vec<f64> {

@@ -157,7 +157,7 @@ pub fn backward<R: Real>(grid: &HashGrid, pos: [R; 3], grad_out: &[R], table_gra
 mod tests {
     use super::*;
     use crate::field::reference::gradcheck::{assert_close, central_differences, random_vec};
-    use crate::field::rng::SplitMix64;
+    use crate::rng::SplitMix64;
 
     /// A grid with dense coarse levels and hashed fine levels, small enough to check every entry.
     fn tiny_grid() -> HashGrid {

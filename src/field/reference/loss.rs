@@ -158,7 +158,7 @@ pub fn ray_loss<R: Real>(
 mod tests {
     use super::*;
     use crate::field::reference::gradcheck::{assert_close, central_differences, random_vec};
-    use crate::field::rng::SplitMix64;
+    use crate::rng::SplitMix64;
 
     #[test]
     fn cross_entropy_of_uniform_logits_is_log_classes() {

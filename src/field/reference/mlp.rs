@@ -99,7 +99,7 @@ pub fn backward<R: Real>(
 mod tests {
     use super::*;
     use crate::field::reference::gradcheck::{assert_close, central_differences, random_vec};
-    use crate::field::rng::SplitMix64;
+    use crate::rng::SplitMix64;
 
     #[test]
     fn computes_relu_layers() {

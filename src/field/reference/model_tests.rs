@@ -8,7 +8,7 @@ use super::model::{FieldModel, SampledRay, TrainingRay};
 use super::sampling::ray_through_pixel;
 use super::{Adam, sh};
 use crate::field::config::{Encoding, FieldConfig, SemanticInput};
-use crate::field::rng::SplitMix64;
+use crate::rng::SplitMix64;
 use crate::scene::{Bounds, Intrinsics, Pose};
 
 fn unit_box() -> Bounds {

@@ -106,7 +106,7 @@ pub fn composite_backward<R: Real>(
 mod tests {
     use super::*;
     use crate::field::reference::gradcheck::{assert_close, central_differences, random_vec};
-    use crate::field::rng::SplitMix64;
+    use crate::rng::SplitMix64;
 
     #[test]
     fn opaque_first_sample_takes_all_weight() {

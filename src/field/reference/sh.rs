@@ -34,7 +34,7 @@ pub fn encode<R: Real>(dir: [R; 3], out: &mut [R]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::rng::SplitMix64;
+    use crate::rng::SplitMix64;
 
     /// The basis is orthonormal on the sphere: 4π·E[Y_i Y_j] = δ_ij under uniform directions.
     /// A wrong constant or sign pattern breaks this, so it checks all 16 formulas at once.

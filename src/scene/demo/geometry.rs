@@ -377,7 +377,7 @@ fn convex_polygon_distance(corners: &[DVec2], p: DVec2) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::demo::rng::SplitMix64;
+    use crate::rng::SplitMix64;
 
     /// Test shapes with a point inside each.
     fn shapes_and_inner_points() -> Vec<(Shape, DVec3)> {
@@ -418,7 +418,7 @@ mod tests {
 
     fn random_unit(rng: &mut SplitMix64) -> DVec3 {
         loop {
-            let v = DVec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+            let v = DVec3::new(rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0));
             if (0.01..1.0).contains(&v.length_squared()) {
                 return v.normalize();
             }
@@ -530,10 +530,10 @@ mod tests {
             let mut hits = 0;
             for _ in 0..4000 {
                 let origin = random_unit(&mut rng) * 2.0;
-                let target = inner + DVec3::new(rng.range(-0.2, 0.2), rng.range(-0.2, 0.2), rng.range(-0.2, 0.2));
+                let target = inner + DVec3::new(rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2));
                 let ray = Ray {
                     origin,
-                    dir: (target - origin) * rng.range(0.5, 2.0),
+                    dir: (target - origin) * rng.uniform(0.5, 2.0),
                 };
                 let Some(hit) = shape.intersect(&ray, 0.0, f64::INFINITY) else {
                     // A miss: points along the ray stay outside.
@@ -580,16 +580,16 @@ mod tests {
         for (shape, inner) in shapes_and_inner_points() {
             let sphere = shape.bounding_sphere().unwrap();
             for _ in 0..2000 {
-                let p = inner + random_unit(&mut rng) * rng.range(0.0, 0.6);
+                let p = inner + random_unit(&mut rng) * rng.uniform(0.0, 0.6);
                 if shape.signed_distance(p) <= 0.0 {
                     assert!((p - sphere.0).length() <= sphere.1 + 1e-12, "{shape:?}: {p} pokes out");
                 }
                 let origin = random_unit(&mut rng) * 2.0;
                 let ray = Ray {
                     origin,
-                    dir: (p - origin) * rng.range(0.3, 3.0),
+                    dir: (p - origin) * rng.uniform(0.3, 3.0),
                 };
-                let t_max = rng.range(0.0, 3.0);
+                let t_max = rng.uniform(0.0, 3.0);
                 if shape.intersect(&ray, 0.0, t_max).is_some() {
                     assert!(may_hit_sphere(&ray, t_max, sphere), "{shape:?}: a hit was rejected");
                 }

@@ -3,8 +3,8 @@
 use glam::DVec3;
 
 use super::geometry::{Ray, Shape, SurfaceHit, may_hit_sphere};
-use super::rng::SplitMix64;
 use super::textures::{Colour, Texture};
+use crate::rng::SplitMix64;
 use crate::scene::camera::Bounds;
 
 /// Class names, indexed by the ids stored in the ground truth.
@@ -90,7 +90,11 @@ struct Palette {
 impl Palette {
     fn jittered(rng: &mut SplitMix64) -> Palette {
         let mut c = |r: f64, g: f64, b: f64| {
-            let j = DVec3::new(rng.range(-0.05, 0.05), rng.range(-0.05, 0.05), rng.range(-0.05, 0.05));
+            let j = DVec3::new(
+                rng.uniform(-0.05, 0.05),
+                rng.uniform(-0.05, 0.05),
+                rng.uniform(-0.05, 0.05),
+            );
             (DVec3::new(r, g, b) + j).clamp(DVec3::ZERO, DVec3::ONE)
         };
         Palette {
@@ -115,7 +119,7 @@ impl DemoWorld {
         parts.extend(table(&palette, &mut rng));
         let top = TABLE_HEIGHT;
 
-        let scale = |rng: &mut SplitMix64| rng.range(0.9, 1.1);
+        let scale = |rng: &mut SplitMix64| rng.uniform(0.9, 1.1);
         let box_size = DVec3::new(0.20, 0.15, 0.14) * scale(&mut rng);
         let (mug_radius, mug_height) = (0.06 * scale(&mut rng), 0.13 * scale(&mut rng));
         let ball_radius = 0.075 * scale(&mut rng);
@@ -129,7 +133,7 @@ impl DemoWorld {
         ];
         let spots = place_objects(&footprints, &mut rng);
 
-        let box_yaw = rng.range(0.0, std::f64::consts::PI);
+        let box_yaw = rng.uniform(0.0, std::f64::consts::PI);
         parts.push(Part {
             shape: Shape::cuboid(spots[0].extend(top + box_size.z * 0.5), box_size, box_yaw),
             texture: Texture::Checker {
@@ -155,7 +159,7 @@ impl DemoWorld {
             },
             class: MUG,
         });
-        let handle_yaw = rng.range(0.0, std::f64::consts::TAU);
+        let handle_yaw = rng.uniform(0.0, std::f64::consts::TAU);
         parts.extend(
             mug_handle(mug_base, mug_radius, mug_height, handle_yaw, handle_reach).map(|shape| Part {
                 shape,
@@ -295,7 +299,7 @@ impl DemoWorld {
 }
 
 fn room(rng: &mut SplitMix64) -> Part {
-    let mut c = |r: f64, g: f64, b: f64| DVec3::new(r, g, b) + DVec3::splat(rng.range(-0.04, 0.04));
+    let mut c = |r: f64, g: f64, b: f64| DVec3::new(r, g, b) + DVec3::splat(rng.uniform(-0.04, 0.04));
     Part {
         shape: Shape::RoomInterior {
             min: ROOM_MIN,
@@ -368,14 +372,14 @@ fn place_objects(footprints: &[f64; 4], rng: &mut SplitMix64) -> [glam::DVec2; 4
     let half = TABLE_SIZE.truncate() * 0.5;
     let mut quadrants = [0usize, 1, 2, 3];
     rng.shuffle(&mut quadrants);
-    let spin = rng.range(0.0, std::f64::consts::TAU);
+    let spin = rng.uniform(0.0, std::f64::consts::TAU);
     let spot = |quadrant: usize, angle_jitter: f64, distance: f64| {
         let angle = spin + quadrant as f64 * std::f64::consts::FRAC_PI_2 + angle_jitter;
         glam::DVec2::new(angle.cos(), angle.sin()) * distance
     };
     for _ in 0..1000 {
         let spots: [glam::DVec2; 4] =
-            std::array::from_fn(|i| spot(quadrants[i], rng.range(-0.25, 0.25), rng.range(0.17, 0.26)));
+            std::array::from_fn(|i| spot(quadrants[i], rng.uniform(-0.25, 0.25), rng.uniform(0.17, 0.26)));
         if layout_fits(&spots, footprints, half) {
             return spots;
         }
@@ -521,7 +525,7 @@ mod tests {
         let world = DemoWorld::generate(0);
         let mut rng = SplitMix64::new(9);
         for _ in 0..2000 {
-            let dir = DVec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+            let dir = DVec3::new(rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0));
             let hit = world
                 .cast(DVec3::new(1.0, -0.5, 1.3), dir)
                 .expect("the room closes every ray");
@@ -534,8 +538,8 @@ mod tests {
         let world = DemoWorld::generate(4);
         let mut rng = SplitMix64::new(10);
         for _ in 0..5000 {
-            let origin = DVec3::new(rng.range(-1.5, 1.5), rng.range(-1.4, 1.4), rng.range(1.0, 2.0));
-            let target = DVec3::new(rng.range(-0.7, 0.7), rng.range(-0.5, 0.5), rng.range(0.0, 1.2));
+            let origin = DVec3::new(rng.uniform(-1.5, 1.5), rng.uniform(-1.4, 1.4), rng.uniform(1.0, 2.0));
+            let target = DVec3::new(rng.uniform(-0.7, 0.7), rng.uniform(-0.5, 0.5), rng.uniform(0.0, 1.2));
             let ray = Ray {
                 origin,
                 dir: target - origin,

@@ -4,8 +4,8 @@
 //! it without any dataset.
 mod geometry;
 mod layout;
+mod noise;
 mod render;
-mod rng;
 mod textures;
 
 pub use geometry::{Ray, Shape, SurfaceHit};
@@ -13,12 +13,12 @@ pub use layout::{DEMO_CLASS_COLOURS, DEMO_CLASSES, DemoWorld, Part, WorldHit};
 pub use render::{HORIZONTAL_FOV_DEGREES, demo_intrinsics, look_at};
 
 use super::archive::limits;
+use super::decoded::{Frame, Scene};
 use super::error::{Result, SceneError};
 use super::manifest::Provenance;
-use super::scene::{Frame, Scene};
-use crate::labels::ClassInfo;
+use crate::rng::SplitMix64;
+use crate::scene::label_set::ClassInfo;
 use render::{DEPTH_SCALE, Orbit, render_frame};
-use rng::SplitMix64;
 
 /// Frame counts accepted; 24 to 60 make a good orbit (enough overlap between neighbouring
 /// views, few enough to label and train quickly).

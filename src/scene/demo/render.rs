@@ -3,9 +3,9 @@ use glam::{DMat4, DVec3};
 use image::{GrayImage, Luma, Rgb, RgbImage};
 
 use super::layout::{DemoWorld, WorldHit};
-use super::rng::SplitMix64;
+use crate::rng::SplitMix64;
 use crate::scene::camera::{Intrinsics, Pose};
-use crate::scene::scene::{DepthImage, GT_VOID};
+use crate::scene::{DepthImage, GT_VOID};
 
 /// Horizontal field of view of the demo camera.
 pub const HORIZONTAL_FOV_DEGREES: f64 = 60.0;
@@ -53,11 +53,11 @@ impl Orbit {
     pub fn new(target: DVec3, rng: &mut SplitMix64) -> Orbit {
         Orbit {
             target,
-            start_azimuth: rng.range(0.0, std::f64::consts::TAU),
-            distance: rng.range(0.95, 1.05),
-            elevation_degrees: rng.range(26.0, 30.0),
+            start_azimuth: rng.uniform(0.0, std::f64::consts::TAU),
+            distance: rng.uniform(0.95, 1.05),
+            elevation_degrees: rng.uniform(26.0, 30.0),
             swing_degrees: 9.0,
-            swing_phase: rng.range(0.0, std::f64::consts::TAU),
+            swing_phase: rng.uniform(0.0, std::f64::consts::TAU),
         }
     }
 

@@ -2,7 +2,7 @@
 //! surface from every view (what makes the frames multi-view consistent).
 use glam::DVec3;
 
-use super::rng::lattice_hash;
+use super::noise::lattice_hash;
 
 /// Linear RGB in [0, 1].
 pub type Colour = DVec3;

@@ -12,11 +12,11 @@ use super::images::load_mask;
 use super::resize::{resize_nearest, same_aspect};
 use super::text::{read_bbox, read_class_names, read_intrinsics, read_pose};
 use super::{Built, ImportOptions, Layout, shown};
-use crate::labels::{ClassInfo, FrameLabels, LabelSet, UNLABELLED, mask_to_strokes};
 use crate::scene::archive::limits;
 use crate::scene::camera::Pose;
 use crate::scene::error::{Result, SceneError};
-use crate::scene::scene::{Frame, GT_VOID, Scene};
+use crate::scene::label_set::{ClassInfo, FrameLabels, LabelSet, UNLABELLED, mask_to_strokes};
+use crate::scene::{Frame, GT_VOID, Scene};
 
 pub(super) const RGB_DIR: &str = "rgb";
 const DEPTH_DIR: &str = "depth";

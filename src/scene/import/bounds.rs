@@ -2,8 +2,8 @@
 //! depth, from the cameras' positions and view directions where there is none.
 use glam::{DMat3, DVec3};
 
+use crate::scene::Frame;
 use crate::scene::camera::{Bounds, Intrinsics, Pose};
-use crate::scene::scene::Frame;
 
 /// Depth pixels back-projected over all frames together, at most (enough for stable
 /// percentiles, few enough to take well under a second).

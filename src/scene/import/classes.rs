@@ -1,6 +1,6 @@
 //! Class lists for imported ground truth and labels, with distinct display colours.
 use crate::colors::distinct_color;
-use crate::labels::ClassInfo;
+use crate::scene::label_set::ClassInfo;
 
 pub(super) fn class_infos(names: impl IntoIterator<Item = String>) -> Vec<ClassInfo> {
     names

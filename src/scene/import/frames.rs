@@ -11,7 +11,7 @@ use super::resize::{resize_nearest, resize_rgb, same_aspect, target_size};
 use crate::scene::archive::limits;
 use crate::scene::camera::{Bounds, Intrinsics, Pose};
 use crate::scene::error::{Result, SceneError};
-use crate::scene::scene::{Frame, Scene};
+use crate::scene::{Frame, Scene};
 
 /// The files and pose of one frame of a capture.
 pub(super) struct FrameFiles {

@@ -5,9 +5,9 @@ use std::path::Path;
 use image::{DynamicImage, GrayImage, ImageReader, RgbImage};
 
 use super::resize::Mask16;
+use crate::scene::DepthImage;
 use crate::scene::archive::limits;
 use crate::scene::error::{Result, SceneError};
-use crate::scene::scene::DepthImage;
 
 /// Bytes searched at the end of a JPEG for its end-of-image marker.
 const JPEG_TAIL: usize = 1024;

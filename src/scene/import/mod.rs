@@ -3,9 +3,9 @@
 //! decoding, resizing, frame selection and bounds estimation.
 use std::path::{Path, PathBuf};
 
+use crate::scene::Scene;
 use crate::scene::error::{Result, SceneError};
 use crate::scene::manifest::Provenance;
-use crate::scene::scene::Scene;
 
 mod autolabel;
 mod bounds;

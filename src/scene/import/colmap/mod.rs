@@ -19,7 +19,7 @@ use super::resize::resize_nearest;
 use super::{Built, ImportOptions, Layout, shown};
 use crate::scene::camera::{Bounds, Intrinsics, Pose};
 use crate::scene::error::{Result, SceneError};
-use crate::scene::scene::{DepthImage, GT_VOID, Scene};
+use crate::scene::{DepthImage, GT_VOID, Scene};
 
 mod binary;
 mod model;

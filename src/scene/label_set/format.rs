@@ -11,8 +11,9 @@ pub const LABELS_VERSION: u32 = 1;
 /// brush's square, and the page rasterizes labels on every load and edit: these keep a hostile
 /// file or link from freezing it. docs/limits.md lists them.
 pub mod limits {
-    /// Largest brush radius in pixels: the annotator's own maximum, so anything it draws passes.
-    pub const MAX_RADIUS: f32 = crate::labels::brush::MAX_RADIUS;
+    /// Largest brush radius in pixels; the annotator's brush (`labels::brush::MAX_RADIUS`) is
+    /// this, so anything it draws passes.
+    pub const MAX_RADIUS: f32 = 200.0;
     /// Points in one stroke. The annotator records a point per few pixels of drag, so a stroke
     /// across an 8192-pixel frame and back stays far below this.
     pub const MAX_POINTS_PER_STROKE: usize = 65_536;

@@ -3,8 +3,8 @@ use half::f16;
 use image::{GrayImage, ImageBuffer, Luma, RgbImage};
 
 use super::camera::{Bounds, Intrinsics, Pose};
+use super::label_set::{ClassInfo, LabelSet};
 use super::manifest::{Pca, Provenance};
-use crate::labels::{ClassInfo, LabelSet};
 
 /// Depth in units of `Scene::depth_scale` metres; 0 = no reading.
 pub type DepthImage = ImageBuffer<Luma<u16>, Vec<u16>>;
