@@ -60,8 +60,9 @@ pub struct PropagationOptions {
     /// the two surfaces share a colour and a depth.
     pub normal_sigma: f32,
     /// On a capture whose depth is a reconstruction's points (sparse), carry the strokes to
-    /// every frame through the points first (`field::point_walk`), so each frame walks from the
-    /// labels of its own points.
+    /// every frame through the points first (`field::point_walk`), so each frame trains on the
+    /// labels of its own points. Off by default: the labels are right, but at the budget the
+    /// field is trained with here it turned them into worse masks (docs/quality.md).
     pub across_views: bool,
 }
 
@@ -76,7 +77,7 @@ impl Default for PropagationOptions {
             min_probability: 0.5,
             min_margin: 0.5,
             normal_sigma: 0.15,
-            across_views: true,
+            across_views: false,
         }
     }
 }
