@@ -1,0 +1,221 @@
+//! Tests of the walk inside one frame (`propagate`).
+use image::{ImageBuffer, Luma, Rgb, RgbImage};
+
+use super::*;
+
+/// Left half dark red, right half light grey, 24 x 16.
+fn two_regions() -> RgbImage {
+    RgbImage::from_fn(24, 16, |x, _| {
+        if x < 12 {
+            Rgb([120, 20, 20])
+        } else {
+            Rgb([200, 200, 200])
+        }
+    })
+}
+
+/// Full-height strokes at columns `(x, class)`: a user's stroke across an object.
+fn columns(width: u32, height: u32, marks: &[(u32, u16)]) -> Vec<u16> {
+    let dots: Vec<(u32, u32, u16)> = marks
+        .iter()
+        .flat_map(|&(x, c)| (0..height).map(move |y| (x, y, c)))
+        .collect();
+    strokes_at(width, height, &dots)
+}
+
+fn strokes_at(width: u32, height: u32, marks: &[(u32, u32, u16)]) -> Vec<u16> {
+    let mut map = vec![UNLABELLED; (width * height) as usize];
+    for &(x, y, c) in marks {
+        map[(y * width + x) as usize] = c;
+    }
+    map
+}
+
+#[test]
+fn two_strokes_fill_their_regions_and_stop_at_the_edge() {
+    let rgb = two_regions();
+    let strokes = columns(24, 16, &[(3, 0), (20, 1)]);
+    let guide = Guide { rgb: &rgb, depth: None };
+    let map = propagate_frame(&strokes, 2, guide, None, &PropagationOptions::default());
+    for y in 0..16 {
+        for x in 0..24 {
+            let want = if x < 12 { 0 } else { 1 };
+            assert_eq!(map[y * 24 + x], want, "pixel ({x}, {y})");
+        }
+    }
+}
+
+#[test]
+fn a_crease_in_the_depth_stops_the_walk_where_colour_and_depth_change_smoothly() {
+    // One colour; depth falls gently towards x = 12 and rises after it (a fold, no jump):
+    // only the turn of the normal marks the edge.
+    let rgb = RgbImage::from_pixel(24, 16, Rgb([150, 150, 150]));
+    let depth: ImageBuffer<Luma<u16>, Vec<u16>> =
+        ImageBuffer::from_fn(24, 16, |x, _| Luma([(1000 + 10 * (2 * x as i32 - 23).abs()) as u16]));
+    let camera = Intrinsics {
+        fx: 20.0,
+        fy: 20.0,
+        cx: 11.5,
+        cy: 7.5,
+    };
+    let strokes = columns(24, 16, &[(3, 0), (20, 1)]);
+    let guide = Guide {
+        rgb: &rgb,
+        depth: Some(&depth),
+    };
+    // A loose depth sigma and a long reach, so that neither the slope nor the walk's fading
+    // decides.
+    let no_normals = PropagationOptions {
+        depth_sigma: 1.0,
+        reach: 4.0,
+        ..PropagationOptions::default()
+    };
+    let with_normals = PropagationOptions {
+        normal_sigma: 0.1,
+        ..no_normals
+    };
+    let map = propagate_frame(&strokes, 2, guide, Some(&camera), &with_normals);
+    for x in 4..11 {
+        assert_eq!(map[8 * 24 + x], 0, "({x}, 8)");
+    }
+    for x in 13..20 {
+        assert_eq!(map[8 * 24 + x], 1, "({x}, 8)");
+    }
+    let without = propagate_frame(&strokes, 2, guide, Some(&camera), &no_normals);
+    assert_eq!(without[8 * 24 + 11], UNLABELLED, "no normals: unsure next to the fold");
+}
+
+#[test]
+fn depth_separates_regions_of_one_colour_and_without_it_the_walk_is_unsure() {
+    let rgb = RgbImage::from_pixel(24, 16, Rgb([150, 150, 150]));
+    let depth: ImageBuffer<Luma<u16>, Vec<u16>> =
+        ImageBuffer::from_fn(24, 16, |x, _| Luma([if x < 12 { 1000 } else { 2000 }]));
+    let strokes = columns(24, 16, &[(3, 0), (20, 1)]);
+    let options = PropagationOptions::default();
+    let with_depth = propagate_frame(
+        &strokes,
+        2,
+        Guide {
+            rgb: &rgb,
+            depth: Some(&depth),
+        },
+        None,
+        &options,
+    );
+    assert_eq!(with_depth[8 * 24 + 10], 0);
+    assert_eq!(with_depth[8 * 24 + 13], 1);
+    let labelled = |m: &[u16]| m.iter().filter(|&&c| c != UNLABELLED).count();
+    assert_eq!(labelled(&with_depth), 24 * 16);
+    let without = propagate_frame(&strokes, 2, Guide { rgb: &rgb, depth: None }, None, &options);
+    for x in 9..15 {
+        assert_eq!(
+            without[8 * 24 + x],
+            UNLABELLED,
+            "({x}, 8): a uniform image gives no confident label midway between the strokes"
+        );
+    }
+    assert!(labelled(&without) < labelled(&with_depth));
+}
+
+#[test]
+fn one_class_or_disabled_keeps_the_strokes_and_unknown_classes_are_dropped() {
+    let rgb = two_regions();
+    let guide = Guide { rgb: &rgb, depth: None };
+    let one = strokes_at(24, 16, &[(3, 8, 0), (4, 8, 0)]);
+    assert_eq!(
+        propagate_frame(&one, 2, guide, None, &PropagationOptions::default()),
+        one
+    );
+    let two = strokes_at(24, 16, &[(3, 8, 0), (20, 8, 1), (5, 5, 7)]);
+    let off = PropagationOptions {
+        enabled: false,
+        ..PropagationOptions::default()
+    };
+    let kept = propagate_frame(&two, 2, guide, None, &off);
+    assert_eq!(kept[5 * 24 + 5], UNLABELLED, "class 7 has no logit with 2 classes");
+    assert_eq!(kept.iter().filter(|&&c| c != UNLABELLED).count(), 2);
+}
+
+#[test]
+fn the_cache_walks_again_only_a_frame_whose_strokes_changed() {
+    use crate::labels::{ClassInfo, Stroke};
+    use crate::scene::demo::{DemoOptions, demo_scene};
+    let scene = demo_scene(&DemoOptions {
+        width: 32,
+        height: 24,
+        frames: 24,
+        ..DemoOptions::default()
+    })
+    .unwrap();
+    let class = |name: &str| ClassInfo {
+        name: name.into(),
+        color: [0, 0, 0],
+    };
+    let mut labels = LabelSet::new(vec![class("a"), class("b")]);
+    let dot = |class: u16, x: f32, y: f32| Stroke {
+        class: Some(class),
+        radius: 1.0,
+        points: vec![[x, y]],
+    };
+    for frame in [0, 2] {
+        labels.push_stroke(frame, dot(0, 4.5, 20.5));
+        labels.push_stroke(frame, dot(1, 16.5, 4.5));
+    }
+    let options = PropagationOptions::default();
+    let mut cache = PropagationCache::default();
+    let first = cache.maps(&scene, &labels, 2, &options);
+    assert_eq!(first, propagate_labels(&scene, &labels, 2, &options));
+    assert_eq!(first.iter().map(|(f, _)| *f).collect::<Vec<_>>(), vec![0, 2]);
+    labels.push_stroke(2, dot(0, 28.5, 20.5));
+    let second = cache.maps(&scene, &labels, 2, &options);
+    assert_eq!(second[0], first[0], "frame 0 did not change");
+    assert_ne!(second[1], first[1], "frame 2 gained a stroke");
+    assert_eq!(second, propagate_labels(&scene, &labels, 2, &options));
+}
+
+#[test]
+fn pixels_beyond_the_reach_of_every_stroke_stay_unlabelled() {
+    // A dark red block with a stroke of class 0 at the left end of a long grey strip whose
+    // near end has a stroke of class 1: the far end is grey like class 1's stroke, but 75
+    // pixels away.
+    let rgb = RgbImage::from_fn(96, 8, |x, _| {
+        if x < 8 {
+            Rgb([120, 20, 20])
+        } else {
+            Rgb([150, 150, 150])
+        }
+    });
+    let strokes = strokes_at(96, 8, &[(2, 4, 0), (12, 4, 1)]);
+    let guide = Guide { rgb: &rgb, depth: None };
+    let short = propagate_frame(&strokes, 2, guide, None, &PropagationOptions::default());
+    assert_eq!(short[4 * 96 + 20], 1, "near the stroke");
+    assert_eq!(short[4 * 96 + 90], UNLABELLED, "48 pixels of reach do not get there");
+    let long = PropagationOptions {
+        reach: 4.0,
+        ..PropagationOptions::default()
+    };
+    assert_eq!(propagate_frame(&strokes, 2, guide, None, &long)[4 * 96 + 90], 1);
+}
+
+#[test]
+fn bad_options_are_named() {
+    let bad = PropagationOptions {
+        min_margin: 1.5,
+        ..PropagationOptions::default()
+    };
+    assert!(bad.validate().unwrap_err().contains("min_margin"));
+    let bad = PropagationOptions {
+        colour_sigma: 0.0,
+        ..PropagationOptions::default()
+    };
+    assert!(bad.validate().unwrap_err().contains("colour_sigma"));
+    PropagationOptions::default().validate().unwrap();
+}
+
+#[test]
+fn lab_of_white_black_and_red() {
+    let close = |a: [f32; 3], b: [f32; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 0.5);
+    assert!(close(srgb_to_lab([255, 255, 255]), [100.0, 0.0, 0.0]));
+    assert!(close(srgb_to_lab([0, 0, 0]), [0.0, 0.0, 0.0]));
+    assert!(close(srgb_to_lab([255, 0, 0]), [53.24, 80.09, 67.20]));
+}
