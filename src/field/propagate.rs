@@ -62,7 +62,7 @@ pub struct PropagationOptions {
     /// On a capture whose depth is a reconstruction's points (sparse), carry the strokes to
     /// every frame through the points first (`field::point_walk`), so each frame trains on the
     /// labels of its own points. Off by default: the labels are right, but at the budget the
-    /// field is trained with here it turned them into worse masks (docs/quality.md).
+    /// field is trained with here they did not make better masks (docs/quality.md).
     pub across_views: bool,
 }
 
