@@ -146,10 +146,12 @@ fn demo_scribbles_on_two_frames_propagate_to_every_frame() {
 /// The field's own class maps, measured by this test: 0.854 (pixel accuracy 0.976) with the strokes
 /// spread inside their frames (`field::propagate`, docs/quality.md); 0.813 from the strokes alone.
 /// The test bakes its own feature codes, so a change to the feature fit moves it a few hundredths
-/// (0.893 before the shared Adam); the floor leaves room for that.
+/// (0.893 before the autoencoder moved to the shared Adam, whose arithmetic differs in the last
+/// bits); the floor leaves room for that.
 const MEASURED_DEMO_FIELD_FLOOR: f64 = 0.82;
 /// The refined maps (`segment`'s output), measured by this test: 0.931 (pixel accuracy 0.987) with
-/// propagation (0.959 before the shared Adam); 0.932 from the strokes alone. Issue 17's target is
+/// propagation (0.959 before the autoencoder moved to the shared Adam); 0.932 from the strokes
+/// alone. Issue 17's target is
 /// 0.90.
 const MEASURED_DEMO_REFINED_FLOOR: f64 = 0.90;
 
