@@ -48,14 +48,12 @@ pub fn wall_clock_ms() -> f64 {
 
 /// Yields to the browser for `ms` milliseconds (0: just let it run its event loop once).
 pub async fn sleep_ms(ms: i32) {
-    let promise = js_sys::Promise::new(&mut |resolve, _reject| {
-        if let Some(window) = web_sys::window() {
-            let _ = window.set_timeout_with_callback_and_timeout_and_arguments_0(&resolve, ms);
-        } else {
-            let _ = resolve.call0(&JsValue::NULL);
-        }
-    });
-    let _ = JsFuture::from(promise).await;
+    let (done, elapsed) = futures_channel::oneshot::channel::<()>();
+    gloo::timers::callback::Timeout::new(ms.max(0) as u32, move || {
+        let _ = done.send(());
+    })
+    .forget();
+    let _ = elapsed.await;
 }
 
 fn local_storage() -> Result<web_sys::Storage, BrowserError> {
@@ -106,12 +104,10 @@ pub fn download(bytes: &[u8], file_name: &str, mime: &str) -> Result<(), Browser
     anchor.click();
     // The click has started the download; the browser keeps what it needs. Revoke later so a
     // slow browser still finds the URL.
-    let revoke = Closure::once_into_js(move || {
+    gloo::timers::callback::Timeout::new(60_000, move || {
         let _ = web_sys::Url::revoke_object_url(&url);
-    });
-    if let Some(window) = web_sys::window() {
-        let _ = window.set_timeout_with_callback_and_timeout_and_arguments_0(revoke.unchecked_ref(), 60_000);
-    }
+    })
+    .forget();
     Ok(())
 }
 
