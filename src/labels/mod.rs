@@ -10,6 +10,7 @@ pub mod canvas_zoom;
 pub mod history;
 pub mod scale;
 pub mod share;
+pub mod snapshots;
 pub mod summary;
 pub mod synthetic;
 

@@ -11,6 +11,7 @@ use super::camera::{Pose, f32_finite};
 use super::decoded::{DepthImage, FeatureCodes, Frame, GT_VOID, Scene};
 use super::error::{Result, SceneError};
 
+mod content_id;
 mod write;
 use super::label_set::LabelSet;
 use super::manifest::{FeatureEntry, MANIFEST_FILE, Manifest, SCENE_FORMAT, SCENE_VERSION};
@@ -67,6 +68,7 @@ pub struct ArchiveReader<R: Read + Seek> {
     name: String,
     manifest: Manifest,
     frames: Vec<Frame>,
+    content_id: String,
 }
 
 impl<R: Read + Seek> ArchiveReader<R> {
@@ -97,18 +99,26 @@ impl<R: Read + Seek> ArchiveReader<R> {
             source,
         })?;
         check_manifest(&manifest, &at)?;
+        let content_id = content_id::content_id(&mut zip, name, &manifest_bytes)?;
         let frames = Vec::with_capacity(manifest.frames.len());
         Ok(ArchiveReader {
             zip,
             name: name.into(),
             manifest,
             frames,
+            content_id,
         })
     }
 
     /// The checked manifest (frame count, size, classes...).
     pub fn manifest(&self) -> &Manifest {
         &self.manifest
+    }
+
+    /// What the archive holds, as 32 hex digits (see `content_id`): the page keys saved
+    /// annotations by it.
+    pub fn content_id(&self) -> &str {
+        &self.content_id
     }
 
     /// Frames decoded so far.
