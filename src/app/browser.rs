@@ -111,9 +111,21 @@ pub fn download(bytes: &[u8], file_name: &str, mime: &str) -> Result<(), Browser
     Ok(())
 }
 
-/// Asks the user for a file (`accept`: e.g. ".zip,application/zip") and reads it. `None` when
-/// the user cancels.
-pub async fn pick_file(accept: &str) -> Result<Option<(String, Vec<u8>)>, BrowserError> {
+/// Refuses a file larger than `max_bytes` before any of it is copied into the page's memory.
+pub fn check_file_size(file: &web_sys::File, max_bytes: u64) -> Result<(), BrowserError> {
+    let size = file.size();
+    if size > max_bytes as f64 {
+        return Err(BrowserError::new(
+            &format!("{} is {} bytes", file.name(), size as u64),
+            format!("more than this page opens ({max_bytes} bytes at most; docs/limits.md)"),
+        ));
+    }
+    Ok(())
+}
+
+/// Asks the user for a file (`accept`: e.g. ".zip,application/zip") and reads it, unless it is
+/// larger than `max_bytes`. `None` when the user cancels.
+pub async fn pick_file(accept: &str, max_bytes: u64) -> Result<Option<(String, Vec<u8>)>, BrowserError> {
     let what = "opening a file";
     let js = |e: JsValue| BrowserError::js(what, &e);
     let document = web_sys::window()
@@ -145,6 +157,7 @@ pub async fn pick_file(accept: &str) -> Result<Option<(String, Vec<u8>)>, Browse
     let Some(file) = files.dyn_into::<web_sys::FileList>().ok().and_then(|list| list.get(0)) else {
         return Ok(None);
     };
+    check_file_size(&file, max_bytes)?;
     let buffer = JsFuture::from(file.array_buffer()).await.map_err(js)?;
     Ok(Some((file.name(), js_sys::Uint8Array::new(&buffer).to_vec())))
 }

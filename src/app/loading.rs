@@ -58,6 +58,13 @@ pub enum LoadError {
     Scene(#[from] SceneError),
 }
 
+/// A decoded scene and its archive's content id (what its saved annotations are keyed by).
+#[derive(Debug)]
+pub struct Loaded {
+    pub scene: Box<Scene>,
+    pub content_id: String,
+}
+
 /// Where a load stands; the UI draws it.
 #[derive(Debug)]
 pub enum LoadPhase {
@@ -73,7 +80,7 @@ pub enum LoadPhase {
         done: usize,
         frames: usize,
     },
-    Finished(Result<Box<Scene>, LoadError>),
+    Finished(Result<Loaded, LoadError>),
     /// The result has been handed to the app.
     Taken,
 }
@@ -134,7 +141,7 @@ impl SceneLoad {
     }
 
     /// The outcome, once: later calls return `None`.
-    pub fn take_result(&self) -> Option<Result<Box<Scene>, LoadError>> {
+    pub fn take_result(&self) -> Option<Result<Loaded, LoadError>> {
         let mut phase = self.phase.borrow_mut();
         if !matches!(*phase, LoadPhase::Finished(_)) {
             return None;
@@ -151,7 +158,7 @@ async fn load(
     phase: &RefCell<LoadPhase>,
     ctx: &egui::Context,
     repaint_ms: u64,
-) -> Result<Box<Scene>, LoadError> {
+) -> Result<Loaded, LoadError> {
     let bytes = download(url, phase, ctx, repaint_ms).await?;
     let name = url.rsplit('/').next().filter(|n| !n.is_empty()).unwrap_or(url);
     decode(bytes, name, phase, ctx, repaint_ms).await
@@ -165,7 +172,7 @@ async fn decode(
     phase: &RefCell<LoadPhase>,
     ctx: &egui::Context,
     repaint_ms: u64,
-) -> Result<Box<Scene>, LoadError> {
+) -> Result<Loaded, LoadError> {
     let total = bytes.len() as u64;
     let show = |done: usize, frames: usize| {
         *phase.borrow_mut() = LoadPhase::Decoding {
@@ -181,6 +188,7 @@ async fn decode(
     // Let the page paint "decoding" first.
     sleep_ms(0).await;
     let mut reader = ArchiveReader::new(std::io::Cursor::new(bytes), name)?;
+    let content_id = reader.content_id().to_string();
     let frames = reader.frame_count();
     loop {
         let slice_start = now_ms();
@@ -195,7 +203,10 @@ async fn decode(
         sleep_ms(0).await;
     }
     let scene = reader.finish()?;
-    Ok(Box::new(scene))
+    Ok(Loaded {
+        scene: Box::new(scene),
+        content_id,
+    })
 }
 
 async fn download(

@@ -36,6 +36,8 @@ pub mod scene_panel;
 pub mod side_panel;
 pub mod status;
 #[cfg(target_arch = "wasm32")]
+pub mod store;
+#[cfg(target_arch = "wasm32")]
 pub mod training;
 
 #[cfg(target_arch = "wasm32")]

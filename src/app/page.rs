@@ -5,13 +5,17 @@ use std::rc::Rc;
 use egui::RichText;
 
 use super::annotator::{Annotator, AnnotatorSetup};
-use super::loading::{self, LoadPhase, SceneLoad};
+use super::loading::{self, LoadPhase, Loaded, SceneLoad};
 use super::model_size::ModelSize;
 use super::page_options::{PageOptionError, PageOptions};
 use super::status::PageStatus;
+use super::store::{self, Opened};
 use super::{browser, page_status, repaint_interval_ms};
 use crate::gpu::GpuContext;
 use crate::labels::autosave::SceneSource;
+use crate::labels::snapshots::SceneShape;
+use crate::scene::Scene;
+use crate::scene::archive::limits::MAX_JSON_BYTES;
 
 pub struct App {
     stage: Stage,
@@ -34,9 +38,21 @@ struct OpenedFile {
 }
 
 enum Stage {
-    Loading { load: SceneLoad, source: SceneSource },
+    Loading {
+        load: SceneLoad,
+        source: SceneSource,
+    },
+    /// Decoded; its saved annotations are being read (`opened` is filled in when done).
+    Opening {
+        scene: Option<Box<Scene>>,
+        source: SceneSource,
+        opened: Rc<RefCell<Option<Opened>>>,
+    },
     Annotating(Box<Annotator>),
-    Failed { url: String, message: String },
+    Failed {
+        url: String,
+        message: String,
+    },
 }
 
 impl App {
@@ -86,7 +102,7 @@ impl App {
         let inbox = self.inbox.clone();
         let ctx = ctx.clone();
         wasm_bindgen_futures::spawn_local(async move {
-            let opened = match browser::pick_file(".zip,application/zip").await {
+            let opened = match browser::pick_file(".zip,application/zip", loading::MAX_ARCHIVE_BYTES).await {
                 Ok(Some((name, bytes))) => OpenedFile { name, bytes: Ok(bytes) },
                 Ok(None) => return,
                 Err(e) => OpenedFile {
@@ -111,7 +127,17 @@ impl App {
                     .file_name()
                     .map(|n| n.to_string_lossy().into_owned())
                     .unwrap_or_else(|| "dropped file".into());
-                let bytes = file.bytes_async().await;
+                // Checked before the browser copies the file into the page's memory.
+                let limit = if name.to_ascii_lowercase().ends_with(".json") {
+                    MAX_JSON_BYTES
+                } else {
+                    loading::MAX_ARCHIVE_BYTES
+                };
+                let too_large = file.web_file().and_then(|f| browser::check_file_size(f, limit).err());
+                let bytes = match too_large {
+                    Some(e) => Err(e.to_string()),
+                    None => file.bytes_async().await,
+                };
                 inbox.borrow_mut().push(OpenedFile { name, bytes });
                 ctx.request_repaint();
             });
@@ -151,37 +177,74 @@ impl App {
     }
 }
 
+impl App {
+    /// Moves on when a stage is done: a decoded scene has its saved annotations read, and
+    /// then it is annotated.
+    fn advance(&mut self, ctx: &egui::Context) {
+        if let Stage::Loading { load, source } = &self.stage
+            && let Some(result) = load.take_result()
+        {
+            self.stage = match result {
+                Ok(Loaded { scene, content_id }) => {
+                    let opened: Rc<RefCell<Option<Opened>>> = Rc::default();
+                    let shape = SceneShape {
+                        frames: scene.frames.len() as u32,
+                        width: scene.width,
+                        height: scene.height,
+                    };
+                    let (slot, source_for_task, ctx) = (opened.clone(), source.clone(), ctx.clone());
+                    wasm_bindgen_futures::spawn_local(async move {
+                        let o = store::open_scene(&content_id, &source_for_task, shape).await;
+                        *slot.borrow_mut() = Some(o);
+                        ctx.request_repaint();
+                    });
+                    Stage::Opening {
+                        scene: Some(scene),
+                        source: source.clone(),
+                        opened,
+                    }
+                }
+                Err(e) => Stage::Failed {
+                    url: load.url().to_string(),
+                    message: e.to_string(),
+                },
+            };
+        }
+        let taken = match &mut self.stage {
+            Stage::Opening { scene, source, opened } => {
+                let o = opened.borrow_mut().take();
+                o.and_then(|o| Some((o, scene.take()?, source.clone())))
+            }
+            _ => None,
+        };
+        if let Some((o, scene, source)) = taken {
+            let annotator = Annotator::new(
+                ctx,
+                scene,
+                o,
+                AnnotatorSetup {
+                    source,
+                    gpu: self.gpu.clone(),
+                    model: self.model,
+                    // A share link's labels are for the first scene the page opens.
+                    options: PageOptions {
+                        labels: self.options.labels.take(),
+                        ..self.options.clone()
+                    },
+                    option_errors: std::mem::take(&mut self.option_errors),
+                },
+            );
+            self.stage = Stage::Annotating(Box::new(annotator));
+        }
+    }
+}
+
 impl eframe::App for App {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         let ctx = ui.ctx().clone();
         self.take_dropped_files(&ctx);
         self.open_files(&ctx);
-        if let Stage::Loading { load, source } = &self.stage
-            && let Some(result) = load.take_result()
-        {
-            let url = load.url().to_string();
-            self.stage = match result {
-                Ok(scene) => Stage::Annotating(Box::new(Annotator::new(
-                    &ctx,
-                    scene,
-                    AnnotatorSetup {
-                        source: source.clone(),
-                        gpu: self.gpu.clone(),
-                        model: self.model,
-                        // A share link's labels are for the first scene the page opens.
-                        options: PageOptions {
-                            labels: self.options.labels.take(),
-                            ..self.options.clone()
-                        },
-                        option_errors: std::mem::take(&mut self.option_errors),
-                    },
-                ))),
-                Err(e) => Stage::Failed {
-                    url,
-                    message: e.to_string(),
-                },
-            };
-        }
+        self.advance(&ctx);
 
         let mut pick = false;
         egui::Panel::top("title").show(ui, |ui| {
@@ -207,6 +270,7 @@ impl eframe::App for App {
         }
         match &mut self.stage {
             Stage::Loading { load, .. } => show_loading(ui, load),
+            Stage::Opening { .. } => show_opening(ui),
             Stage::Annotating(a) => a.show(ui, &self.gpu_name),
             Stage::Failed { url, message } => show_failure(ui, url, message),
         }
@@ -279,6 +343,16 @@ fn show_loading(ui: &mut egui::Ui, load: &SceneLoad) {
                 None => egui::ProgressBar::new(0.0).animate(true),
             };
             ui.add(bar.desired_width(ui.available_width().min(480.0)));
+        });
+    });
+}
+
+fn show_opening(ui: &mut egui::Ui) {
+    page_status::set(&PageStatus::Loading);
+    egui::CentralPanel::default().show(ui, |ui| {
+        ui.vertical_centered(|ui| {
+            ui.add_space(ui.available_height() * 0.35);
+            ui.label(RichText::new("Reading the annotations saved in this browser").size(16.0));
         });
     });
 }

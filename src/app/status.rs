@@ -70,6 +70,26 @@ pub struct Annotating {
     pub features: Option<[f32; 4]>,
     /// Why training stopped.
     pub failure: Option<String>,
+    /// Where saving the annotations stands.
+    pub save: SaveStatus,
+}
+
+/// Where saving stands (`save` in the status); docs/web-app.md ("Nothing lost") says what is
+/// kept where.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SaveStatus {
+    /// `saved` (the latest edit is on disk), `saving`, `failed` (NOT saved: see `error`),
+    /// `read_only` (another tab saves this scene), `unavailable` (no IndexedDB).
+    pub state: &'static str,
+    pub error: Option<String>,
+    /// The archive's content id, which the saves are keyed by.
+    pub scene: String,
+    /// The scene's snapshots, oldest first: `[seq, strokes]`.
+    pub snapshots: Vec<[u64; 2]>,
+    /// Keys of set-aside (unreadable) records in IndexedDB store `aside`.
+    pub aside: Vec<String>,
+    /// Whether the browser granted persistent storage (`null`: no answer).
+    pub persisted: Option<bool>,
 }
 
 impl PageStatus {
@@ -126,6 +146,11 @@ mod tests {
             batch: Some(3),
             features: None,
             failure: None,
+            save: SaveStatus {
+                state: "saved",
+                snapshots: vec![[0, 2]],
+                ..SaveStatus::default()
+            },
         }));
         let json: serde_json::Value = serde_json::from_str(&status.to_json()).unwrap();
         assert_eq!(json["state"], "ready");
@@ -135,5 +160,7 @@ mod tests {
         assert_eq!(json["mask"], "coarse");
         assert_eq!(json["refresh_ms"][1], serde_json::Value::Null);
         assert_eq!(json["features"], serde_json::Value::Null);
+        assert_eq!(json["save"]["state"], "saved");
+        assert_eq!(json["save"]["snapshots"][0][1], 2);
     }
 }

@@ -212,17 +212,17 @@ pub enum Start {
     /// The share link's labels (saved at once as a new snapshot).
     Link,
     /// The newest readable snapshot.
-    Snapshot(u64),
+    Snapshot,
     /// The archive's own labels.
     Archive,
     Empty,
 }
 
-pub fn choose_start(link: bool, newest: Option<&SnapshotMeta>, archive_has_labels: bool) -> Start {
-    match (link, newest) {
-        (true, _) => Start::Link,
-        (false, Some(n)) => Start::Snapshot(n.seq),
-        (false, None) if archive_has_labels => Start::Archive,
+pub fn choose_start(link: bool, snapshot: bool, archive_has_labels: bool) -> Start {
+    match (link, snapshot, archive_has_labels) {
+        (true, _, _) => Start::Link,
+        (false, true, _) => Start::Snapshot,
+        (false, false, true) => Start::Archive,
         _ => Start::Empty,
     }
 }
@@ -384,11 +384,10 @@ mod tests {
 
     #[test]
     fn a_link_comes_first_then_the_newest_snapshot() {
-        let n = meta(7, "s", Reason::Edits, 0.0);
-        assert_eq!(choose_start(true, Some(&n), true), Start::Link);
-        assert_eq!(choose_start(false, Some(&n), true), Start::Snapshot(7));
-        assert_eq!(choose_start(false, None, true), Start::Archive);
-        assert_eq!(choose_start(false, None, false), Start::Empty);
+        assert_eq!(choose_start(true, true, true), Start::Link);
+        assert_eq!(choose_start(false, true, true), Start::Snapshot);
+        assert_eq!(choose_start(false, false, true), Start::Archive);
+        assert_eq!(choose_start(false, false, false), Start::Empty);
     }
 
     #[test]

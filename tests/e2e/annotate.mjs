@@ -1,7 +1,7 @@
 // End-to-end test of annotating in headless Chromium (WebGPU on SwiftShader): load the demo
 // scene, draw scribbles of every class with real mouse events, let the field train, download
 // the masks zip and score it against the scene's ground truth; then reload and find the
-// scribbles restored from the autosave, and open a share link (with the storage cleared) and
+// scribbles restored from the saved snapshots, and open a share link (with the saves cleared) and
 // find the same scribbles. Starts no server: run.sh does, or point E2E_URL at one.
 //
 //   E2E_URL        page to open, e.g. http://127.0.0.1:8080/ (required)
@@ -15,7 +15,7 @@ import { tmpdir } from "node:os";
 import { join } from "node:path";
 import { chromium } from "playwright-core";
 import {
-  CHROMIUM_ARGS, Checks, assert, decodePng, openPage, readZip, saturatedColours, settledStatus,
+  CHROMIUM_ARGS, Checks, assert, clearSaves, decodePng, openPage, readZip, saturatedColours, settledStatus,
   show, status, waitForStatus,
 } from "./lib.mjs";
 
@@ -324,7 +324,7 @@ try {
     console.log(`     share link of ${link.length} characters`);
     assert(link.includes("scene=") && link.includes("labels="), `odd link: ${link.slice(0, 200)}`);
     assert(decodeURIComponent(new URL(link).hash).includes(sceneUrl), `the link does not name ${sceneUrl}`);
-    await page.evaluate(() => localStorage.clear());
+    await clearSaves(page);
     await page.close();
     const shared = await openPage(context, link, "share link", consoleLog);
     const r = await settledStatus(shared, LOAD_TIMEOUT_MS);

@@ -186,3 +186,21 @@ export async function openPage(context, pageUrl, label, consoleLog) {
   await page.goto(pageUrl, { waitUntil: "load" });
   return page;
 }
+
+/// Deletes every saved annotation of the page's origin: the IndexedDB stores and local storage.
+export function clearSaves(page) {
+  return page.evaluate(() => new Promise((resolve, reject) => {
+    localStorage.clear();
+    const open = indexedDB.open("scribblefield");
+    open.onerror = () => reject(open.error);
+    open.onsuccess = () => {
+      const db = open.result;
+      const stores = [...db.objectStoreNames];
+      if (stores.length === 0) { db.close(); resolve(); return; }
+      const tx = db.transaction(stores, "readwrite");
+      for (const s of stores) tx.objectStore(s).clear();
+      tx.oncomplete = () => { db.close(); resolve(); };
+      tx.onerror = () => reject(tx.error);
+    };
+  }));
+}

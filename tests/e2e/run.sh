@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Browser end-to-end test: builds the web app, serves it on a free localhost port, and runs
-# smoke.mjs and annotate.mjs in headless Chromium (WebGPU on SwiftShader). Installs Chromium (apt) and the node
+# smoke.mjs, annotate.mjs and durable.mjs in headless Chromium (WebGPU on SwiftShader). Installs Chromium (apt) and the node
 # modules (npm ci) when they are missing. Screenshots go to $E2E_OUT (default /tmp/e2e).
 set -euo pipefail
 HERE="$(cd "$(dirname "$0")" && pwd)"
@@ -47,8 +47,9 @@ for _ in $(seq 1 100); do
   sleep 0.1
 done
 
-# Both tests run even when the first fails, so one run shows every failure.
+# Every test runs even when one fails, so one run shows every failure.
 STATUS=0
 E2E_URL="$URL" CHROMIUM="$CHROMIUM" node "$HERE/smoke.mjs" || STATUS=1
 E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_DEMO="$ROOT/www/demo.scene.zip" node "$HERE/annotate.mjs" || STATUS=1
+E2E_URL="$URL" CHROMIUM="$CHROMIUM" node "$HERE/durable.mjs" || STATUS=1
 exit $STATUS

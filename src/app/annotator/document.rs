@@ -1,12 +1,15 @@
 //! The document being annotated: the scene, its labels and their undo history, the version that
-//! every edit bumps, the autosave, and the summary of what has been labelled.
+//! every edit bumps, its store (where each version is saved), and the summary of what has been
+//! labelled.
 use std::rc::Rc;
 
 use super::super::persistence;
+use super::super::store::{SaveState, SceneStore};
 use crate::labels::LabelSet;
 use crate::labels::autosave::SceneSource;
 use crate::labels::history::{Edit, EditError, History};
-use crate::labels::summary::{classes_used, labelled_pixels_per_frame};
+use crate::labels::snapshots::Reason;
+use crate::labels::summary::SummaryCache;
 use crate::scene::Scene;
 
 /// What has been annotated, recomputed when the labels change.
@@ -27,14 +30,13 @@ pub struct Document {
     pub version: u64,
     pub history: History,
     pub summary: Summary,
-    autosaved_version: Option<u64>,
-    autosave_error: Option<String>,
-    /// An autosave that a shared link replaced, which the user may want back.
-    pub displaced: bool,
+    /// Per-frame counts behind the summary: an edit re-rasterizes only its frame.
+    counts: SummaryCache,
+    pub store: SceneStore,
 }
 
 impl Document {
-    pub fn new(scene: Rc<Scene>, source: SceneSource, labels: LabelSet, displaced: bool) -> Document {
+    pub fn new(scene: Rc<Scene>, source: SceneSource, labels: LabelSet, store: SceneStore) -> Document {
         Document {
             scene,
             source,
@@ -42,10 +44,17 @@ impl Document {
             version: 1,
             history: History::new(),
             summary: Summary::default(),
-            autosaved_version: None,
-            autosave_error: None,
-            displaced,
+            counts: SummaryCache::default(),
+            store,
         }
+    }
+
+    /// Shows labels another tab saved (this tab follows it): they replace the document, and
+    /// the undo history, which was about the labels replaced, starts again.
+    pub fn follow(&mut self, labels: LabelSet) {
+        self.labels = labels;
+        self.history = History::new();
+        self.version += 1;
     }
 
     pub fn frame_count(&self) -> usize {
@@ -82,32 +91,19 @@ impl Document {
         Ok(frame)
     }
 
-    /// Writes the autosave (each edit is one small write: strokes are whole, not per move).
-    /// On failure, the message to tell the user, the first time in a row only.
-    pub fn save(&mut self) -> Option<String> {
-        match persistence::autosave(&self.scene, &self.source, &self.labels) {
-            Ok(()) => {
-                self.autosaved_version = Some(self.version);
-                self.autosave_error = None;
-                None
-            }
-            Err(e) => {
-                let first = self.autosave_error.is_none();
-                self.autosave_error = Some(e.to_string());
-                first.then(|| format!("Cannot autosave the annotations ({e}); export them to keep them."))
-            }
-        }
+    /// Saves the labels as they are now; `reason` starts a new snapshot when it is not plain
+    /// edits. The write is asynchronous: [`Document::save_state`] says how it went.
+    pub fn save(&mut self, reason: Reason) {
+        self.store.save(self.version, &self.labels, reason);
     }
 
-    /// The autosave holds the latest edit.
+    pub fn save_state(&self) -> SaveState {
+        self.store.state(self.version)
+    }
+
+    /// The latest edit is on disk.
     pub fn saved(&self) -> bool {
-        self.autosaved_version == Some(self.version)
-    }
-
-    /// The autosave that a shared link displaced, taken out of storage.
-    pub fn take_displaced(&mut self) -> Result<Option<LabelSet>, String> {
-        self.displaced = false;
-        persistence::take_displaced(&self.scene, &self.source)
+        self.save_state() == SaveState::Saved
     }
 
     /// Makes [`Document::summary`] describe the current labels.
@@ -116,7 +112,8 @@ impl Document {
             return;
         }
         let (w, h) = (self.scene.width, self.scene.height);
-        let per_frame = labelled_pixels_per_frame(&self.labels, w, h);
+        self.counts.update(&self.labels, w, h);
+        let per_frame = self.counts.labelled_pixels_per_frame();
         let mut labelled_frames = vec![false; self.scene.frames.len()];
         for &(f, n) in &per_frame {
             if let Some(slot) = labelled_frames.get_mut(f as usize) {
@@ -128,7 +125,7 @@ impl Document {
             strokes: self.labels.frames.iter().map(|f| f.strokes.len()).sum(),
             labelled_pixels: per_frame.iter().map(|p| p.1).sum(),
             labelled_frames,
-            classes_used: classes_used(&self.labels, w, h),
+            classes_used: self.counts.classes_used(self.labels.classes.len()),
         };
     }
 

@@ -7,6 +7,7 @@
 mod document;
 mod keys;
 mod panels;
+mod saving;
 mod status;
 mod training;
 mod view;
@@ -28,11 +29,14 @@ use super::page_status;
 use super::palette::Palette;
 use super::persistence::{self, Origin};
 use super::side_panel;
+use super::store::Opened;
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
 use crate::labels::autosave::SceneSource;
 use crate::labels::history::Edit;
+use crate::labels::snapshots::Reason;
 use crate::scene::Scene;
+use crate::scene::archive::limits::MAX_JSON_BYTES;
 
 /// A message shown under the title bar for a while.
 struct Notice {
@@ -47,6 +51,14 @@ type Inbox = Rc<RefCell<Vec<InboxItem>>>;
 enum InboxItem {
     ImportedLabels(String, Vec<u8>),
     Error(String),
+}
+
+/// What the save machinery has told the user, so each change is told once.
+#[derive(Default)]
+struct SaveNews {
+    /// The failure last told, if saving is failing.
+    failure: Option<String>,
+    read_only: bool,
 }
 
 /// What an annotator starts from besides its scene.
@@ -70,10 +82,13 @@ pub struct Annotator {
     notices: Vec<Notice>,
     share_link: Option<String>,
     inbox: Inbox,
+    /// The snapshots window is open.
+    snapshots_open: bool,
+    save_news: SaveNews,
 }
 
 impl Annotator {
-    pub fn new(ctx: &egui::Context, scene: Box<Scene>, setup: AnnotatorSetup) -> Annotator {
+    pub fn new(ctx: &egui::Context, scene: Box<Scene>, opened: Opened, setup: AnnotatorSetup) -> Annotator {
         let scene: Rc<Scene> = Rc::from(scene);
         let AnnotatorSetup {
             source,
@@ -82,8 +97,8 @@ impl Annotator {
             mut options,
             option_errors,
         } = setup;
-        let restored = persistence::initial_labels(&scene, &source, options.labels.take().as_deref());
-        let doc = Document::new(scene, source, restored.labels, restored.displaced);
+        let restored = persistence::initial_labels(&scene, &source, options.labels.take().as_deref(), opened.newest);
+        let doc = Document::new(scene, source, restored.labels, opened.store);
         let mut a = Annotator {
             view: View::new(&doc),
             doc,
@@ -93,10 +108,29 @@ impl Annotator {
             notices: Vec::new(),
             share_link: None,
             inbox: Inbox::default(),
+            snapshots_open: false,
+            save_news: SaveNews::default(),
         };
+        for w in opened.warnings {
+            a.notify(&w, true);
+        }
+        for i in opened.infos {
+            a.notify(&i, false);
+        }
         match restored.origin {
-            Origin::SharedLink => a.notify("Opened the annotations from the link.", false),
-            Origin::Autosave => a.notify("Restored the annotations saved in this browser.", false),
+            Origin::SharedLink if a.doc.store.writable() => {
+                // Saved at once, as a snapshot of its own: what it displaces stays listed.
+                a.doc.save(Reason::Link);
+                a.notify(
+                    "Opened the annotations from the link; what was saved before stays in the snapshots.",
+                    false,
+                );
+            }
+            Origin::SharedLink => a.notify(
+                "Opened the annotations from the link, NOT saved: another tab saves this scene. Export them to keep them.",
+                true,
+            ),
+            Origin::Snapshot => a.notify("Restored the annotations saved in this browser.", false),
             Origin::Archive => a.notify("Started from the annotations shipped with the scene.", false),
             Origin::Empty => {}
         }
@@ -132,16 +166,40 @@ impl Annotator {
 
     /// Applies an edit made by the user and lets everything that follows the labels know.
     fn edit(&mut self, edit: Edit, merge: bool) {
+        self.edit_for(edit, merge, Reason::Edits);
+    }
+
+    /// As [`Annotator::edit`], saving with `reason` (a restore or an import starts a snapshot).
+    fn edit_for(&mut self, edit: Edit, merge: bool, reason: Reason) {
+        if !self.may_edit() {
+            return;
+        }
         match self.doc.apply(edit, merge) {
-            Ok(()) => self.labels_changed(),
+            Ok(()) => self.labels_changed(reason),
             Err(e) => self.notify(&format!("cannot apply that edit: {e}"), true),
         }
     }
 
+    /// A follower tab refuses edits: they could not be saved, and the writer's next save
+    /// would replace them.
+    fn may_edit(&mut self) -> bool {
+        if self.doc.store.writable() {
+            return true;
+        }
+        self.notify(
+            "Read-only: this scene is being edited in another tab. Close that tab (this one then takes over) or edit there.",
+            true,
+        );
+        false
+    }
+
     fn undo(&mut self) {
+        if !self.may_edit() {
+            return;
+        }
         match self.doc.undo() {
             Ok(Some(frame)) => {
-                self.labels_changed();
+                self.labels_changed(Reason::Edits);
                 self.go_to_edited_frame(frame);
             }
             Ok(None) => {}
@@ -150,9 +208,12 @@ impl Annotator {
     }
 
     fn redo(&mut self) {
+        if !self.may_edit() {
+            return;
+        }
         match self.doc.redo() {
             Ok(Some(frame)) => {
-                self.labels_changed();
+                self.labels_changed(Reason::Edits);
                 self.go_to_edited_frame(frame);
             }
             Ok(None) => {}
@@ -167,8 +228,14 @@ impl Annotator {
         }
     }
 
-    /// After every change of the labels (the document's version has moved on).
-    fn labels_changed(&mut self) {
+    /// After every change of the labels by this tab (the document's version has moved on).
+    fn labels_changed(&mut self, reason: Reason) {
+        self.labels_followed();
+        self.doc.save(reason);
+    }
+
+    /// After every change of the labels, this tab's or the writer's it follows.
+    fn labels_followed(&mut self) {
         self.share_link = None;
         self.view.class = self
             .view
@@ -178,9 +245,6 @@ impl Annotator {
             // Restarted from `show`, where the egui context is at hand.
             self.notify("A new class needs a larger field: training restarts.", false);
         }
-        if let Some(message) = self.doc.save() {
-            self.notify(&message, true);
-        }
     }
 
     pub fn show(&mut self, ui: &mut egui::Ui, gpu_name: &str) {
@@ -189,6 +253,7 @@ impl Annotator {
             self.start_training(&ctx);
         }
         self.take_inbox();
+        self.take_store_news();
         // Any key, or the pointer pressed or moving with a button down: the user is at work.
         let active = ctx.input(|i| {
             i.events.iter().any(|e| {
@@ -241,8 +306,17 @@ impl Annotator {
             self.view.frame = out.frame;
             self.view.arrow_key_widgets.extend(out.arrow_key_widgets);
         });
-        if !self.notices.is_empty() {
+        let banner = self.save_banner();
+        if !self.notices.is_empty() || banner.is_some() {
             egui::Panel::top("notices").show(ui, |ui| {
+                if let Some((text, error)) = &banner {
+                    let color = if *error {
+                        ui.visuals().error_fg_color
+                    } else {
+                        ui.visuals().warn_fg_color
+                    };
+                    ui.label(RichText::new(text).color(color).strong());
+                }
                 for n in &self.notices {
                     let color = if n.error {
                         ui.visuals().error_fg_color
@@ -264,6 +338,7 @@ impl Annotator {
                 self.edit(Edit::AddStroke { frame, stroke }, false);
             }
         });
+        self.snapshots_window(&ctx);
         if let Some(t) = &mut self.training.handle {
             t.show_frame(self.view.frame as u32);
         }
@@ -273,24 +348,22 @@ impl Annotator {
         }
     }
 
-    fn replace_labels(&mut self, labels: LabelSet, message: &str) {
+    /// Replaces the labels as one undoable edit, saved as a new snapshot (`reason`), so
+    /// the labels replaced stay in the snapshot before it.
+    fn replace_labels(&mut self, labels: LabelSet, message: &str, reason: Reason) {
+        if !self.may_edit() {
+            return;
+        }
         let before = Box::new(self.doc.labels.clone());
-        self.edit(
+        self.edit_for(
             Edit::Replace {
                 before,
                 after: Box::new(labels),
             },
             false,
+            reason,
         );
         self.notify(message, false);
-    }
-
-    fn restore_displaced(&mut self) {
-        match self.doc.take_displaced() {
-            Ok(Some(labels)) => self.replace_labels(labels, "Restored the annotations from before the link."),
-            Ok(None) => self.notify("The earlier annotations are gone.", true),
-            Err(e) => self.notify(&e, true),
-        }
     }
 
     fn download_masks(&mut self) {
@@ -309,7 +382,7 @@ impl Annotator {
     fn import_labels(&mut self) {
         let inbox = self.inbox.clone();
         wasm_bindgen_futures::spawn_local(async move {
-            let item = match browser::pick_file(".json,application/json").await {
+            let item = match browser::pick_file(".json,application/json", MAX_JSON_BYTES).await {
                 Ok(Some((name, bytes))) => InboxItem::ImportedLabels(name, bytes),
                 Ok(None) => return,
                 Err(e) => InboxItem::Error(e.to_string()),
@@ -324,7 +397,11 @@ impl Annotator {
             Ok(labels) if labels.classes.is_empty() => {
                 self.notify(&format!("{name}: defines no classes"), true);
             }
-            Ok(labels) => self.replace_labels(labels, &format!("Imported {name} (undo brings back what was there).")),
+            Ok(labels) => self.replace_labels(
+                labels,
+                &format!("Imported {name} (undo brings back what was there)."),
+                Reason::Imported,
+            ),
             Err(e) => self.notify(&e.to_string(), true),
         }
     }

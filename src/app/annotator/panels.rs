@@ -169,8 +169,7 @@ impl Annotator {
             );
             ui.label(RichText::new(format!("{} characters, copied", link.len())).small());
         }
-        if self.doc.displaced && ui.button("restore my earlier annotations").clicked() {
-            self.restore_displaced();
-        }
+        ui.add_space(4.0);
+        self.save_section(ui);
     }
 }

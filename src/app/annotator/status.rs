@@ -1,6 +1,6 @@
 //! The page status while annotating (see `app::status`), put together from the three parts.
 use super::super::canvas::Tool;
-use super::super::status::{Annotating, PageStatus};
+use super::super::status::{Annotating, PageStatus, SaveStatus};
 use super::super::training::Phase;
 use super::Annotator;
 
@@ -16,6 +16,19 @@ fn rect(r: egui::Rect) -> [f32; 4] {
 }
 
 impl Annotator {
+    fn save_status(&self) -> SaveStatus {
+        let store = &self.doc.store;
+        let state = self.doc.save_state();
+        SaveStatus {
+            state: state.name(),
+            error: state.error().map(str::to_string),
+            scene: store.content_id(),
+            snapshots: store.snapshots().iter().map(|s| [s.seq, s.strokes as u64]).collect(),
+            aside: store.aside(),
+            persisted: store.persisted(),
+        }
+    }
+
     pub(super) fn status(&self) -> PageStatus {
         let (doc, view) = (&self.doc, &self.view);
         let rendered = view.rendered_here();
@@ -47,6 +60,7 @@ impl Annotator {
             batch: None,
             features: view.features_rect.filter(|_| rendered.is_some()).map(rect),
             failure: None,
+            save: self.save_status(),
         };
         if let Some(t) = &self.training.handle {
             let reports = t.reports();
