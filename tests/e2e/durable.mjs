@@ -197,20 +197,25 @@ try {
         throw new DOMException("The quota has been exceeded.", "QuotaExceededError");
       };
     }));
-    await c.focus("#scribblefield");
-    await draw(c, 30);
-    const s = await waitForStatus(c, (t) => t.strokes === strokesBefore + 1 && t.save.state !== "saving",
-      "the failed save", SAVE_TIMEOUT_MS);
-    console.log(`     ${show(s.save.state)}: ${s.save.error}`);
-    assert(s.save.state === "failed" && /quota/i.test(s.save.error), `save: ${show(s.save)}`);
-    assert(s.saved === false, "saved is true");
-    await c.evaluate(() => { document.body.dataset.gpuLost = "test: device lost"; });
-    await c.waitForFunction(() => /GPU stopped/.test(document.getElementById("notice-text").textContent),
-      null, { timeout: 10_000 });
-    const notice = await c.evaluate(() => document.getElementById("notice-text").textContent);
-    assert(/NOT saved/.test(notice) && !/annotations are saved/.test(notice), `notice: ${notice}`);
-    await c.screenshot({ path: join(outDir, "durable-not-saved.png") });
-    await c.close();
+    // Closed whatever happens: while open it holds the scene's lock.
+    try {
+      await c.focus("#scribblefield");
+      await draw(c, 30);
+      const s = await waitForStatus(c, (t) => t.strokes === strokesBefore + 1 && t.save.state !== "saving",
+        "the failed save", SAVE_TIMEOUT_MS);
+      console.log(`     ${show(s.save.state)}: ${s.save.error}`);
+      assert(s.save.state === "failed" && /quota/i.test(s.save.error), `save: ${show(s.save)}`);
+      assert(s.saved === false, "saved is true");
+      await c.screenshot({ path: join(outDir, "durable-not-saved-banner.png") });
+      await c.evaluate(() => { document.body.dataset.gpuLost = "test: device lost"; });
+      await c.waitForFunction(() => /GPU stopped/.test(document.getElementById("notice-text").textContent),
+        null, { timeout: 10_000 });
+      const notice = await c.evaluate(() => document.getElementById("notice-text").textContent);
+      assert(/NOT be saved/.test(notice) && !/annotations are saved/.test(notice), `notice: ${notice}`);
+      await c.screenshot({ path: join(outDir, "durable-not-saved-gpu-lost.png") });
+    } finally {
+      await c.close();
+    }
   });
 
   // --- a reload while training ---
