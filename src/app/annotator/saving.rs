@@ -99,6 +99,8 @@ impl Annotator {
         let mut restore = None;
         let mut download = None;
         let snapshots = self.doc.store.snapshots();
+        let others = self.doc.store.others();
+        let mut restore_other = None;
         let aside = self.doc.store.aside();
         let writable = self.doc.store.writable();
         egui::Window::new("Snapshots").open(&mut open).show(ctx, |ui| {
@@ -128,6 +130,22 @@ impl Annotator {
             if snapshots.is_empty() {
                 ui.label("Nothing saved yet.");
             }
+            if !others.is_empty() {
+                ui.separator();
+                ui.label("Saved for another version of this archive at the same address:");
+                egui::Grid::new("other versions").striped(true).show(ui, |ui| {
+                    for (id, s) in others.iter().rev() {
+                        ui.label(local_time(s.saved_ms));
+                        ui.label(format!("{} strokes", s.strokes));
+                        ui.label(RichText::new(&id[..8.min(id.len())]).monospace())
+                            .on_hover_text(format!("content id {id}"));
+                        if ui.add_enabled(writable, egui::Button::new("restore")).clicked() {
+                            restore_other = Some((id.clone(), s.seq, s.saved_ms));
+                        }
+                        ui.end_row();
+                    }
+                });
+            }
             if !aside.is_empty() {
                 ui.separator();
                 ui.label(
@@ -147,6 +165,19 @@ impl Annotator {
         self.snapshots_open = open;
         if let Some((seq, saved_ms)) = restore {
             self.restore_snapshot(seq, saved_ms);
+        }
+        if let Some((id, seq, saved_ms)) = restore_other {
+            match self.doc.store.other_labels(&id, seq) {
+                Some(labels) => self.replace_labels(
+                    labels,
+                    &format!(
+                        "Restored the annotations of {} saved for another version of this archive.",
+                        local_time(saved_ms)
+                    ),
+                    Reason::Restored,
+                ),
+                None => self.notify("That snapshot is gone.", true),
+            }
         }
         if let Some(key) = download {
             self.download_aside(key);

@@ -88,6 +88,9 @@ struct Inner {
     session: String,
     /// The scene's readable snapshots, oldest first.
     snapshots: Vec<SnapshotRecord>,
+    /// When the scene has none: snapshots of another archive once at the same URL that fit
+    /// this scene, oldest first (offered in the snapshots window, never applied unasked).
+    others: Vec<SnapshotRecord>,
     next_seq: u64,
     /// Keys in the `aside` store that belong to this scene.
     aside: Vec<String>,
@@ -238,6 +241,20 @@ impl SceneStore {
 
     pub fn snapshots(&self) -> Vec<SnapshotMeta> {
         self.inner.borrow().snapshots.iter().map(SnapshotRecord::meta).collect()
+    }
+
+    /// Snapshots of another version of the archive at the same URL: (content id, meta).
+    pub fn others(&self) -> Vec<(String, SnapshotMeta)> {
+        let i = self.inner.borrow();
+        i.others.iter().map(|r| (r.content_id.clone(), r.meta())).collect()
+    }
+
+    pub fn other_labels(&self, content_id: &str, seq: u64) -> Option<LabelSet> {
+        let i = self.inner.borrow();
+        i.others
+            .iter()
+            .find(|r| r.content_id == content_id && r.seq == seq)
+            .map(|r| r.autosave.labels.clone())
     }
 
     pub fn snapshot_labels(&self, seq: u64) -> Option<LabelSet> {

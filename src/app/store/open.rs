@@ -11,8 +11,8 @@ use crate::app::browser;
 use crate::labels::LabelSet;
 use crate::labels::autosave::{Autosave, SceneSource};
 use crate::labels::snapshots::{
-    Migration, Reason, SNAPSHOT_FORMAT, SNAPSHOT_VERSION, SceneKey, SceneShape, SnapshotRecord, journal_is_newer,
-    migration, text_mark,
+    KEEP_SNAPSHOTS, Migration, Reason, SNAPSHOT_FORMAT, SNAPSHOT_VERSION, SceneKey, SceneShape, SnapshotRecord,
+    journal_is_newer, migration, text_mark,
 };
 
 /// A scene's store, opened, and what the user should hear about it.
@@ -70,6 +70,7 @@ pub async fn open_scene(content_id: &str, source: &SceneSource, shape: SceneShap
     // Over every key seen, readable or not: a new snapshot must never land on an unreadable
     // record that could not be set aside.
     let mut max_seq = None;
+    let mut others = Vec::new();
     if let Some(db) = &db {
         if writer {
             migrate(db, &key, source, shape, &mut warnings, &mut infos, &mut aside).await;
@@ -77,6 +78,16 @@ pub async fn open_scene(content_id: &str, source: &SceneSource, shape: SceneShap
         }
         (records, max_seq) = read_snapshots(db, &key, shape, writer, &mut warnings, &mut aside).await;
         aside = aside_keys(db, &key).await.unwrap_or(aside);
+        if records.is_empty() {
+            others = other_versions(db, &key, source, shape).await;
+            if let Some(newest) = others.last() {
+                infos.push(format!(
+                    "Nothing is saved for this archive, but {} snapshot(s) are saved for another version of it at                      the same address (newest: {} strokes): the snapshots window can restore them.",
+                    others.len(),
+                    newest.meta().strokes
+                ));
+            }
+        }
     }
     let newest = records.last().map(|r| r.autosave.labels.clone());
     let next_seq = max_seq.map_or(0, |s: u64| s + 1);
@@ -89,6 +100,7 @@ pub async fn open_scene(content_id: &str, source: &SceneSource, shape: SceneShap
         shape,
         session: session_id(),
         snapshots: records,
+        others,
         next_seq,
         aside,
         wanted: None,
@@ -298,6 +310,26 @@ async fn read_snapshots(
         }
     }
     (records, max_seq)
+}
+
+/// Snapshots of other content saved from the same address (the archive there has changed),
+/// that still fit this scene: the URL is a hint, so they are offered, never applied.
+async fn other_versions(db: &Db, key: &SceneKey, source: &SceneSource, shape: SceneShape) -> Vec<SnapshotRecord> {
+    // Content ids are hex digits: every snapshot key lies in ["0", "g").
+    let Ok(entries) = db.entries(idb::SNAPSHOTS, "0", "g").await else {
+        return Vec::new();
+    };
+    let url = source.describe();
+    let mut found: Vec<SnapshotRecord> = entries
+        .iter()
+        .filter(|(k, _)| !k.starts_with(&key.content_id))
+        .filter_map(|(k, v)| SnapshotRecord::read(&v.as_string()?, k, &shape).ok())
+        .filter(|r| r.url == url)
+        .collect();
+    found.sort_by(|a, b| a.autosave.saved_at_ms.total_cmp(&b.autosave.saved_at_ms));
+    let excess = found.len().saturating_sub(KEEP_SNAPSHOTS);
+    found.drain(..excess);
+    found
 }
 
 async fn aside_keys(db: &Db, key: &SceneKey) -> Option<Vec<String>> {
