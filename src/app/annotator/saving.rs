@@ -52,13 +52,21 @@ impl Annotator {
 
     /// The line that stays on top while saving is not what it should be.
     pub(super) fn save_banner(&self) -> Option<(String, bool)> {
+        // Browser messages end with a full stop of their own.
+        let clean = |e: &str| e.trim_end_matches('.').to_string();
         match self.doc.save_state() {
             SaveState::Failed(e) => Some((
-                format!("⚠ NOT SAVED: {e}. The latest edits are only in this tab: export labels to keep them."),
+                format!(
+                    "⚠ NOT SAVED: {}. The latest edits are only in this tab: export labels to keep them.",
+                    clean(&e)
+                ),
                 true,
             )),
             SaveState::Unavailable(e) => Some((
-                format!("⚠ NOT SAVED: this browser cannot store annotations ({e}). Export labels to keep them."),
+                format!(
+                    "⚠ NOT SAVED: this browser cannot store annotations ({}). Export labels to keep them.",
+                    clean(&e)
+                ),
                 true,
             )),
             SaveState::ReadOnly => Some((
