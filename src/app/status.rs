@@ -88,6 +88,9 @@ pub struct SaveStatus {
     pub snapshots: Vec<[u64; 2]>,
     /// Keys of set-aside (unreadable) records in IndexedDB store `aside`.
     pub aside: Vec<String>,
+    /// Snapshots offered from another version of the archive at the same URL (only when this
+    /// one has none).
+    pub others: usize,
     /// Whether the browser granted persistent storage (`null`: no answer).
     pub persisted: Option<bool>,
 }

@@ -3,13 +3,17 @@
 // over when the first closes, and a reload loses no stroke); a corrupted save is set aside and
 // the next edit leaves it alone; a full disk (IndexedDB put stubbed to fail) shows "not saved",
 // also in the GPU-lost notice; a reload in the middle of training loses nothing; opening a
-// share link, twice, keeps the version it displaced among the snapshots. Starts no server:
+// share link, twice, keeps the version it displaced among the snapshots; a changed archive at
+// the same URL (an entry added, served through a route) gets none of the old labels but is
+// offered them. Starts no server:
 // run.sh does, or point E2E_URL at one.
 //
 //   E2E_URL    page to open, e.g. http://127.0.0.1:8080/ (required)
+//   E2E_DEMO   the demo archive the page serves (default www/demo.scene.zip)
 //   E2E_OUT    folder for screenshots (default /tmp/e2e)
 //   CHROMIUM   browser binary (default /usr/bin/chromium)
-import { mkdirSync, mkdtempSync, rmSync } from "node:fs";
+import { mkdirSync, mkdtempSync, readFileSync, rmSync } from "node:fs";
+import { crc32 } from "node:zlib";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
 import { chromium } from "playwright-core";
@@ -111,9 +115,34 @@ function putRecord(page, key, value) {
   }), [key, value]);
 }
 
+/// `zip` with one more stored entry (`name`, `text`) at the end: other content, so another
+/// content id, for a scene that decodes the same.
+function withExtraEntry(zip, name, text) {
+  let eocd = zip.length - 22;
+  while (eocd >= 0 && zip.readUInt32LE(eocd) !== 0x06054b50) eocd--;
+  assert(eocd >= 0, "no end of central directory");
+  const count = zip.readUInt16LE(eocd + 10), cdSize = zip.readUInt32LE(eocd + 12), cdOffset = zip.readUInt32LE(eocd + 16);
+  const data = Buffer.from(text), fileName = Buffer.from(name), crc = crc32(data);
+  const local = Buffer.alloc(30);
+  local.writeUInt32LE(0x04034b50, 0); local.writeUInt16LE(20, 4);
+  local.writeUInt32LE(crc, 14); local.writeUInt32LE(data.length, 18); local.writeUInt32LE(data.length, 22);
+  local.writeUInt16LE(fileName.length, 26);
+  const central = Buffer.alloc(46);
+  central.writeUInt32LE(0x02014b50, 0); central.writeUInt16LE(20, 4); central.writeUInt16LE(20, 6);
+  central.writeUInt32LE(crc, 16); central.writeUInt32LE(data.length, 20); central.writeUInt32LE(data.length, 24);
+  central.writeUInt16LE(fileName.length, 28); central.writeUInt32LE(cdOffset, 42);
+  const end = Buffer.from(zip.subarray(eocd, eocd + 22));
+  const newCdOffset = cdOffset + 30 + fileName.length + data.length;
+  end.writeUInt16LE(count + 1, 8); end.writeUInt16LE(count + 1, 10);
+  end.writeUInt32LE(cdSize + 46 + fileName.length, 12); end.writeUInt32LE(newCdOffset, 16); end.writeUInt16LE(0, 20);
+  return Buffer.concat([zip.subarray(0, cdOffset), local, fileName, data,
+    zip.subarray(cdOffset, cdOffset + cdSize), central, fileName, end]);
+}
+
 const strokesOf = (s) => s.save.snapshots.map(([, n]) => n);
 
 let context;
+let sceneId;
 try {
   context = await chromium.launchPersistentContext(userDataDir, {
     executablePath: chromiumPath,
@@ -135,6 +164,7 @@ try {
     assert(s.strokes === 1 && s.classes === 2, `strokes ${s.strokes}, classes ${s.classes}`);
     assert(s.save.snapshots.length === 1 && s.save.snapshots[0][1] === 1, `snapshots ${show(s.save.snapshots)}`);
     assert(s.save.scene.length === 32, `scene id ${s.save.scene}`);
+    sceneId = s.save.scene;
     assert(await a.evaluate((k) => !!localStorage.getItem(k), legacyKey), "the old entry is gone");
   });
 
@@ -253,6 +283,23 @@ try {
       console.log(`     link ${round}: ${s.strokes} strokes; snapshots hold ${show(strokesOf(saved))}`);
       assert(s.strokes === linked, `the link opened ${s.strokes} strokes, it holds ${linked}`);
       assert(strokesOf(saved).includes(mine), `no snapshot of the ${mine} strokes the link displaced`);
+      await page.close();
+    }
+  });
+
+  // --- another archive at the same URL ---
+  await checks.check("a changed archive at the same URL does not get the old labels; they are offered", async () => {
+    const demo = readFileSync(process.env.E2E_DEMO || "www/demo.scene.zip");
+    const changed = withExtraEntry(demo, "changed.txt", "another version of the archive");
+    const page = await open("changed archive", (p) => p.route("**/demo.scene.zip",
+      (route) => route.fulfill({ body: changed, contentType: "application/zip" })));
+    try {
+      const s = await status(page);
+      console.log(`     changed archive: ${s.strokes} strokes; ${show(s.save)}`);
+      assert(s.save.scene.length === 32 && s.save.scene !== sceneId, `the content id did not change: ${s.save.scene}`);
+      assert(s.strokes === 0, `the changed archive opened with ${s.strokes} strokes of the old one`);
+      assert(s.save.others > 0, "the old version's snapshots are not offered");
+    } finally {
       await page.close();
     }
   });

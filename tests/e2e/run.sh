@@ -51,5 +51,5 @@ done
 STATUS=0
 E2E_URL="$URL" CHROMIUM="$CHROMIUM" node "$HERE/smoke.mjs" || STATUS=1
 E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_DEMO="$ROOT/www/demo.scene.zip" node "$HERE/annotate.mjs" || STATUS=1
-E2E_URL="$URL" CHROMIUM="$CHROMIUM" node "$HERE/durable.mjs" || STATUS=1
+E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_DEMO="$ROOT/www/demo.scene.zip" node "$HERE/durable.mjs" || STATUS=1
 exit $STATUS

@@ -25,6 +25,7 @@ impl Annotator {
             scene: store.content_id(),
             snapshots: store.snapshots().iter().map(|s| [s.seq, s.strokes as u64]).collect(),
             aside: store.aside(),
+            others: store.others().len(),
             persisted: store.persisted(),
         }
     }
