@@ -1,7 +1,7 @@
 //! The egui app (web): gets a scene into the page (`loading`, or a file picked or dropped),
 //! then annotates it (`annotator`), training the field live on the page's WebGPU device
 //! (`training`). The modules below each draw or do one thing; the plain logic they use (undo,
-//! share codec, autosave entries, brush and view maths) is in `crate::labels`, tested natively.
+//! share codec, autosave entries and snapshots, brush and view maths) is in `crate::labels`, tested natively.
 //!
 //! `page_options`, `status` and `model_size` are plain data and build natively too (their tests
 //! run with `cargo test --lib`); the rest needs the browser. docs/architecture.md ("The web

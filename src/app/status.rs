@@ -51,7 +51,7 @@ pub struct Annotating {
     pub loss: Option<f64>,
     /// The step of the mask shown for this frame, -1 for none.
     pub rendered: i64,
-    /// The autosave holds the latest edit.
+    /// The latest edit is on disk (`save.state` is `saved`).
     pub saved: bool,
     /// The field trains on frames this many times smaller.
     pub res: u32,

@@ -26,7 +26,7 @@ pub struct Document {
     pub scene: Rc<Scene>,
     pub source: SceneSource,
     pub labels: LabelSet,
-    /// Bumped by every edit: textures, summary, autosave and trainer follow it.
+    /// Bumped by every edit: textures, summary, saving and trainer follow it.
     pub version: u64,
     pub history: History,
     pub summary: Summary,

@@ -1,4 +1,4 @@
-//! Annotating a loaded scene, in three parts: the [`Document`] (labels, undo history, autosave),
+//! Annotating a loaded scene, in three parts: the [`Document`] (labels, undo history, saving),
 //! the [`View`] (frame shown, zoom, layers, tool) and the [`TrainingControl`] (the handle to
 //! the live training that turns the scribbles into masks). This module joins them: it turns
 //! what the panels, keys and canvas report into edits and lets everything that follows the
