@@ -241,6 +241,15 @@ def archive_seeds(binary):
             for n, data in entries.items():
                 z.writestr(n, data)
         put("archive", "seed-stored-labels.scene.zip", out.getvalue())
+        # The same entries for archive_entries: `--entry:NAME\n` then the bytes.
+        put("archive_entries", "seed-labels.entries",
+            b"".join(b"--entry:" + n.encode() + b"\n" + d for n, d in entries.items()))
+        with zipfile.ZipFile(feat) as z:
+            feat_entries = {n: z.read(n) for n in z.namelist()}
+        scene = json.loads(feat_entries["scene.json"])
+        feat_entries["scene.json"] = json.dumps(scene, separators=(",", ":")).encode()
+        put("archive_entries", "seed-features.entries",
+            b"".join(b"--entry:" + n.encode() + b"\n" + d for n, d in feat_entries.items()))
 
 
 if __name__ == "__main__":

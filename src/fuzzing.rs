@@ -26,6 +26,7 @@ pub type Target = fn(&[u8]) -> Outcome;
 /// `fuzz/fuzz_targets/`.
 pub const TARGETS: &[(&str, Target)] = &[
     ("archive", archive),
+    ("archive_entries", archive_entries),
     ("labels_json", labels_json),
     ("share_link", share_link),
     ("npy", npy),
@@ -47,6 +48,51 @@ pub fn archive(data: &[u8]) -> Outcome {
     let scene = read_archive(data, "fuzz.scene.zip").map_err(|e| e.to_string())?;
     assert_scene_within_limits(&scene);
     Ok(())
+}
+
+/// Marks the start of an entry in [`archive_entries`] input: `--entry:NAME\n` then its bytes.
+pub const ENTRY_MARK: &[u8] = b"--entry:";
+
+/// The entries of a scene archive, zipped here (stored, with correct checksums) and then read
+/// like [`archive`]. Mutations of a zip file's bytes mostly break its CRC-32s, which the reader
+/// checks first; this target's mutations reach `scene.json`, the image headers and pixels, the
+/// labels and the feature codes instead. Input: `--entry:NAME\n` followed by the entry's bytes,
+/// repeated (a duplicate name ends the input's use: the zip writer refuses it).
+pub fn archive_entries(data: &[u8]) -> Outcome {
+    use std::io::Write;
+    use zip::write::SimpleFileOptions;
+
+    let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    let stored = SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    for part in split_on(data, ENTRY_MARK).skip(1) {
+        let (name, content) = match part.iter().position(|&b| b == b'\n') {
+            Some(end) => (&part[..end], &part[end + 1..]),
+            None => (part, &[][..]),
+        };
+        let name = std::str::from_utf8(name).map_err(|_| "entry name not UTF-8".to_string())?;
+        zip.start_file(name, stored).map_err(|e| format!("zip writer: {e}"))?;
+        zip.write_all(content).map_err(|e| format!("zip writer: {e}"))?;
+    }
+    let bytes = zip.finish().map_err(|e| format!("zip writer: {e}"))?.into_inner();
+    archive(&bytes)
+}
+
+/// The pieces of `data` between occurrences of `mark` (the first one before the first mark).
+fn split_on<'a>(data: &'a [u8], mark: &'a [u8]) -> impl Iterator<Item = &'a [u8]> {
+    let mut rest = Some(data);
+    std::iter::from_fn(move || {
+        let r = rest?;
+        match r.windows(mark.len()).position(|w| w == mark) {
+            Some(at) => {
+                rest = Some(&r[at + mark.len()..]);
+                Some(&r[..at])
+            }
+            None => {
+                rest = None;
+                Some(r)
+            }
+        }
+    })
 }
 
 /// A `labels.json` for a scene of [`LABEL_FRAMES`] frames; accepted labels are rasterized.
