@@ -13,14 +13,15 @@
 //! - request text in the log escaped and capped (`log.rs`).
 //!
 //! `Connection: close`: one request per connection.
+use std::collections::VecDeque;
 use std::fs::File;
-use std::io::{self, Read, Write};
+use std::io::{self, Write};
 use std::net::{Ipv4Addr, Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 mod files;
 mod log;
@@ -67,11 +68,13 @@ impl Default for ServeConfig {
 /// Connections waiting to be told 503; when the refuser falls behind this far, the rest are
 /// closed unanswered (a flood, not a browser).
 const REFUSAL_QUEUE: usize = 64;
-/// How long the refuser waits on a refused client: for its 503 to be written, and then for the
-/// client's request (read and dropped, so that closing the socket does not reset the connection
-/// before the client reads its 503) or its close. A browser has sent its request by then and
-/// closes on reading the 503; only an idle client costs the refuser the whole wait.
-const REFUSAL_WAIT: Duration = Duration::from_millis(50);
+/// Longest wait for a 503 to be written; it fits an empty socket buffer, so this is rarely spent.
+const REFUSAL_WRITE: Duration = Duration::from_millis(50);
+/// How long a refused connection is kept open after its 503, unread: closing a socket with
+/// unread input resets the connection, and a reset can reach the client before it has read the
+/// 503. Kept in a list the refuser prunes at each refusal, never waited on, so a refusal costs
+/// no time; at most [`REFUSAL_QUEUE`] are kept.
+const REFUSAL_LINGER: Duration = Duration::from_secs(1);
 
 /// The loopback address on `port`: the server is for the developer's own browser by default.
 pub fn localhost(port: u16) -> SocketAddr {
@@ -122,7 +125,8 @@ impl Server {
         };
         let refuser = {
             let config = config.clone();
-            Pool::start(1, REFUSAL_QUEUE, move |stream| refuse(stream, &config))?
+            let lingering = Mutex::new(VecDeque::new());
+            Pool::start(1, REFUSAL_QUEUE, move |stream| refuse(stream, &config, &lingering))?
         };
         let accept_thread = {
             let (stopping, log) = (stopping.clone(), config.log.clone());
@@ -230,9 +234,8 @@ fn peer(stream: &TcpStream) -> String {
 }
 
 /// Answers a connection the workers have no room for: 503 and `Retry-After`, without reading
-/// its request (beyond draining what arrived, so that the close does not reset the connection
-/// before the client reads the answer).
-fn refuse(stream: TcpStream, config: &ServeConfig) {
+/// its request, then keeps it open a while (see [`REFUSAL_LINGER`]) in `lingering`.
+fn refuse(stream: TcpStream, config: &ServeConfig, lingering: &Mutex<VecDeque<(TcpStream, Instant)>>) {
     config.log.line(&format!(
         "503 {}: all {} workers busy and {} connections waiting",
         peer(&stream),
@@ -240,34 +243,27 @@ fn refuse(stream: TcpStream, config: &ServeConfig) {
         config.queue
     ));
     let mut out = &stream;
-    let _ = stream.set_write_timeout(Some(REFUSAL_WAIT));
+    let _ = stream.set_write_timeout(Some(REFUSAL_WRITE));
     let body = "503 Service Unavailable: the server is busy; try again\n";
     let answer = format!(
         "HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain; charset=utf-8\r\nContent-Length: {}\r\n\
          Retry-After: 1\r\nCache-Control: no-cache\r\nConnection: close\r\n\r\n{body}",
         body.len()
     );
-    if out.write_all(answer.as_bytes()).is_ok() {
-        let _ = stream.shutdown(Shutdown::Write);
-        drain(&stream, REFUSAL_WAIT);
-    }
-}
-
-/// Reads and drops what the client sends for up to `limit` (at most one request head's worth),
-/// until it closes.
-fn drain(stream: &TcpStream, limit: Duration) {
-    if stream.set_read_timeout(Some(limit)).is_err() {
+    if out.write_all(answer.as_bytes()).is_err() {
         return;
     }
-    let mut buf = [0u8; 4096];
-    let mut left = MAX_HEAD_BYTES;
-    let mut input = stream;
-    while left > 0 {
-        match input.read(&mut buf) {
-            Ok(0) | Err(_) => return,
-            Ok(n) => left = left.saturating_sub(n),
-        }
+    let _ = stream.shutdown(Shutdown::Write);
+    // Only the refuser thread takes this lock; a poisoned one still holds a usable list.
+    let mut kept = lingering.lock().unwrap_or_else(|p| p.into_inner());
+    let now = Instant::now();
+    while kept
+        .front()
+        .is_some_and(|(_, since)| now.duration_since(*since) > REFUSAL_LINGER || kept.len() >= REFUSAL_QUEUE)
+    {
+        kept.pop_front();
     }
+    kept.push_back((stream, now));
 }
 
 fn handle_connection(stream: TcpStream, root: &Path, config: &ServeConfig) {
