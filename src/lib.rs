@@ -7,6 +7,9 @@ pub mod export;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod features;
 pub mod field;
+#[cfg(not(target_arch = "wasm32"))]
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod gpu;
 pub mod labels;
 #[cfg(test)]

@@ -20,8 +20,9 @@ const LAYERS: &[&[&str]] = &[
     &["labels"],
     // What learns from labels: pretrained feature extractors, the neural field.
     &["features", "field"],
-    // What uses a trained field: evaluation, mask export; the static file server.
-    &["eval", "export", "serve"],
+    // What uses a trained field: evaluation, mask export; the static file server. And the fuzz
+    // targets' entry points, which feed the parsers of scene, labels and features.
+    &["eval", "export", "serve", "fuzzing"],
     // The two front ends.
     &["app", "cli"],
     // Crate roots and the wasm entry point.

@@ -242,6 +242,52 @@ fn capture_path(base: &Path, relative: &str, field: &str, file: &str, opts: &Imp
     Ok(base.join(path))
 }
 
+/// The importers' parsers of a capture's own text files, run on text in memory (no file is read,
+/// no image decoded): everything each importer decides from that text alone. The fuzz targets
+/// (`fuzz/`) and their corpus replay (`tests/fuzz_corpus.rs`) call these, through
+/// `scribblefield::fuzzing`.
+pub mod text_checks {
+    use std::path::Path;
+
+    use super::{ImportOptions, colmap, text, transforms};
+    use crate::scene::camera::{Intrinsics, Pose};
+    use crate::scene::error::{Result, SceneError};
+
+    /// A `transforms.json` in a capture folder `capture/`; returns its frame count.
+    pub fn transforms_json(bytes: &[u8]) -> Result<usize> {
+        transforms::check_text(bytes, Path::new("capture"), &ImportOptions::default())
+    }
+
+    /// A COLMAP text model (`cameras.txt`, `images.txt`, `points3D.txt`); returns its image count.
+    pub fn colmap_text(cameras: &str, images: &str, points: &str) -> Result<usize> {
+        colmap::check_text_model([cameras, images, points])
+    }
+
+    /// A 7-Scenes `frame-NNNNNN.pose.txt`: a 4x4 (or 3x4) camera-to-world matrix.
+    pub fn pose_text(bytes: &[u8]) -> Result<Pose> {
+        let file = "frame-000000.pose.txt";
+        text::pose_from_numbers(&text::parse_numbers(text_of(bytes, file)?, file)?, file)
+    }
+
+    /// A 7-Scenes `camera-intrinsics.txt` (or autolabel `intrinsics.txt`): a 3x3 or 4x4 K.
+    pub fn intrinsics_text(bytes: &[u8]) -> Result<Intrinsics> {
+        let file = "camera-intrinsics.txt";
+        let (k, _skew) = text::intrinsics_from_numbers(&text::parse_numbers(text_of(bytes, file)?, file)?, file)?;
+        Ok(k)
+    }
+
+    /// The checks `text::read_text` makes on a file's bytes.
+    fn text_of<'a>(bytes: &'a [u8], file: &str) -> Result<&'a str> {
+        if bytes.len() as u64 > text::MAX_TEXT_BYTES {
+            return Err(SceneError::invalid(
+                file,
+                format!("{} bytes is far too large for this text file", bytes.len()),
+            ));
+        }
+        std::str::from_utf8(bytes).map_err(|_| SceneError::invalid(file, "not a text file (not UTF-8)"))
+    }
+}
+
 /// Display name of a path for messages.
 fn shown(path: &Path) -> String {
     path.display().to_string()

@@ -6,7 +6,7 @@ use crate::scene::camera::{Bounds, Intrinsics, Pose};
 use crate::scene::error::{Result, SceneError};
 
 /// Largest text file read as a matrix or list; anything bigger is not what we are looking for.
-const MAX_TEXT_BYTES: u64 = 1 << 20;
+pub(super) const MAX_TEXT_BYTES: u64 = 1 << 20;
 
 /// How far the last row of K may stray from (0 0 1) before the file is not a camera matrix.
 const K_TOLERANCE: f64 = 1e-6;
@@ -51,6 +51,11 @@ fn read_numbers(path: &Path) -> Result<(Vec<f64>, String)> {
 /// Returns the intrinsics and a warning when K has a skew term, which a pinhole model ignores.
 pub(super) fn read_intrinsics(path: &Path) -> Result<(Intrinsics, Option<String>)> {
     let (v, file) = read_numbers(path)?;
+    intrinsics_from_numbers(&v, &file)
+}
+
+/// [`read_intrinsics`] on numbers already read (the fuzz targets feed text without files).
+pub(super) fn intrinsics_from_numbers(v: &[f64], file: &str) -> Result<(Intrinsics, Option<String>)> {
     let k: [f64; 9] = match v.len() {
         9 => [v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8]],
         16 => [v[0], v[1], v[2], v[4], v[5], v[6], v[8], v[9], v[10]],
@@ -61,7 +66,7 @@ pub(super) fn read_intrinsics(path: &Path) -> Result<(Intrinsics, Option<String>
             ));
         }
     };
-    parse_k(&k, &file)
+    parse_k(&k, file)
 }
 
 /// Checks a row-major 3x3 K and turns it into intrinsics.

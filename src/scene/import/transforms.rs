@@ -81,19 +81,7 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
         ));
     }
     let bytes = std::fs::read(&json_path).map_err(|e| SceneError::io(&json_path, e))?;
-    let parsed: TransformsFile = serde_json::from_slice(&bytes).map_err(|source| SceneError::Json {
-        file: file.clone(),
-        source,
-    })?;
-    if parsed.frames.is_empty() {
-        return Err(SceneError::invalid(
-            &file,
-            "\"frames\" is empty: the scene has no frames",
-        ));
-    }
-    let mut warnings = Vec::new();
-    warnings.extend(distortion_warning(&parsed.distortion, &file)?);
-    let camera = shared_camera(&parsed, &file)?;
+    let (parsed, camera, mut warnings) = parse(&bytes, &file)?;
 
     // Frames whose image is missing are skipped (exports often list frames that were culled).
     let mut present = Vec::new();
@@ -208,6 +196,52 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
         warnings,
         notes,
     })
+}
+
+/// The file parsed, with the camera its frames share and the warnings about it.
+fn parse(bytes: &[u8], file: &str) -> Result<(TransformsFile, Camera, Vec<String>)> {
+    let parsed: TransformsFile = serde_json::from_slice(bytes).map_err(|source| SceneError::Json {
+        file: file.to_string(),
+        source,
+    })?;
+    if parsed.frames.is_empty() {
+        return Err(SceneError::invalid(
+            file,
+            "\"frames\" is empty: the scene has no frames",
+        ));
+    }
+    let warnings = distortion_warning(&parsed.distortion, file)?.into_iter().collect();
+    let camera = shared_camera(&parsed, file)?;
+    Ok((parsed, camera, warnings))
+}
+
+/// Everything [`import`] decides from the file alone, without reading images: the file parses,
+/// its camera is consistent, every path stays in `base` (unless allowed), every
+/// `transform_matrix` is a rigid pose and, when the size is stated, the intrinsics are valid.
+/// The fuzz target and its corpus replay (`scribblefield::fuzzing`) run this. Returns the
+/// number of frames.
+pub(super) fn check_text(bytes: &[u8], base: &Path, opts: &ImportOptions) -> Result<usize> {
+    let file = FILE;
+    if bytes.len() as u64 > limits::MAX_JSON_BYTES {
+        return Err(SceneError::invalid(
+            file,
+            format!("{} bytes is too large for a transforms file", bytes.len()),
+        ));
+    }
+    let (parsed, camera, _) = parse(bytes, file)?;
+    for (i, f) in parsed.frames.iter().enumerate() {
+        if let Some(d) = &f.depth_file_path {
+            capture_path(base, d, &format!("frames[{i}].depth_file_path"), file, opts)?;
+        }
+        capture_path(base, &f.file_path, &format!("frames[{i}].file_path"), file, opts)?;
+        let numbers: Vec<f64> = f.transform_matrix.iter().flatten().copied().collect();
+        pose_from_numbers(&numbers, &format!("{file}: frames[{i}]: transform_matrix"))?;
+    }
+    if let (Some(w), Some(h)) = (camera.w, camera.h) {
+        let size = (pixels(w, "w", file)?, pixels(h, "h", file)?);
+        intrinsics(&camera, size, file)?;
+    }
+    Ok(parsed.frames.len())
 }
 
 /// The image a `file_path` names (already joined to the capture folder): as given, or with an

@@ -239,6 +239,38 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
     })
 }
 
+/// Everything [`import`] decides from a text model alone, without photos: the three files
+/// parse and agree, image names stay inside images/, every pose is rigid, the bounds and one
+/// shared output camera follow, and each photo's sparse depth can be computed. The fuzz target
+/// and its corpus replay (`scribblefield::fuzzing`) run this. Returns the number of images.
+pub(super) fn check_text_model(texts: [&str; 3]) -> Result<usize> {
+    let model = text::parse(texts, FILES.map(|f| format!("{f}.txt")))?;
+    model.check()?;
+    let mut images: Vec<&Image> = model.images.iter().collect();
+    images.sort_by(|a, b| a.name.cmp(&b.name));
+    let opts = ImportOptions::default();
+    for image in &images {
+        let field = format!("image {} name", image.id);
+        super::capture_path(Path::new(IMAGES_DIR), &image.name, &field, &model.files[1], &opts)?;
+        camera_to_world(image, &model.files[1])?;
+    }
+    let _ = points_bounds(&model);
+    if images.is_empty() {
+        return Ok(0);
+    }
+    let (out, size, lenses) = output_camera(&model, &images)?;
+    let k = Intrinsics {
+        fx: out.fx,
+        fy: out.fy,
+        cx: out.cx - 0.5,
+        cy: out.cy - 0.5,
+    };
+    for (image, lens) in images.iter().zip(&lenses) {
+        sparse_depth(image, lens, &model, &k, size);
+    }
+    Ok(images.len())
+}
+
 /// Image files below `dir` (a few levels deep), as paths relative to it with `/` separators, the
 /// way COLMAP names them.
 fn photos_under(dir: &Path) -> Result<Vec<String>> {

@@ -15,10 +15,15 @@ pub(super) fn read(dir: &Path) -> Result<Model> {
     let files = paths.clone().map(|p| p.display().to_string());
     let texts = [0, 1, 2].map(|i| text_of(&paths[i], &files[i]));
     let [cameras, images, points] = texts;
+    parse([&cameras?, &images?, &points?], files)
+}
+
+/// The model from the texts of cameras.txt, images.txt and points3D.txt, named by `files`.
+pub(super) fn parse(texts: [&str; 3], files: [String; 3]) -> Result<Model> {
     Ok(Model {
-        cameras: read_cameras(&cameras?, &files[0])?,
-        images: read_images(&images?, &files[1])?,
-        points: read_points(&points?, &files[2])?,
+        cameras: read_cameras(texts[0], &files[0])?,
+        images: read_images(texts[1], &files[1])?,
+        points: read_points(texts[2], &files[2])?,
         files,
     })
 }
