@@ -15,6 +15,7 @@ pub mod presets;
 pub mod propagate;
 pub mod reference;
 pub mod refine;
+pub mod view_seeds;
 
 pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LossWeights, SemanticInput};
 pub use params::{MlpLayout, ParamLayout};

@@ -195,6 +195,25 @@ impl PointLabeller {
     /// no label are left out. Nothing is labelled unless the strokes cover readings of at least
     /// two classes.
     pub fn label(&self, strokes: &[(u32, Vec<u16>)], classes: usize) -> Vec<(u32, Vec<u16>)> {
+        let classes_of_points = self.point_classes(strokes, classes);
+        let pixels = (self.width * self.height) as usize;
+        let mut maps: Vec<Option<Vec<u16>>> = vec![None; self.frames];
+        for (&class, &(frame, pixel)) in classes_of_points.iter().zip(&self.points.at) {
+            if class != UNLABELLED {
+                let map = maps[frame as usize].get_or_insert_with(|| vec![UNLABELLED; pixels]);
+                map[pixel as usize] = class;
+            }
+        }
+        maps.into_iter()
+            .enumerate()
+            .filter_map(|(f, m)| m.map(|m| (f as u32, m)))
+            .collect()
+    }
+
+    /// Every point's class as [`PointLabeller::label`] finds it (`UNLABELLED` where no class
+    /// clearly wins, and everywhere unless the strokes cover points of two classes), in the
+    /// order of [`PointLabeller::positions`].
+    pub fn point_classes(&self, strokes: &[(u32, Vec<u16>)], classes: usize) -> Vec<u16> {
         let seeds: Vec<u16> = self
             .points
             .at
@@ -210,30 +229,32 @@ impl PointLabeller {
             .collect();
         let present: Vec<u16> = (0..classes as u16).filter(|c| seeds.contains(c)).collect();
         if present.len() < 2 {
-            return Vec::new();
+            return vec![UNLABELLED; seeds.len()];
         }
         let probabilities: Vec<Vec<f64>> = present.iter().map(|&c| self.graph.walk(&seeds, c)).collect();
-        let pixels = (self.width * self.height) as usize;
-        let mut maps: Vec<Option<Vec<u16>>> = vec![None; self.frames];
-        for (p, &(frame, pixel)) in self.points.at.iter().enumerate() {
-            let (mut best, mut first, mut second) = (0, f64::MIN, f64::MIN);
-            for (k, probability) in probabilities.iter().enumerate() {
-                let v = probability[p];
-                if v > first {
-                    (second, first, best) = (first, v, k);
-                } else if v > second {
-                    second = v;
+        (0..seeds.len())
+            .map(|p| {
+                let (mut best, mut first, mut second) = (0, f64::MIN, f64::MIN);
+                for (k, probability) in probabilities.iter().enumerate() {
+                    let v = probability[p];
+                    if v > first {
+                        (second, first, best) = (first, v, k);
+                    } else if v > second {
+                        second = v;
+                    }
                 }
-            }
-            if first - second >= self.min_margin {
-                let map = maps[frame as usize].get_or_insert_with(|| vec![UNLABELLED; pixels]);
-                map[pixel as usize] = present[best];
-            }
-        }
-        maps.into_iter()
-            .enumerate()
-            .filter_map(|(f, m)| m.map(|m| (f as u32, m)))
+                if first - second >= self.min_margin {
+                    present[best]
+                } else {
+                    UNLABELLED
+                }
+            })
             .collect()
+    }
+
+    /// The points in the world, one per depth reading.
+    pub fn positions(&self) -> &[DVec3] {
+        &self.points.xyz
     }
 }
 

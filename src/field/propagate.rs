@@ -21,6 +21,7 @@ use serde::{Deserialize, Serialize};
 use crate::field::normals::depth_normals;
 use crate::field::point_walk::{PointLabeller, PointWalkOptions, has_sparse_depth};
 use crate::field::refine::Guide;
+use crate::field::view_seeds::{View, unreconstructed_class};
 use std::collections::HashMap;
 
 use crate::labels::{LabelSet, UNLABELLED, rasterize_frame};
@@ -60,9 +61,10 @@ pub struct PropagationOptions {
     /// the two surfaces share a colour and a depth.
     pub normal_sigma: f32,
     /// On a capture whose depth is a reconstruction's points (sparse), carry the strokes to
-    /// every frame through the points first (`field::point_walk`), so each frame trains on the
-    /// labels of its own points. Off by default: the labels are right, but at the budget the
-    /// field is trained with here they did not make better masks (docs/quality.md).
+    /// every frame through the points first (`field::point_walk`): each frame walks from the
+    /// labels of the points that land in it and, where the strokes name the class of what the
+    /// reconstruction missed, from its pixels far from every point (`field::view_seeds`).
+    /// Captures with dense depth are not affected.
     pub across_views: bool,
 }
 
@@ -77,7 +79,7 @@ impl Default for PropagationOptions {
             min_probability: 0.5,
             min_margin: 0.5,
             normal_sigma: 0.15,
-            across_views: false,
+            across_views: true,
         }
     }
 }
@@ -216,25 +218,37 @@ impl PropagationCache {
             carried,
         } in seeds
         {
-            // Only strokes walk. The points of a frame may all be one object's, and a walk from
-            // those would paint the whole frame with it; where they have a label it is more
-            // often right than the walk's, so it replaces the walk's (never a stroke).
-            let walked = match (&strokes, Guide::of_frame(scene, frame as usize)) {
-                (Some(strokes), Some(guide)) => {
-                    Some(match self.frames.get(&frame).filter(|(seen, _)| seen == strokes) {
-                        Some((_, map)) => map.clone(),
-                        None => {
-                            let map = propagate_frame(strokes, classes, guide, Some(&scene.intrinsics), options);
-                            self.frames.insert(frame, (strokes.clone(), map.clone()));
-                            map
+            let walked = match &carried {
+                // Far pixels gave the frame a second class: the projected points and the far
+                // pixels walk together, under the strokes.
+                Some(Carried::Walks(carried)) => {
+                    let mut start = carried.clone();
+                    for (s, &d) in start.iter_mut().zip(strokes.iter().flatten()) {
+                        if d != UNLABELLED {
+                            *s = d;
                         }
-                    })
+                    }
+                    Some(start)
                 }
-                (Some(strokes), None) => Some(strokes.clone()),
-                (None, _) => None,
+                _ => strokes.clone(),
             };
+            let walked = match (walked, Guide::of_frame(scene, frame as usize)) {
+                (Some(start), Some(guide)) => Some(match self.frames.get(&frame).filter(|(seen, _)| *seen == start) {
+                    Some((_, map)) => map.clone(),
+                    None => {
+                        let map = propagate_frame(&start, classes, guide, Some(&scene.intrinsics), options);
+                        self.frames.insert(frame, (start, map.clone()));
+                        map
+                    }
+                }),
+                (start, _) => start,
+            };
+            // Only what the user drew or what reaches two classes walks. The points of a frame
+            // may all be one object's, and a walk from those alone would paint the whole frame
+            // with it; where they have a label it is more often right than the walk's, so it
+            // replaces the walk's (never a stroke).
             let map = match (walked, carried) {
-                (Some(mut map), Some(carried)) => {
+                (Some(mut map), Some(Carried::AsIs(carried))) => {
                     let drawn = strokes.unwrap_or_default();
                     for ((m, c), d) in map.iter_mut().zip(carried).zip(drawn) {
                         if c != UNLABELLED && d == UNLABELLED {
@@ -243,8 +257,8 @@ impl PropagationCache {
                     }
                     map
                 }
-                (Some(map), None) | (None, Some(map)) => map,
-                (None, None) => continue,
+                (Some(map), _) | (None, Some(Carried::AsIs(map))) => map,
+                (None, _) => continue,
             };
             maps.push((frame, map));
         }
@@ -258,7 +272,16 @@ struct FrameSeeds {
     /// The frame's rasterized strokes, if it has any.
     strokes: Option<Vec<u16>>,
     /// Labels the points carried to it, if any.
-    carried: Option<Vec<u16>>,
+    carried: Option<Carried>,
+}
+
+/// Labels the points carry to a frame.
+enum Carried {
+    /// Its own readings' labels, trained on as they are.
+    AsIs(Vec<u16>),
+    /// The labels of every point that lands in it, and its pixels far from every point in the
+    /// class the strokes give such pixels (`field::view_seeds`): a start for its own walk.
+    Walks(Vec<u16>),
 }
 
 /// What each frame starts from: its rasterized strokes, and on a capture with sparse depth
@@ -294,11 +317,40 @@ fn frame_seeds(
         .filter_map(|s| s.strokes.clone().map(|m| (s.frame, m)))
         .collect();
     let labeller = points.get_or_insert_with(|| PointLabeller::new(scene, &PointWalkOptions::default()));
-    for (frame, carried) in labeller.label(&strokes, classes) {
-        match seeds.iter_mut().find(|s| s.frame == frame) {
+    let point_classes = labeller.point_classes(&strokes, classes);
+    let views: Vec<View> = (0..scene.frames.len())
+        .map(|f| View::of_frame(scene, f, labeller.positions()))
+        .collect();
+    let far: Vec<Vec<bool>> = views.iter().map(View::far_from_points).collect();
+    let drawn: Vec<(&[u16], &[bool])> = strokes
+        .iter()
+        .map(|(f, map)| (map.as_slice(), far[*f as usize].as_slice()))
+        .collect();
+    let unreconstructed = unreconstructed_class(&drawn, classes);
+    for (f, view) in views.iter().enumerate() {
+        let mut carried = view.labels(&point_classes);
+        let carried = match unreconstructed {
+            Some(class) => {
+                for (c, &far) in carried.iter_mut().zip(&far[f]) {
+                    if far && *c == UNLABELLED {
+                        *c = class;
+                    }
+                }
+                Carried::Walks(carried)
+            }
+            None => {
+                // Without a class for the far pixels, a frame keeps only its own readings'
+                // labels: another frame's point landing on it may be hidden behind its surface.
+                Carried::AsIs(own_reading_labels(scene, f, carried))
+            }
+        };
+        if carried_is_empty(&carried) {
+            continue;
+        }
+        match seeds.iter_mut().find(|s| s.frame == f as u32) {
             Some(own) => own.carried = Some(carried),
             None => seeds.push(FrameSeeds {
-                frame,
+                frame: f as u32,
                 strokes: None,
                 carried: Some(carried),
             }),
@@ -306,6 +358,27 @@ fn frame_seeds(
     }
     seeds.sort_by_key(|s| s.frame);
     seeds
+}
+
+/// `carried` kept at the frame's own depth readings only.
+fn own_reading_labels(scene: &Scene, frame: usize, mut carried: Vec<u16>) -> Vec<u16> {
+    match &scene.frames[frame].depth {
+        Some(depth) => {
+            for (c, d) in carried.iter_mut().zip(depth.pixels()) {
+                if d.0[0] == 0 {
+                    *c = UNLABELLED;
+                }
+            }
+        }
+        None => carried.fill(UNLABELLED),
+    }
+    carried
+}
+
+fn carried_is_empty(carried: &Carried) -> bool {
+    match carried {
+        Carried::AsIs(map) | Carried::Walks(map) => map.iter().all(|&c| c == UNLABELLED),
+    }
 }
 
 fn pixel_count(guide: Guide<'_>) -> usize {

@@ -213,12 +213,12 @@ fn strokes_on_two_photos_reach_the_others_through_the_points() {
         .collect();
     let (point_frames, point_labels, point_right) =
         right_share(&scene, &label_points(&scene, &strokes, 2, &PointWalkOptions::default()));
-    let across = PropagationOptions {
-        across_views: true,
+    let (frames, labelled, right) = score(&PropagationOptions::default());
+    let within = PropagationOptions {
+        across_views: false,
         ..PropagationOptions::default()
     };
-    let (frames, labelled, right) = score(&across);
-    let (frames_within, labelled_within, right_within) = score(&PropagationOptions::default());
+    let (frames_within, labelled_within, right_within) = score(&within);
     eprintln!(
         "the points alone: {point_frames} frames, {point_labels} labelled pixels, {point_right:.4} right; \
          with the walks: {frames} frames, {labelled} labelled pixels, {right:.4} right; \
@@ -229,11 +229,10 @@ fn strokes_on_two_photos_reach_the_others_through_the_points() {
         point_frames >= 40 && point_right > 0.99,
         "{point_frames} frames, {point_right}"
     );
-    assert!(frames >= 40, "{frames} frames labelled");
-    assert!(
-        2 * labelled > 3 * labelled_within,
-        "{labelled} against {labelled_within}"
-    );
+    // Far from every point lies what the reconstruction missed, the room behind the head: the
+    // strokes name its class, so every photo gets labels of both classes.
+    assert_eq!(frames, FRAMES, "{frames} frames labelled");
+    assert!(labelled > 20 * labelled_within, "{labelled} against {labelled_within}");
     assert!(right > 0.9 && right > right_within, "{right} against {right_within}");
 }
 
