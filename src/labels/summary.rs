@@ -103,18 +103,25 @@ mod tests {
     use super::*;
     use crate::labels::{ClassInfo, Stroke};
 
-    #[test]
-    fn the_cache_counts_alike_and_redoes_only_changed_frames() {
+    fn two_classes() -> LabelSet {
         let c = |n: &str| ClassInfo {
             name: n.into(),
             color: [0, 0, 0],
         };
-        let mut l = LabelSet::new(vec![c("a"), c("b")]);
-        let dot = |class, x: f32, r| Stroke {
+        LabelSet::new(vec![c("a"), c("b")])
+    }
+
+    fn dot(class: Option<u16>, x: f32, radius: f32) -> Stroke {
+        Stroke {
             class,
-            radius: r,
+            radius,
             points: vec![[x, 10.0]],
-        };
+        }
+    }
+
+    #[test]
+    fn the_cache_counts_alike_and_redoes_only_changed_frames() {
+        let mut l = two_classes();
         l.push_stroke(2, dot(Some(1), 10.0, 3.0));
         l.push_stroke(4, dot(Some(0), 10.0, 3.0));
         let mut cache = SummaryCache::default();
@@ -131,16 +138,7 @@ mod tests {
 
     #[test]
     fn counts_follow_erasing() {
-        let c = |n: &str| ClassInfo {
-            name: n.into(),
-            color: [0, 0, 0],
-        };
-        let mut l = LabelSet::new(vec![c("a"), c("b")]);
-        let dot = |class, x: f32, r| Stroke {
-            class,
-            radius: r,
-            points: vec![[x, 10.0]],
-        };
+        let mut l = two_classes();
         l.push_stroke(2, dot(Some(1), 10.0, 3.0));
         l.push_stroke(4, dot(Some(1), 10.0, 3.0));
         l.push_stroke(4, dot(None, 10.0, 10.0));
