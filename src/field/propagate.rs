@@ -125,6 +125,9 @@ impl PropagationOptions {
 /// Smallest step weight: keeps every pixel connected to the strokes, so each system has one
 /// solution, while a pixel behind a strong edge still ends up uncertain.
 const MIN_WEIGHT: f32 = 1e-6;
+/// On a capture with sparse depth, the probability and the lead over the next class at which a
+/// drawn frame's walk labels a pixel whose points then seed the walk across views.
+const SEED_CERTAINTY: f32 = 0.7;
 /// Conjugate-gradient stopping point: residual relative to the right-hand side.
 const TOLERANCE: f64 = 1e-4;
 
@@ -194,6 +197,9 @@ pub struct PropagationCache {
     frames: HashMap<u32, (Vec<u16>, Vec<u16>)>,
     /// The scene's points and their graph, once a capture with sparse depth needs them.
     points: Option<PointLabeller>,
+    /// Per drawn frame of such a capture: its strokes and their walk inside the frame alone,
+    /// which seeds the walk over the points.
+    drawn: HashMap<u32, (Vec<u16>, Vec<u16>)>,
 }
 
 impl PropagationCache {
@@ -207,9 +213,10 @@ impl PropagationCache {
     ) -> Vec<(u32, Vec<u16>)> {
         if self.settings != Some((classes, *options)) {
             self.frames.clear();
+            self.drawn.clear();
             self.settings = Some((classes, *options));
         }
-        let seeds = frame_seeds(scene, labels, classes, options, &mut self.points);
+        let seeds = frame_seeds(scene, labels, classes, options, self);
         self.frames.retain(|frame, _| seeds.iter().any(|s| s.frame == *frame));
         let mut maps = Vec::with_capacity(seeds.len());
         for FrameSeeds {
@@ -291,7 +298,7 @@ fn frame_seeds(
     labels: &LabelSet,
     classes: usize,
     options: &PropagationOptions,
-    points: &mut Option<PointLabeller>,
+    cache: &mut PropagationCache,
 ) -> Vec<FrameSeeds> {
     let mut frames: Vec<u32> = labels
         .frames
@@ -316,8 +323,38 @@ fn frame_seeds(
         .iter()
         .filter_map(|s| s.strokes.clone().map(|m| (s.frame, m)))
         .collect();
-    let labeller = points.get_or_insert_with(|| PointLabeller::new(scene, &PointWalkOptions::default()));
-    let point_classes = labeller.point_classes(&strokes, classes);
+    // The points walk from what each drawn frame's own walk labels, not from the strokes alone:
+    // strokes on the room behind an object cover no point (the reconstruction missed the room),
+    // and the walk inside the frame carries the object's other class to the points it has.
+    // A wrong seed reaches every photo, so the walk that seeds is stricter than the one a frame
+    // trains on.
+    let seeding = PropagationOptions {
+        min_probability: options.min_probability.max(SEED_CERTAINTY),
+        min_margin: options.min_margin.max(SEED_CERTAINTY),
+        ..*options
+    };
+    cache.drawn.retain(|frame, _| strokes.iter().any(|(f, _)| f == frame));
+    let walked: Vec<(u32, Vec<u16>)> = strokes
+        .iter()
+        .map(|(frame, drawn)| {
+            let map = match cache.drawn.get(frame).filter(|(seen, _)| seen == drawn) {
+                Some((_, map)) => map.clone(),
+                None => {
+                    let map = match Guide::of_frame(scene, *frame as usize) {
+                        Some(guide) => propagate_frame(drawn, classes, guide, Some(&scene.intrinsics), &seeding),
+                        None => drawn.clone(),
+                    };
+                    cache.drawn.insert(*frame, (drawn.clone(), map.clone()));
+                    map
+                }
+            };
+            (*frame, map)
+        })
+        .collect();
+    let labeller = cache
+        .points
+        .get_or_insert_with(|| PointLabeller::new(scene, &PointWalkOptions::default()));
+    let point_classes = labeller.point_classes(&walked, classes);
     let views: Vec<View> = (0..scene.frames.len())
         .map(|f| View::of_frame(scene, f, labeller.positions()))
         .collect();

@@ -1,0 +1,91 @@
+//! Not checks: prints how far the labels the trainer draws from reach and how right they are,
+//! before any training, on the demo scene, the YCB clip and the COLMAP capture, for three sets of
+//! synthetic strokes each (`cargo test --release --test label_spread -- --ignored --nocapture`).
+//! docs/quality.md reports these figures; `tests/quality.rs` and `tests/import_colmap` hold the
+//! checks.
+use std::path::Path;
+
+use scribblefield::field::propagate::{PropagationOptions, propagate_labels};
+use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
+use scribblefield::scene::Scene;
+use scribblefield::scene::demo::{DemoOptions, demo_scene};
+use scribblefield::scene::import::{ImportOptions, import};
+
+/// Labelled pixels, the share of them that are right, and per class: pixels labelled right over
+/// pixels labelled as it or truly it (an unlabelled pixel counts as missed), over the frames the
+/// labels reach.
+fn spread(scene: &Scene, frames: &[u32], options: &PropagationOptions) {
+    let classes = scene.classes.len();
+    for seed in 0..3 {
+        let scribbles = ScribbleOptions {
+            seed,
+            ..ScribbleOptions::default()
+        };
+        let labels = scribble_frames(scene, frames, &scribbles);
+        let maps = propagate_labels(scene, &labels, classes, options);
+        let (mut labelled, mut right) = (0usize, 0usize);
+        let mut iou = vec![(0usize, 0usize); classes];
+        for (frame, map) in &maps {
+            let gt = scene.frames[*frame as usize].gt.as_ref().expect("ground truth");
+            for (&label, truth) in map.iter().zip(gt.pixels()) {
+                let truth = truth.0[0];
+                if truth == 255 {
+                    continue;
+                }
+                if label != u16::MAX {
+                    labelled += 1;
+                    right += usize::from(label == u16::from(truth));
+                }
+                for (c, (hit, union)) in iou.iter_mut().enumerate() {
+                    let (is_label, is_truth) = (label == c as u16, truth as usize == c);
+                    *hit += usize::from(is_label && is_truth);
+                    *union += usize::from(is_label || is_truth);
+                }
+            }
+        }
+        let per_class: Vec<f64> = iou.iter().map(|(h, u)| *h as f64 / (*u).max(1) as f64).collect();
+        let mean = per_class.iter().sum::<f64>() / classes as f64;
+        let per_class: Vec<String> = per_class.iter().map(|v| format!("{v:.3}")).collect();
+        eprintln!(
+            "  scribbles {seed}: {} frames, {labelled} labelled pixels, {:.4} right; IoU of the labels {mean:.3} {per_class:?}",
+            maps.len(),
+            right as f64 / labelled.max(1) as f64
+        );
+    }
+}
+
+fn real(name: &str, max_size: u32) -> Option<Scene> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(name);
+    if !dir.is_dir() {
+        eprintln!("\n!!! SKIPPING {name}: real data {} is absent !!!\n", dir.display());
+        return None;
+    }
+    let options = ImportOptions {
+        max_size: Some(max_size),
+        ..ImportOptions::default()
+    };
+    Some(import(&dir, &options, &mut |_, _| {}).unwrap().scene)
+}
+
+#[test]
+#[ignore]
+fn labels_before_training() {
+    let options = PropagationOptions::default();
+    let demo = demo_scene(&DemoOptions {
+        width: 80,
+        height: 60,
+        frames: 36,
+        ..Default::default()
+    })
+    .unwrap();
+    eprintln!("demo, strokes on frames 0 and 12:");
+    spread(&demo, &[0, 12], &options);
+    if let Some(ycb) = real("ycb-video-0000", 160) {
+        eprintln!("YCB, strokes on frame 0:");
+        spread(&ycb, &[0], &options);
+    }
+    if let Some(colmap) = real("alexander-colmap", 200) {
+        eprintln!("COLMAP capture, strokes on photos 0 and 26:");
+        spread(&colmap, &[0, 26], &options);
+    }
+}
