@@ -210,6 +210,17 @@ fn alpha_becomes_two_class_ground_truth() {
             .unwrap()
             .has_gt()
     );
+
+    // One split file is a plain transforms.json capture, which takes --alpha-gt too.
+    let opts = ImportOptions {
+        alpha_gt: true,
+        mask_classes: ["sky".into(), "lego".into()],
+        ..Default::default()
+    };
+    let s = run_with(&tmp.path().join("transforms_val.json"), &opts).unwrap().scene;
+    assert_eq!(s.frames.len(), 2);
+    assert_eq!(s.classes[1].name, "lego");
+    assert_eq!(s.frames[1].gt.as_ref().unwrap().get_pixel(16, 16).0[0], 1);
 }
 
 #[test]

@@ -17,6 +17,13 @@ pub(super) fn looks_like(dir: &Path) -> bool {
 
 pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Built> {
     let splits = chosen_splits(dir, &opts.splits)?;
+    if splits.is_empty() {
+        // Detection saw a split file; it is gone now.
+        return Err(SceneError::missing(
+            shown(&dir.join(Split::Train.file_name())),
+            "the split files of a NeRF-synthetic folder (transforms_train.json, ...)",
+        ));
+    }
     let mut listings: Vec<(Split, Listing)> = Vec::with_capacity(splits.len());
     for split in splits {
         let listing = list(&dir.join(split.file_name()), opts)?;
