@@ -50,24 +50,19 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
         line.push_str(" (before --every / --max-frames)");
     }
 
-    let file = listings[0].1.file.clone();
-    let camera = listings[0].1.camera;
-    let mut warnings = Vec::new();
-    let mut entries = Vec::new();
+    // One listing of every chosen split's frames, in split order, under the first split's camera
+    // (all agree, checked above).
+    let mut merged = Listing {
+        file: listings[0].1.file.clone(),
+        camera: listings[0].1.camera,
+        entries: Vec::new(),
+        warnings: Vec::new(),
+    };
     for (_, l) in listings {
-        warnings.extend(l.warnings);
-        entries.extend(l.entries);
+        merged.warnings.extend(l.warnings);
+        merged.entries.extend(l.entries);
     }
-    let mut built = build(
-        entries,
-        &camera,
-        &file,
-        opts,
-        Layout::NerfSplits,
-        warnings,
-        Vec::new(),
-        progress,
-    )?;
+    let mut built = build(merged, opts, Layout::NerfSplits, progress)?;
     built.report.insert(0, line);
     Ok(built)
 }

@@ -94,17 +94,7 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
     } else {
         input.to_path_buf()
     };
-    let listing = list(&json_path, opts)?;
-    build(
-        listing.entries,
-        &listing.camera,
-        &listing.file,
-        opts,
-        Layout::Transforms,
-        listing.warnings,
-        Vec::new(),
-        progress,
-    )
+    build(list(&json_path, opts)?, opts, Layout::Transforms, progress)
 }
 
 /// Reads the transforms file at `json_path`: its camera, and its frames whose image exists
@@ -185,20 +175,25 @@ pub(super) fn list(json_path: &Path, opts: &ImportOptions) -> Result<Listing> {
     })
 }
 
-/// The scene of `entries` (from one or more transforms files sharing `camera`; `file` names
-/// where the camera was read for messages), with `--every`, `--max-frames`, `--alpha-gt` applied.
-#[allow(clippy::too_many_arguments)]
+/// The scene of a listing (one transforms file, or several sharing one camera, whose `file`
+/// names where the camera was read), with `--every`, `--max-frames`, `--alpha-gt` applied.
 pub(super) fn build(
-    entries: Vec<Entry>,
-    camera: &Camera,
-    file: &str,
+    listing: Listing,
     opts: &ImportOptions,
     layout: Layout,
-    warnings: Vec<String>,
-    mut notes: Vec<String>,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Built> {
-    let first_image = &entries[0].rgb;
+    let Listing {
+        file,
+        camera,
+        entries,
+        warnings,
+    } = listing;
+    let (file, camera) = (file.as_str(), &camera);
+    let first_image = &entries
+        .first()
+        .ok_or_else(|| SceneError::invalid(file, "no frame's image exists"))?
+        .rgb;
     let image_size = dimensions(first_image)?;
     let native = match (camera.w, camera.h) {
         (Some(w), Some(h)) => {
@@ -218,8 +213,7 @@ pub(super) fn build(
     };
     let k = intrinsics(camera, native, file)?;
 
-    let (keep, selection) = select(entries.len(), opts)?;
-    notes.extend(selection);
+    let (keep, mut notes) = select(entries.len(), opts)?;
     let mut files = Vec::with_capacity(keep.len());
     for &j in &keep {
         let entry = &entries[j];
