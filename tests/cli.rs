@@ -136,6 +136,135 @@ fn pack_real_seven_scenes_subset() {
     );
 }
 
+/// A NeRF-synthetic folder (RGBA frames named without extension in two splits) and a ScanNet
+/// export (colour twice the depth's size, one lost pose), written to their published layouts.
+fn write_lego_and_scannet(d: &Path) -> (PathBuf, PathBuf) {
+    let lego = d.join("lego");
+    for (split, count, turn) in [("train", 2, 0.0), ("test", 1, 2.0)] {
+        std::fs::create_dir_all(lego.join(split)).unwrap();
+        let frames: Vec<serde_json::Value> = (0..count)
+            .map(|i| {
+                // On a circle of radius 4, looking at the origin (OpenGL axes, world z up).
+                let (sin, cos) = (turn + 0.8 * i as f64).sin_cos();
+                let m = [
+                    [-sin, 0.0, cos, 4.0 * cos],
+                    [cos, 0.0, sin, 4.0 * sin],
+                    [0.0, 1.0, 0.0, 0.5],
+                    [0.0, 0.0, 0.0, 1.0],
+                ];
+                serde_json::json!({ "file_path": format!("./{split}/r_{i}"), "transform_matrix": m })
+            })
+            .collect();
+        let doc = serde_json::json!({ "camera_angle_x": 0.69, "frames": frames });
+        std::fs::write(lego.join(format!("transforms_{split}.json")), doc.to_string()).unwrap();
+        for i in 0..count {
+            let img = image::RgbaImage::from_fn(8, 8, |x, _| image::Rgba([90, 60, 30, if x < 4 { 0 } else { 255 }]));
+            img.save(lego.join(format!("{split}/r_{i}.png"))).unwrap();
+        }
+    }
+    let scan = d.join("scene0000_00");
+    for sub in ["color", "depth", "pose", "intrinsic"] {
+        std::fs::create_dir_all(scan.join(sub)).unwrap();
+    }
+    for i in 0..3 {
+        image::RgbImage::from_pixel(16, 12, image::Rgb([40 * i as u8, 80, 120]))
+            .save(scan.join(format!("color/{i}.jpg")))
+            .unwrap();
+        image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_pixel(8, 6, image::Luma([1200]))
+            .save(scan.join(format!("depth/{i}.png")))
+            .unwrap();
+        let pose = if i == 1 {
+            "-inf -inf -inf -inf\n".repeat(4)
+        } else {
+            format!("1 0 0 {}\n0 1 0 0\n0 0 1 0\n0 0 0 1\n", 0.1 * i as f64)
+        };
+        std::fs::write(scan.join(format!("pose/{i}.txt")), pose).unwrap();
+    }
+    let k = |f: f64, cx: f64, cy: f64| format!("{f} 0 {cx} 0\n0 {f} {cy} 0\n0 0 1 0\n0 0 0 1\n");
+    std::fs::write(scan.join("intrinsic/intrinsic_color.txt"), k(14.0, 7.5, 5.5)).unwrap();
+    std::fs::write(scan.join("intrinsic/intrinsic_depth.txt"), k(7.0, 3.5, 2.5)).unwrap();
+    (lego, scan)
+}
+
+#[test]
+fn pack_nerf_split_folders_and_scannet_exports() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (lego, scan) = write_lego_and_scannet(d);
+    let out = d.join("lego.scene.zip");
+    let pack = |input: &Path, extra: &[&str]| {
+        let mut args = vec!["pack", input.to_str().unwrap(), "-o", out.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let o = pack(&lego, &[]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(
+        t.contains("splits packed: train (2 frames), test (1 frames); not packed: val"),
+        "{t}"
+    );
+    assert!(
+        t.contains("composited on white, the default (--background black for black)"),
+        "{t}"
+    );
+    assert!(t.contains("frames:      3"), "{t}");
+    let o = pack(&lego, &["--split", "test", "--background", "black", "--alpha-gt"]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(
+        t.contains("splits packed: test (1 frames)") && t.contains("composited on black"),
+        "{t}"
+    );
+    assert!(
+        t.contains("ground truth from alpha") && t.contains("ground truth: yes (1 frames)"),
+        "{t}"
+    );
+    assert_clean_failure(
+        &pack(&lego, &["--split", "training"]),
+        &["unknown split \"training\"", "train, val, test"],
+    );
+    assert_clean_failure(&pack(&lego, &["--split", "val"]), &["transforms_val.json", "missing"]);
+    assert_clean_failure(
+        &pack(&lego, &["--background", "grey"]),
+        &["unknown background \"grey\""],
+    );
+
+    let o = pack(&scan, &[]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(
+        t.contains("ScanNet layout") && t.contains("skipped 1 of 3 frames whose pose is invalid"),
+        "{t}"
+    );
+    assert!(
+        t.contains("frames:      2") && t.contains("16 x 12") && t.contains("depth:       yes (2 of 2"),
+        "{t}"
+    );
+    assert_clean_failure(
+        &pack(&scan, &["--alpha-gt"]),
+        &["--alpha-gt is for NeRF", "scannet capture"],
+    );
+    std::fs::remove_file(scan.join("intrinsic/intrinsic_depth.txt")).unwrap();
+    assert_clean_failure(&pack(&scan, &[]), &["intrinsic_depth.txt", "missing"]);
+}
+
+#[test]
+fn bench_picks_its_preset_by_adapter() {
+    let o = run(&[
+        "bench", "--rays", "32", "--warmup", "0", "--steps", "1", "--matmul", "32",
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(t.contains("(--preset to choose)") && t.contains(" is a "), "{t}");
+    // The config line names the preset the adapter chose.
+    let chosen = ["tiny", "small", "budget", "full"]
+        .into_iter()
+        .find(|p| t.contains(&format!("preset {p}: adapter")))
+        .unwrap_or_else(|| panic!("no preset line:\n{t}"));
+    assert!(t.contains(&format!("config:           {chosen}: 32 rays")), "{t}");
+}
+
 #[test]
 fn bad_inputs_fail_cleanly() {
     let dir = tempfile::tempdir().unwrap();
@@ -231,6 +360,11 @@ fn scribble_segment_eval_round() {
     let t = text(&o);
     assert!(o.status.success(), "{t}");
     assert!(t.contains("wrote 24 masks") && t.contains("mean IoU"), "{t}");
+    // No --preset: the adapter chose, and the user is told which and why.
+    assert!(
+        t.contains("preset ") && t.contains(" is a ") && t.contains("(--preset to choose)"),
+        "{t}"
+    );
     assert!(
         t.contains("refined with each frame's colour and depth (3 rounds;"),
         "{t}"

@@ -24,7 +24,7 @@ pub struct AblateArgs {
     sim: SimArgs,
 }
 
-pub fn run(args: AblateArgs) -> CliResult {
+pub fn run(mut args: AblateArgs) -> CliResult {
     // Read every scene first, so a bad archive fails before hours of training.
     let mut scenes = Vec::new();
     for path in &args.scenes {
@@ -35,7 +35,13 @@ pub fn run(args: AblateArgs) -> CliResult {
         }
         scenes.push((name, path.clone(), scene, id));
     }
-    // Every (scene, method) with its settings, checked before the GPU opens.
+    // The preset may depend on the adapter: open it before the settings are made (seconds,
+    // against the hours of training a bad setting would waste).
+    args.sim.field.check()?;
+    let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
+    eprintln!("training on {}", ctx.describe());
+    args.sim.field.settle(&ctx);
+    // Every (scene, method) with its settings, checked before any training.
     let mut runs = Vec::new();
     let mut notes = Vec::new();
     for (name, path, scene, id) in &scenes {
@@ -69,8 +75,6 @@ pub fn run(args: AblateArgs) -> CliResult {
         }
     }
     std::fs::create_dir_all(&args.output).map_err(|e| format!("{}: {e}", args.output.display()))?;
-    let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
-    eprintln!("training on {}", ctx.describe());
     let mut curves = Vec::new();
     for (name, scene, method, settings) in runs {
         let out = args.output.join(&name).join(&method);

@@ -39,7 +39,11 @@ fn mlp_macs_per_sample(trainer: &Trainer) -> f64 {
         .sum()
 }
 
-pub fn run(args: BenchArgs) -> CliResult {
+pub fn run(mut args: BenchArgs) -> CliResult {
+    args.field.check()?;
+    let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
+    println!("adapter:          {}", ctx.describe());
+    args.field.settle(&ctx);
     let mut cfg = args.field.resolve(0, None)?;
     if let Some(r) = args.rays {
         cfg.batch_rays = r;
@@ -51,8 +55,6 @@ pub fn run(args: BenchArgs) -> CliResult {
     cfg.feature_supervision = false;
     cfg.validate()?;
 
-    let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
-    println!("adapter:          {}", ctx.describe());
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, 0))?;
     trainer.train(args.warmup);
     ctx.wait_idle()?;
@@ -65,7 +67,8 @@ pub fn run(args: BenchArgs) -> CliResult {
     // Forward, input gradient and weight gradient: three products of the same size.
     let gflop = 3.0 * 2.0 * mlp_macs_per_sample(&trainer) * samples / 1e9;
     println!(
-        "config:           {} rays x {} samples, {} hash levels, table 2^{}, widths {}/{}/{}/{}",
+        "config:           {}: {} rays x {} samples, {} hash levels, table 2^{}, widths {}/{}/{}/{}",
+        args.field.describe(),
         cfg.batch_rays,
         cfg.samples_per_ray(),
         cfg.hash_levels,

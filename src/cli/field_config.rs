@@ -4,15 +4,17 @@ use std::path::{Path, PathBuf};
 
 use clap::Args;
 use scribblefield::field::{FieldConfig, Preset};
+use scribblefield::gpu::GpuContext;
 use scribblefield::scene::{FeatureCodes, Scene};
 
 #[derive(Args, Clone, Debug)]
 pub struct FieldConfigArgs {
     /// Base field config, from `field::Preset`: tiny, small, budget (a CPU device's budget, as
     /// the quality tests train) or full (the full model, for a real GPU; `default` is its older
-    /// name). `--config` overrides fields of it.
-    #[arg(long, value_parser = parse_preset, default_value = "full")]
-    pub preset: Preset,
+    /// name). Default: by adapter (budget on a CPU device, full on a discrete GPU, small on
+    /// other GPUs), said at the start. `--config` overrides fields of it.
+    #[arg(long, value_parser = parse_preset)]
+    pub preset: Option<Preset>,
     /// Field config as JSON, inline (`'{"feature_supervision": true}'`) or a file: fields given
     /// replace the preset's (`adam`, `loss` and `scribble_propagation` field by field, `encoding`
     /// as a whole); see `FieldConfig`. Unknown fields are an error.
@@ -21,6 +23,37 @@ pub struct FieldConfigArgs {
 }
 
 impl FieldConfigArgs {
+    /// Chooses the preset by `ctx`'s adapter when `--preset` was not given, and says which and
+    /// why on stderr (a run of the full model on a CPU device takes hours: the user must see the
+    /// choice before it starts).
+    pub fn settle(&mut self, ctx: &GpuContext) {
+        let (preset, why) = match self.preset {
+            Some(p) => (p, "--preset".to_string()),
+            None => {
+                let (p, why) = Preset::for_adapter(&ctx.adapter_info);
+                (p, format!("{why} (--preset to choose)"))
+            }
+        };
+        eprintln!("preset {}: {why}", preset.name());
+        self.preset = Some(preset);
+    }
+
+    /// The preset given or settled; before [`FieldConfigArgs::settle`] without `--preset`, an error.
+    fn preset(&self) -> Result<Preset, String> {
+        self.preset
+            .ok_or_else(|| "no preset chosen yet: the adapter decides it (FieldConfigArgs::settle)".into())
+    }
+
+    /// Reads and applies `--config` to the preset given (or `full` when the adapter will choose),
+    /// without validating: a typo or a broken file is named before the GPU opens.
+    pub fn check(&self) -> Result<(), Box<dyn std::error::Error>> {
+        let probe = FieldConfigArgs {
+            preset: Some(self.preset.unwrap_or(Preset::Full)),
+            config: self.config.clone(),
+        };
+        probe.resolve(0, None).map(|_| ())
+    }
+
     /// The preset with `--config` applied, for `classes` classes and, when the archive has
     /// feature codes, their width (the rendered feature f is compared with them). Not validated:
     /// callers may change more fields first.
@@ -29,7 +62,7 @@ impl FieldConfigArgs {
         classes: u32,
         codes: Option<&FeatureCodes>,
     ) -> Result<FieldConfig, Box<dyn std::error::Error>> {
-        let preset = self.preset.config();
+        let preset = self.preset()?.config();
         let mut cfg = match &self.config {
             Some(arg) => {
                 let (text, source) = config_text(arg)?;
@@ -48,7 +81,7 @@ impl FieldConfigArgs {
 
     /// How the config was chosen, for reports: `budget` or `budget with cfg.json`.
     pub fn describe(&self) -> String {
-        let preset = self.preset.name();
+        let preset = self.preset.map_or("(by adapter)", Preset::name);
         match &self.config {
             Some(arg) if is_inline(arg) => format!("{preset} with {}", arg.trim()),
             Some(path) => format!("{preset} with {path}"),
@@ -145,7 +178,7 @@ mod tests {
     #[test]
     fn config_is_inline_json_or_a_file() {
         let args = |config: &str| FieldConfigArgs {
-            preset: Preset::Budget,
+            preset: Some(Preset::Budget),
             config: Some(config.into()),
         };
         let inline = args(r#" {"feature_supervision": true, "scribble_propagation": {"min_margin": 0.9}}"#);
@@ -168,5 +201,12 @@ mod tests {
         );
         let broken = args(r#"{"batch_rays": }"#).resolve(3, None).unwrap_err().to_string();
         assert!(broken.contains("(inline JSON)"), "{broken}");
+        // Before the adapter chose a preset, a typo is still found; resolving is refused.
+        let unsettled = FieldConfigArgs {
+            preset: None,
+            config: Some(r#"{"batch_ray": 1}"#.into()),
+        };
+        assert!(unsettled.check().unwrap_err().to_string().contains("batch_ray"));
+        assert!(unsettled.resolve(3, None).is_err());
     }
 }

@@ -1,14 +1,15 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use scribblefield::scene::import::{ImportOptions, import};
+use scribblefield::scene::import::{Background, ImportOptions, Split, import};
 use scribblefield::scene::write_archive_path;
 
 use super::{CliResult, check_output, progress};
 
 #[derive(Args)]
 pub struct PackArgs {
-    /// Capture folder (autolabel scene, 7-Scenes/TUM, COLMAP) or a NeRF `transforms.json` (or its folder).
+    /// Capture folder (autolabel scene, 7-Scenes/TUM, COLMAP, ScanNet export, NeRF-synthetic
+    /// split folder) or a NeRF `transforms.json` (or its folder).
     input: PathBuf,
     /// Output archive, e.g. `scene.scene.zip`.
     #[arg(short, long)]
@@ -26,7 +27,7 @@ pub struct PackArgs {
     /// (>= 128 = foreground); a `masks/` folder beside `images/` is used without this.
     #[arg(long)]
     masks: Option<PathBuf>,
-    /// Names of the two mask classes, background first.
+    /// Names of the two mask classes (COLMAP masks, --alpha-gt), background first.
     #[arg(long, value_delimiter = ',', num_args = 1, default_value = "background,object")]
     mask_classes: Vec<String>,
     /// Accept image and depth paths in the capture's files (`transforms.json` `file_path`,
@@ -34,6 +35,18 @@ pub struct PackArgs {
     /// default so that a capture from elsewhere cannot pack arbitrary files.
     #[arg(long)]
     allow_outside_paths: bool,
+    /// NeRF-synthetic split folders: the splits to pack (train, val, test; repeat the flag or
+    /// give a comma list). Default: every `transforms_<split>.json` present.
+    #[arg(long = "split", value_delimiter = ',', value_parser = parse_split)]
+    splits: Vec<Split>,
+    /// What transparent pixels of RGBA images are composited on: white (as NeRF-synthetic
+    /// training does) or black.
+    #[arg(long, default_value = "white", value_parser = parse_background)]
+    background: Background,
+    /// NeRF captures: turn each image's alpha into 2-class ground truth (--mask-classes; alpha
+    /// 0 = background, 255 = object, boundary pixels between = void).
+    #[arg(long)]
+    alpha_gt: bool,
     #[command(flatten)]
     features: super::features::FeatureArgs,
 }
@@ -52,6 +65,9 @@ pub fn run(args: PackArgs) -> CliResult {
         masks: args.masks,
         mask_classes,
         allow_outside_paths: args.allow_outside_paths,
+        splits: args.splits,
+        background: args.background,
+        alpha_gt: args.alpha_gt,
     };
     let bar = progress::bar("loading");
     let mut imported = import(&args.input, &opts, &mut |done, total| {
@@ -61,6 +77,9 @@ pub fn run(args: PackArgs) -> CliResult {
     bar.finish_and_clear();
     for w in &imported.warnings {
         eprintln!("warning: {w}");
+    }
+    for line in &imported.report {
+        println!("{line}");
     }
     args.features.apply(&mut imported.scene)?;
     write_archive_path(&imported.scene, &args.output)?;
@@ -72,4 +91,15 @@ pub fn run(args: PackArgs) -> CliResult {
     );
     print!("{}", imported.scene.summary());
     Ok(())
+}
+
+fn parse_split(name: &str) -> Result<Split, String> {
+    Split::parse(name).ok_or_else(|| {
+        let names: Vec<&str> = Split::ALL.iter().map(|s| s.name()).collect();
+        format!("unknown split {name:?}: one of {}", names.join(", "))
+    })
+}
+
+fn parse_background(name: &str) -> Result<Background, String> {
+    Background::parse(name).ok_or_else(|| format!("unknown background {name:?}: white or black"))
 }

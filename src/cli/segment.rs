@@ -39,7 +39,7 @@ pub struct SegmentArgs {
     refine_iterations: u32,
 }
 
-pub fn run(args: SegmentArgs) -> CliResult {
+pub fn run(mut args: SegmentArgs) -> CliResult {
     let mut scene = read_archive_path(&args.archive)?;
     let labels = match &args.labels {
         Some(path) => {
@@ -56,11 +56,7 @@ pub fn run(args: SegmentArgs) -> CliResult {
     if labels.classes.is_empty() {
         return Err("labels define no classes".into());
     }
-    let mut cfg = args
-        .field
-        .resolve(labels.classes.len() as u32, scene.features.as_ref())?;
-    without_missing_codes(&mut cfg, &scene, &args.archive);
-    cfg.validate()?;
+    args.field.check()?;
     let refine = RefineOptions {
         iterations: args.refine_iterations,
         ..RefineOptions::default()
@@ -69,6 +65,12 @@ pub fn run(args: SegmentArgs) -> CliResult {
 
     let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
     eprintln!("training on {}", ctx.describe());
+    args.field.settle(&ctx);
+    let mut cfg = args
+        .field
+        .resolve(labels.classes.len() as u32, scene.features.as_ref())?;
+    without_missing_codes(&mut cfg, &scene, &args.archive);
+    cfg.validate()?;
     scene.labels = None;
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, args.seed))?;
     let bar = progress::bar("training");
@@ -86,7 +88,7 @@ pub fn run(args: SegmentArgs) -> CliResult {
                 bar.set_message(format!("loss {loss:.4}"));
                 // Without a terminal the bar is hidden: leave a line in the log now and then.
                 if quiet && (done % 100 == 0 || done == total) {
-                    eprintln!("step {done}/{total}: loss {loss:.4}");
+                    eprintln!("step {done}/{total}: loss {loss:.4}{}", progress::left(&bar));
                 }
             }
         },

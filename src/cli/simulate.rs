@@ -57,13 +57,15 @@ pub struct SimulateArgs {
     sim: SimArgs,
 }
 
-pub fn run(args: SimulateArgs) -> CliResult {
+pub fn run(mut args: SimulateArgs) -> CliResult {
     let (scene, id) = read_scene(&args.archive)?;
+    args.sim.field.check()?;
+    let ctx = GpuContext::new_blocking(&scribblefield::gpu::GpuOptions::from_env())?;
+    eprintln!("training on {}", ctx.describe());
+    args.sim.field.settle(&ctx);
     let mut cfg = base_config(&args.sim, &scene)?;
     without_missing_codes(&mut cfg, &scene, &args.archive);
     let settings = settings(&args.sim, &scene, id, cfg).map_err(|e| format!("{}: {e}", args.archive.display()))?;
-    let ctx = GpuContext::new_blocking(&scribblefield::gpu::GpuOptions::from_env())?;
-    eprintln!("training on {}", ctx.describe());
     let state = run_one(&ctx, &scene, &settings, &args.sim, &args.output)?;
     if let Some(why) = &state.stopped {
         println!("stopped early: {why}");
@@ -132,8 +134,13 @@ pub fn run_one(
 ) -> Result<simulate::SimulateState, Box<dyn std::error::Error>> {
     let bar = progress::bar("training");
     let quiet = bar.is_hidden();
+    // The whole run's time left, from the clicks labelled in this session so far (the bar's own
+    // estimate only covers the current round's training).
+    let started = std::time::Instant::now();
+    let mut clicks_before = 0u32;
     let mut events = |event: SimEvent<'_>| match event {
         SimEvent::Resumed { rounds, clicks } => {
+            clicks_before = clicks;
             bar.suspend(|| eprintln!("resuming {}: {rounds} rounds, {clicks} clicks done", out.display()))
         }
         SimEvent::Training { done, total, loss } => {
@@ -151,9 +158,18 @@ pub fn run_one(
             }
         }
         SimEvent::Evaluated(p) => bar.suspend(|| {
+            let left = progress::estimate(
+                f64::from(p.clicks.saturating_sub(clicks_before)),
+                f64::from(sim.budget.saturating_sub(p.clicks)),
+                started.elapsed(),
+            )
+            .filter(|s| *s > 0.0)
+            .map_or(String::new(), |s| {
+                format!(", ~{} left to {} clicks", progress::duration(s), sim.budget)
+            });
             eprintln!(
-                "round {:>3}  clicks {:>4}  steps {:>6}  mean IoU {:.4}  pixel acc {:.4}",
-                p.round, p.clicks, p.steps, p.mean_iou, p.pixel_acc
+                "round {:>3}  clicks {:>4}  steps {:>6}  mean IoU {:.4}  pixel acc {:.4}{}",
+                p.round, p.clicks, p.steps, p.mean_iou, p.pixel_acc, left
             )
         }),
         SimEvent::Note(line) => bar.suspend(|| eprintln!("note: {line}")),

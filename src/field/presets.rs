@@ -40,6 +40,36 @@ impl Preset {
         }
     }
 
+    /// The preset to train when none is named, for the adapter the work runs on, and why (for
+    /// the user: "adapter llvmpipe is a CPU device ..."). The page makes the same split by
+    /// `gpu::context::is_software_adapter` (`app::model_size`), with `tiny` there since a
+    /// browser gets far fewer steps than a headless run: a CPU device gets `budget`, a discrete
+    /// GPU the full model, any other GPU (integrated, virtual, unknown) `small`.
+    pub fn for_adapter(info: &wgpu::AdapterInfo) -> (Preset, String) {
+        let name = &info.name;
+        if crate::gpu::context::is_software_adapter(info) {
+            return (
+                Preset::Budget,
+                format!("adapter {name} is a CPU device (a software rasterizer): the budget the quality tests train"),
+            );
+        }
+        let kind = match info.device_type {
+            wgpu::DeviceType::DiscreteGpu => {
+                return (
+                    Preset::Full,
+                    format!("adapter {name} is a discrete GPU: the full model"),
+                );
+            }
+            wgpu::DeviceType::IntegratedGpu => "an integrated GPU",
+            wgpu::DeviceType::VirtualGpu => "a virtual GPU",
+            _ => "a GPU of unknown type",
+        };
+        (
+            Preset::Small,
+            format!("adapter {name} is {kind}; the full model wants a discrete GPU"),
+        )
+    }
+
     pub fn config(self) -> FieldConfig {
         match self {
             Preset::Tiny => FieldConfig {
@@ -105,5 +135,29 @@ mod tests {
         }
         assert_eq!(Preset::parse("default"), Some(Preset::Full));
         assert_eq!(Preset::parse("huge"), None);
+    }
+
+    #[test]
+    fn adapters_pick_presets_and_say_why() {
+        let info = |name: &str, device_type| wgpu::AdapterInfo {
+            name: name.into(),
+            device_type,
+            ..wgpu::AdapterInfo::new(wgpu::DeviceType::Other, wgpu::Backend::Noop)
+        };
+        let (p, why) = Preset::for_adapter(&info("llvmpipe (LLVM 19.1.7, 256 bits)", wgpu::DeviceType::Cpu));
+        assert_eq!(p, Preset::Budget);
+        assert!(
+            why.starts_with("adapter llvmpipe") && why.contains("CPU device"),
+            "{why}"
+        );
+        // Browsers often report no device type: the name tells.
+        let (p, _) = Preset::for_adapter(&info("SwiftShader Device", wgpu::DeviceType::Other));
+        assert_eq!(p, Preset::Budget);
+        let (p, why) = Preset::for_adapter(&info("NVIDIA H200", wgpu::DeviceType::DiscreteGpu));
+        assert_eq!(p, Preset::Full);
+        assert!(why.contains("discrete GPU"), "{why}");
+        let (p, why) = Preset::for_adapter(&info("Intel Iris Xe", wgpu::DeviceType::IntegratedGpu));
+        assert_eq!(p, Preset::Small);
+        assert!(why.contains("integrated GPU"), "{why}");
     }
 }

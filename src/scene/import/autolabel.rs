@@ -107,8 +107,9 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
     let (k, skew) = read_intrinsics(&intrinsics_path)?;
     warnings.extend(skew);
 
-    let loaded = load_frames(files, opts.max_size, InvalidDepth::ZeroOnly, progress)?;
+    let loaded = load_frames(files, opts, InvalidDepth::ZeroOnly, progress)?;
     notes.extend(loaded.notes);
+    let report = loaded.report;
     let intrinsics = k.scaled(loaded.native, loaded.size);
 
     let masks = load_scribbles(&names, &keep, &semantic, loaded.native, loaded.size)?;
@@ -143,6 +144,7 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
         layout: Layout::Autolabel,
         warnings,
         notes,
+        report,
     })
 }
 

@@ -5,9 +5,9 @@ use std::path::{Path, PathBuf};
 
 use image::{GrayImage, RgbImage};
 
-use super::ImportOptions;
 use super::images::{load_depth, load_gt, load_rgb};
 use super::resize::{resize_nearest, resize_rgb, same_aspect, target_size};
+use super::{Background, ImportOptions};
 use crate::scene::archive::limits;
 use crate::scene::camera::{Bounds, Intrinsics, Pose};
 use crate::scene::error::{Result, SceneError};
@@ -100,6 +100,8 @@ pub(super) struct Loaded {
     /// Size of the imported frames.
     pub size: (u32, u32),
     pub notes: Vec<String>,
+    /// Lines for the user (`Imported::report`): what transparent pixels were composited on.
+    pub report: Vec<String>,
 }
 
 /// The indices of frames to keep out of `count`: every `every`-th, then at most `max_frames`.
@@ -152,11 +154,11 @@ pub(super) fn select(count: usize, opts: &ImportOptions) -> Result<(Vec<usize>, 
 /// field of view; a different aspect ratio means the images do not cover the same view: error.
 pub(super) fn load_frames(
     files: Vec<FrameFiles>,
-    max_size: Option<u32>,
+    opts: &ImportOptions,
     invalid: InvalidDepth,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Loaded> {
-    load_frames_prepared(files, max_size, invalid, &AsStored, progress)
+    load_frames_prepared(files, opts, invalid, &AsStored, progress)
 }
 
 /// What an importer does to a frame's images at their native size, before they are downscaled:
@@ -189,7 +191,7 @@ impl Prepare for AsStored {
 /// `load_frames` with `prepare` applied to each frame's colour and ground truth.
 pub(super) fn load_frames_prepared(
     files: Vec<FrameFiles>,
-    max_size: Option<u32>,
+    opts: &ImportOptions,
     invalid: InvalidDepth,
     prepare: &dyn Prepare,
     progress: &mut dyn FnMut(usize, usize),
@@ -200,8 +202,11 @@ pub(super) fn load_frames_prepared(
     let mut sizes: Option<((u32, u32), (u32, u32))> = None;
     let mut notes = Vec::new();
     let mut resampled_depth = false;
+    let mut with_alpha = 0;
+    let max_size = opts.max_size;
     for (i, f) in files.into_iter().enumerate() {
-        let rgb = load_rgb(&f.rgb)?;
+        let (rgb, alpha) = load_rgb(&f.rgb, opts.background)?;
+        with_alpha += usize::from(alpha);
         let (native, size) = match sizes {
             Some(s) => s,
             None => {
@@ -266,12 +271,37 @@ pub(super) fn load_frames_prepared(
     if resampled_depth {
         notes.push("depth recorded at a different resolution was resampled (nearest) onto the colour images".into());
     }
+    let report = background_report(with_alpha, total, opts.background);
     Ok(Loaded {
         frames,
         native,
         size,
         notes,
+        report,
     })
+}
+
+/// Says what transparent pixels became, when any image had them: the default (white) is a choice
+/// a user of black-background renders must know to change.
+fn background_report(with_alpha: usize, total: usize, background: Background) -> Vec<String> {
+    if with_alpha == 0 {
+        return Vec::new();
+    }
+    let other = Background::ALL
+        .into_iter()
+        .find(|b| *b != background)
+        .unwrap_or(background);
+    vec![format!(
+        "{with_alpha} of {total} images have an alpha channel: composited on {}{} (--background {} for {})",
+        background.name(),
+        if background == Background::default() {
+            ", the default"
+        } else {
+            ""
+        },
+        other.name(),
+        other.name()
+    )]
 }
 
 pub(super) fn check_resamplable(got: (u32, u32), native: (u32, u32), file: &str, what: &str) -> Result<()> {

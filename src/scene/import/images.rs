@@ -4,6 +4,7 @@ use std::path::Path;
 
 use image::{DynamicImage, GrayImage, ImageReader, RgbImage};
 
+use super::Background;
 use super::resize::Mask16;
 use crate::scene::DepthImage;
 use crate::scene::archive::limits;
@@ -63,20 +64,24 @@ pub(super) fn dimensions(path: &Path) -> Result<(u32, u32)> {
     })
 }
 
-/// Colour image as 8-bit RGB; transparent pixels are composited over white (the convention of
-/// NeRF's synthetic scenes, whose backgrounds are transparent).
-pub(super) fn load_rgb(path: &Path) -> Result<RgbImage> {
+/// Colour image as 8-bit RGB, and whether the file had an alpha channel; transparent pixels are
+/// composited on `background` (NeRF's synthetic scenes have transparent backgrounds).
+pub(super) fn load_rgb(path: &Path, background: Background) -> Result<(RgbImage, bool)> {
     let img = decode(path)?;
     if !img.color().has_alpha() {
-        return Ok(img.into_rgb8());
+        return Ok((img.into_rgb8(), false));
     }
     let rgba = img.into_rgba8();
-    Ok(RgbImage::from_fn(rgba.width(), rgba.height(), |x, y| {
-        let p = rgba.get_pixel(x, y).0;
-        let a = p[3] as u32;
-        let over_white = |c: u8| ((c as u32 * a + 255 * (255 - a) + 127) / 255) as u8;
-        image::Rgb([over_white(p[0]), over_white(p[1]), over_white(p[2])])
-    }))
+    let b = background.value() as u32;
+    Ok((
+        RgbImage::from_fn(rgba.width(), rgba.height(), |x, y| {
+            let p = rgba.get_pixel(x, y).0;
+            let a = p[3] as u32;
+            let over = |c: u8| ((c as u32 * a + b * (255 - a) + 127) / 255) as u8;
+            image::Rgb([over(p[0]), over(p[1]), over(p[2])])
+        }),
+        true,
+    ))
 }
 
 /// Depth must be a 16-bit single-channel image: an 8-bit one has lost its millimetres.

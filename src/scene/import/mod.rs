@@ -1,22 +1,30 @@
 //! Importers: build a Scene from captures in other layouts (autolabel scene directories,
-//! 7-Scenes folders, NeRF-style `transforms.json`, COLMAP sparse models). Each layout has its own module; they share
-//! decoding, resizing, frame selection and bounds estimation.
+//! 7-Scenes folders, NeRF-style `transforms.json` and NeRF-synthetic split folders, COLMAP sparse
+//! models, ScanNet SensReader exports). Each layout has its own module; they share decoding,
+//! resizing, frame selection and bounds estimation.
 use std::path::{Path, PathBuf};
 
 use crate::scene::Scene;
 use crate::scene::error::{Result, SceneError};
 use crate::scene::manifest::Provenance;
 
+mod alpha;
 mod autolabel;
 mod bounds;
 mod classes;
 mod colmap;
 mod frames;
 mod images;
+mod nerf_splits;
+mod options;
+mod register;
 mod resize;
+mod scannet;
 mod seven_scenes;
 mod text;
 mod transforms;
+
+pub use options::{Background, Split};
 
 /// What to keep of a capture.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -37,6 +45,12 @@ pub struct ImportOptions {
     /// COLMAP image names) that are absolute or leave the capture folder with `..`. Off by
     /// default: a capture downloaded from elsewhere must not pack files from anywhere on disk.
     pub allow_outside_paths: bool,
+    /// NeRF split folders: the splits to pack, in this order; empty packs every split present.
+    pub splits: Vec<Split>,
+    /// What transparent pixels of RGBA images are composited on.
+    pub background: Background,
+    /// NeRF captures: alpha becomes 2-class ground truth (`mask_classes`; 0 < alpha < 255 void).
+    pub alpha_gt: bool,
 }
 
 impl Default for ImportOptions {
@@ -48,6 +62,9 @@ impl Default for ImportOptions {
             masks: None,
             mask_classes: ["background".into(), "object".into()],
             allow_outside_paths: false,
+            splits: Vec::new(),
+            background: Background::White,
+            alpha_gt: false,
         }
     }
 }
@@ -62,6 +79,10 @@ pub enum Layout {
     Transforms,
     /// COLMAP sparse model: images/ and sparse/0/ (or sparse/) with cameras, images, points3D.
     Colmap,
+    /// NeRF-synthetic split folder: transforms_train.json, transforms_val.json, transforms_test.json.
+    NerfSplits,
+    /// ScanNet SensReader export: color/ depth/ pose/ intrinsic/.
+    ScanNet,
 }
 
 impl Layout {
@@ -71,6 +92,8 @@ impl Layout {
             Layout::SevenScenes => "7-scenes",
             Layout::Transforms => "transforms.json",
             Layout::Colmap => "colmap",
+            Layout::NerfSplits => "nerf-splits",
+            Layout::ScanNet => "scannet",
         }
     }
 }
@@ -82,6 +105,9 @@ pub struct Imported {
     pub layout: Layout,
     /// Things that were guessed, ignored or skipped (also recorded in the provenance notes).
     pub warnings: Vec<String>,
+    /// Choices the user should see without asking (which splits were packed, what transparent
+    /// pixels were composited on); also in the provenance notes.
+    pub report: Vec<String>,
 }
 
 /// Names the capture layout at `input` (a folder, or a `.json` file for transforms).
@@ -109,8 +135,14 @@ pub fn detect_layout(input: &Path) -> Result<Layout> {
     if colmap::looks_like(input) {
         return Ok(Layout::Colmap);
     }
+    if scannet::looks_like(input) {
+        return Ok(Layout::ScanNet);
+    }
     if input.join(transforms::FILE).is_file() {
         return Ok(Layout::Transforms);
+    }
+    if nerf_splits::looks_like(input) {
+        return Ok(Layout::NerfSplits);
     }
     if has_rgb_dir {
         return Ok(Layout::Autolabel);
@@ -122,31 +154,24 @@ pub fn detect_layout(input: &Path) -> Result<Layout> {
         input.display().to_string(),
         "not a capture layout scribblefield knows; expected one of: an autolabel scene folder \
          (rgb/, depth/, pose/, intrinsics.txt, bbox.txt), a 7-Scenes folder (frame-000000.color.jpg, \
-         frame-000000.depth.png, frame-000000.pose.txt, ...), a folder with a transforms.json, or a COLMAP \
-         folder (images/ and sparse/0/ with cameras, images and points3D .txt or .bin)",
+         frame-000000.depth.png, frame-000000.pose.txt, ...), a folder with a transforms.json, a NeRF-synthetic \
+         folder (transforms_train.json, transforms_val.json, transforms_test.json), a COLMAP folder (images/ and \
+         sparse/0/ with cameras, images and points3D .txt or .bin), or a ScanNet export (color/, depth/, pose/, \
+         intrinsic/intrinsic_color.txt)",
     ))
 }
 
 /// Imports the capture at `input`, calling `progress(done, total)` as frames load.
 pub fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Imported> {
     let layout = detect_layout(input)?;
-    if layout != Layout::Colmap
-        && let Some(masks) = &opts.masks
-    {
-        return Err(SceneError::invalid(
-            shown(masks),
-            format!(
-                "--masks is for COLMAP captures; {} is a {} capture",
-                shown(input),
-                layout.name()
-            ),
-        ));
-    }
+    options::check_for_layout(opts, layout, input)?;
     let built = match layout {
         Layout::Autolabel => autolabel::import(input, opts, progress)?,
         Layout::SevenScenes => seven_scenes::import(input, opts, progress)?,
         Layout::Transforms => transforms::import(input, opts, progress)?,
         Layout::Colmap => colmap::import(input, opts, progress)?,
+        Layout::NerfSplits => nerf_splits::import(input, opts, progress)?,
+        Layout::ScanNet => scannet::import(input, opts, progress)?,
     };
     check_scene(&built.scene, input)?;
     Ok(built.finish(input))
@@ -158,12 +183,15 @@ struct Built {
     layout: Layout,
     warnings: Vec<String>,
     notes: Vec<String>,
+    /// Lines for the user (see `Imported::report`).
+    report: Vec<String>,
 }
 
 impl Built {
     /// Records where the scene came from and how it was changed on the way.
     fn finish(mut self, input: &Path) -> Imported {
         let mut notes = self.notes;
+        notes.extend(self.report.iter().cloned());
         notes.extend(self.warnings.iter().cloned());
         self.scene.provenance = Provenance {
             source: input.display().to_string(),
@@ -175,6 +203,7 @@ impl Built {
             scene: self.scene,
             layout: self.layout,
             warnings: self.warnings,
+            report: self.report,
         }
     }
 }

@@ -72,8 +72,9 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
         None
     };
 
-    let loaded = load_frames(files, opts.max_size, InvalidDepth::ZeroAndMax, progress)?;
+    let loaded = load_frames(files, opts, InvalidDepth::ZeroAndMax, progress)?;
     notes.extend(loaded.notes);
+    let report = loaded.report;
     let k = match k {
         Some(k) => k,
         None if loaded.native == DEFAULT_SIZE => {
@@ -108,6 +109,7 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
         layout: Layout::SevenScenes,
         warnings,
         notes,
+        report,
     })
 }
 

@@ -6,8 +6,10 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use super::alpha::{AlphaGt, alpha_gt_report};
 use super::bounds::{from_cameras, from_depth};
-use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, load_frames, scene_of, select};
+use super::classes::class_infos;
+use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, load_frames, load_frames_prepared, scene_of, select};
 use super::images::dimensions;
 use super::text::pose_from_numbers;
 use super::{Built, ImportOptions, Layout, capture_path, shown};
@@ -25,7 +27,7 @@ const LISTED_MISSING: usize = 5;
 
 /// Camera fields, which nerfstudio allows both at the top level and per frame.
 #[derive(Deserialize, Default, Clone, Copy, Debug)]
-struct Camera {
+pub(super) struct Camera {
     fl_x: Option<f64>,
     fl_y: Option<f64>,
     cx: Option<f64>,
@@ -65,36 +67,79 @@ struct FrameEntry {
     camera: Camera,
 }
 
+/// One frame a transforms file lists whose image is there; its pose is read when it is kept.
+pub(super) struct Entry {
+    /// `file: frames[i] (file_path)`, for messages.
+    at: String,
+    /// The `file_path`, kept as the frame's source.
+    name: String,
+    rgb: PathBuf,
+    depth: Option<PathBuf>,
+    /// `transform_matrix`, row-major.
+    matrix: Vec<f64>,
+}
+
+/// What a transforms file says, with its images found.
+pub(super) struct Listing {
+    /// The file, shown.
+    pub file: String,
+    pub camera: Camera,
+    pub entries: Vec<Entry>,
+    pub warnings: Vec<String>,
+}
+
 pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Built> {
     let json_path = if input.is_dir() {
         input.join(FILE)
     } else {
         input.to_path_buf()
     };
-    let file = shown(&json_path);
+    build(list(&json_path, opts)?, opts, Layout::Transforms, progress)
+}
+
+/// Reads the transforms file at `json_path`: its camera, and its frames whose image exists
+/// (frames whose image is missing are skipped with a warning, since exports often list frames
+/// that were culled; none at all is an error).
+pub(super) fn list(json_path: &Path, opts: &ImportOptions) -> Result<Listing> {
+    let file = shown(json_path);
     let base = json_path.parent().unwrap_or(Path::new("."));
-    let meta = std::fs::metadata(&json_path).map_err(|e| SceneError::io(&json_path, e))?;
+    let meta = std::fs::metadata(json_path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => SceneError::missing(&file, "the transforms file"),
+        _ => SceneError::io(json_path, e),
+    })?;
     if meta.len() > limits::MAX_JSON_BYTES {
         return Err(SceneError::invalid(
             &file,
             format!("{} bytes is too large for a transforms file", meta.len()),
         ));
     }
-    let bytes = std::fs::read(&json_path).map_err(|e| SceneError::io(&json_path, e))?;
+    let bytes = std::fs::read(json_path).map_err(|e| SceneError::io(json_path, e))?;
     let (parsed, camera, mut warnings) = parse(&bytes, &file)?;
 
-    // Frames whose image is missing are skipped (exports often list frames that were culled).
-    let mut present = Vec::new();
+    let mut entries = Vec::new();
     let mut missing = Vec::new();
-    for (i, f) in parsed.frames.iter().enumerate() {
+    for (i, f) in parsed.frames.into_iter().enumerate() {
         // Every frame's paths are checked, kept or not: a refused path is a problem of the file.
-        if let Some(d) = &f.depth_file_path {
-            capture_path(base, d, &format!("frames[{i}].depth_file_path"), &file, opts)?;
-        }
+        let depth = match &f.depth_file_path {
+            Some(d) => Some(capture_path(
+                base,
+                d,
+                &format!("frames[{i}].depth_file_path"),
+                &file,
+                opts,
+            )?),
+            None => None,
+        };
         let image = capture_path(base, &f.file_path, &format!("frames[{i}].file_path"), &file, opts)?;
         match resolve_image(image) {
-            Some(path) => present.push((i, f, path)),
-            None => missing.push(f.file_path.clone()),
+            Some(rgb) => entries.push(Entry {
+                at: format!("{file}: frames[{i}] ({})", f.file_path),
+                matrix: f.transform_matrix.iter().flatten().copied().collect(),
+                name: f.file_path,
+                rgb,
+                depth,
+            }),
+            None => missing.push(f.file_path),
         }
     }
     if !missing.is_empty() {
@@ -112,7 +157,7 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
             missing.len()
         ));
     }
-    if present.is_empty() {
+    if entries.is_empty() {
         return Err(SceneError::invalid(
             &file,
             format!(
@@ -122,12 +167,37 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
             ),
         ));
     }
+    Ok(Listing {
+        file,
+        camera,
+        entries,
+        warnings,
+    })
+}
 
-    let first_image = &present[0].2;
+/// The scene of a listing (one transforms file, or several sharing one camera, whose `file`
+/// names where the camera was read), with `--every`, `--max-frames`, `--alpha-gt` applied.
+pub(super) fn build(
+    listing: Listing,
+    opts: &ImportOptions,
+    layout: Layout,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Built> {
+    let Listing {
+        file,
+        camera,
+        entries,
+        warnings,
+    } = listing;
+    let (file, camera) = (file.as_str(), &camera);
+    let first_image = &entries
+        .first()
+        .ok_or_else(|| SceneError::invalid(file, "no frame's image exists"))?
+        .rgb;
     let image_size = dimensions(first_image)?;
     let native = match (camera.w, camera.h) {
         (Some(w), Some(h)) => {
-            let stated = (pixels(w, "w", &file)?, pixels(h, "h", &file)?);
+            let stated = (pixels(w, "w", file)?, pixels(h, "h", file)?);
             if stated != image_size {
                 return Err(SceneError::invalid(
                     shown(first_image),
@@ -141,37 +211,36 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
         }
         _ => image_size,
     };
-    let k = intrinsics(&camera, native, &file)?;
+    let k = intrinsics(camera, native, file)?;
 
-    let (keep, mut notes) = select(present.len(), opts)?;
+    let (keep, mut notes) = select(entries.len(), opts)?;
     let mut files = Vec::with_capacity(keep.len());
     for &j in &keep {
-        let (i, entry, path) = &present[j];
-        let at = format!("{file}: frames[{i}] ({})", entry.file_path);
-        let numbers: Vec<f64> = entry.transform_matrix.iter().flatten().copied().collect();
-        let gl = pose_from_numbers(&numbers, &format!("{at}: transform_matrix"))?;
-        let depth = match &entry.depth_file_path {
-            Some(d) => {
-                let p = capture_path(base, d, &format!("frames[{i}].depth_file_path"), &file, opts)?;
-                if !p.is_file() {
-                    return Err(SceneError::missing(shown(&p), format!("depth of {at}")));
-                }
-                Some(p)
-            }
-            None => None,
-        };
+        let entry = &entries[j];
+        let gl = pose_from_numbers(&entry.matrix, &format!("{}: transform_matrix", entry.at))?;
+        if let Some(p) = &entry.depth
+            && !p.is_file()
+        {
+            return Err(SceneError::missing(shown(p), format!("depth of {}", entry.at)));
+        }
         files.push(FrameFiles {
-            name: entry.file_path.clone(),
-            rgb: path.clone(),
-            depth,
-            gt: None,
+            name: entry.name.clone(),
+            rgb: entry.rgb.clone(),
+            depth: entry.depth.clone(),
+            // Read from the image's own alpha by `AlphaGt`.
+            gt: opts.alpha_gt.then(|| entry.rgb.clone()),
             // OpenGL camera axes (y up, z backward) to the scene's OpenCV axes.
             pose: Pose::from_opengl(gl.0),
         });
     }
 
-    let loaded = load_frames(files, opts.max_size, InvalidDepth::ZeroOnly, progress)?;
+    let loaded = if opts.alpha_gt {
+        load_frames_prepared(files, opts, InvalidDepth::ZeroOnly, &AlphaGt, progress)?
+    } else {
+        load_frames(files, opts, InvalidDepth::ZeroOnly, progress)?
+    };
     notes.extend(loaded.notes);
+    let mut report = loaded.report;
     let intrinsics = k.scaled(loaded.native, loaded.size);
     let bounds = match from_depth(&loaded.frames, &intrinsics, DEPTH_SCALE) {
         Some(b) => {
@@ -185,16 +254,21 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
                     .into(),
             );
             from_cameras(&poses, &intrinsics, loaded.size)
-                .ok_or_else(|| SceneError::invalid(&file, "no cameras to estimate the scene's bounds from"))?
+                .ok_or_else(|| SceneError::invalid(file, "no cameras to estimate the scene's bounds from"))?
         }
     };
 
-    let scene = scene_of(loaded.frames, loaded.size, intrinsics, bounds);
+    let mut scene = scene_of(loaded.frames, loaded.size, intrinsics, bounds);
+    if opts.alpha_gt {
+        scene.classes = class_infos(opts.mask_classes.iter().cloned());
+        report.push(alpha_gt_report(&scene, &opts.mask_classes));
+    }
     Ok(Built {
         scene,
-        layout: Layout::Transforms,
+        layout,
         warnings,
         notes,
+        report,
     })
 }
 
@@ -261,29 +335,49 @@ fn resolve_image(direct: PathBuf) -> Option<PathBuf> {
         .find(|p| p.is_file())
 }
 
+type CameraField = fn(&mut Camera) -> &mut Option<f64>;
+const CAMERA_FIELDS: [(&str, CameraField); 8] = [
+    ("fl_x", |c| &mut c.fl_x),
+    ("fl_y", |c| &mut c.fl_y),
+    ("cx", |c| &mut c.cx),
+    ("cy", |c| &mut c.cy),
+    ("w", |c| &mut c.w),
+    ("h", |c| &mut c.h),
+    ("camera_angle_x", |c| &mut c.camera_angle_x),
+    ("camera_angle_y", |c| &mut c.camera_angle_y),
+];
+
+fn same_value(a: f64, b: f64) -> bool {
+    (a - b).abs() <= SAME_VALUE * a.abs().max(1.0)
+}
+
+/// The first camera field two files disagree on (one giving it and the other not counts), with
+/// both values.
+pub(super) fn camera_difference(a: &Camera, b: &Camera) -> Option<(&'static str, Option<f64>, Option<f64>)> {
+    let (mut a, mut b) = (*a, *b);
+    CAMERA_FIELDS.iter().find_map(|(name, field)| {
+        let (x, y) = (*field(&mut a), *field(&mut b));
+        let same = match (x, y) {
+            (Some(x), Some(y)) => same_value(x, y),
+            (None, None) => true,
+            _ => false,
+        };
+        (!same).then_some((*name, x, y))
+    })
+}
+
 /// The one camera all frames share: top-level values, filled in from the first frame that has
 /// them. Frames may repeat a value but not change it (a single pinhole camera is assumed).
 fn shared_camera(t: &TransformsFile, file: &str) -> Result<Camera> {
     let mut cam = t.camera;
-    type Field = fn(&mut Camera) -> &mut Option<f64>;
-    let fields: [(&str, Field); 8] = [
-        ("fl_x", |c| &mut c.fl_x),
-        ("fl_y", |c| &mut c.fl_y),
-        ("cx", |c| &mut c.cx),
-        ("cy", |c| &mut c.cy),
-        ("w", |c| &mut c.w),
-        ("h", |c| &mut c.h),
-        ("camera_angle_x", |c| &mut c.camera_angle_x),
-        ("camera_angle_y", |c| &mut c.camera_angle_y),
-    ];
     for (i, f) in t.frames.iter().enumerate() {
         let mut frame_cam = f.camera;
-        for (name, field) in &fields {
+        for (name, field) in &CAMERA_FIELDS {
             let Some(v) = *field(&mut frame_cam) else { continue };
             let shared = field(&mut cam);
             match *shared {
                 None => *shared = Some(v),
-                Some(s) if (s - v).abs() <= SAME_VALUE * s.abs().max(1.0) => {}
+                Some(s) if same_value(s, v) => {}
                 Some(s) => {
                     return Err(SceneError::invalid(
                         file,

@@ -187,8 +187,9 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
         names: kept.iter().map(|i| i.name.clone()).collect(),
         outside: Cell::new(0),
     };
-    let loaded = load_frames_prepared(files, opts.max_size, InvalidDepth::ZeroOnly, &prepare, progress)?;
+    let loaded = load_frames_prepared(files, opts, InvalidDepth::ZeroOnly, &prepare, progress)?;
     notes.extend(loaded.notes);
+    let report = loaded.report;
     notes.push(undistortion_note(&model, &kept, &prepare));
 
     // The scene measures pixels from the top-left pixel's centre, COLMAP from its corner.
@@ -236,6 +237,7 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
         layout: Layout::Colmap,
         warnings,
         notes,
+        report,
     })
 }
 
