@@ -89,3 +89,36 @@ fn labels_before_training() {
         spread(&colmap, &[0, 26], &options);
     }
 }
+
+/// Not a check: how long the labels take on the COLMAP capture (52 photos at 200x200) when the
+/// page sends them after each edit: the first time (the points' graph is built), again unchanged,
+/// and after one more stroke on a drawn photo (`--ignored --nocapture`; docs/quality.md).
+#[test]
+#[ignore]
+fn time_per_edit_on_a_sparse_capture() {
+    use scribblefield::field::propagate::PropagationCache;
+    use std::time::Instant;
+    let Some(scene) = real("alexander-colmap", 200) else {
+        return;
+    };
+    let labels = scribble_frames(&scene, &[0, 26], &ScribbleOptions::default());
+    let more = scribble_frames(
+        &scene,
+        &[0, 26],
+        &ScribbleOptions {
+            strokes_per_class: 3,
+            ..ScribbleOptions::default()
+        },
+    );
+    let options = PropagationOptions::default();
+    let mut cache = PropagationCache::default();
+    for (what, labels) in [("first", &labels), ("unchanged", &labels), ("after an edit", &more)] {
+        let clock = Instant::now();
+        let maps = cache.maps(&scene, labels, 2, &options);
+        eprintln!(
+            "{what}: {:.2} s for {} frames",
+            clock.elapsed().as_secs_f64(),
+            maps.len()
+        );
+    }
+}

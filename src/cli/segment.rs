@@ -105,7 +105,8 @@ pub fn run(mut args: SegmentArgs) -> CliResult {
     let trained = trainer.labelled_pixels();
     if trained > drawn {
         println!(
-            "labels: {drawn} drawn pixels spread to {trained} inside their frames (scribble_propagation; \"enabled\": false in --config turns it off)"
+            "labels: {drawn} drawn pixels spread to {trained} in {} frames (scribble_propagation; \"enabled\": false in --config turns it off)",
+            trainer.labelled_frames()
         );
     }
 

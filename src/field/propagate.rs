@@ -195,8 +195,9 @@ pub struct PropagationCache {
     settings: Option<(usize, PropagationOptions)>,
     /// Per frame: the seeds it walked from and the map that gave.
     frames: HashMap<u32, (Vec<u16>, Vec<u16>)>,
-    /// The scene's points and their graph, once a capture with sparse depth needs them.
-    points: Option<PointLabeller>,
+    /// The scene's points, their graph and where they land in each frame, once a capture with
+    /// sparse depth needs them.
+    sparse: Option<SparseCapture>,
     /// Per drawn frame of such a capture: its strokes and their walk inside the frame alone,
     /// which seeds the walk over the points.
     drawn: HashMap<u32, (Vec<u16>, Vec<u16>)>,
@@ -270,6 +271,51 @@ impl PropagationCache {
             maps.push((frame, map));
         }
         maps
+    }
+}
+
+/// What labels across views need of a capture with sparse depth, built once per scene: the
+/// readings as points with their neighbour graph, each frame's view of the points, and each
+/// frame's pixels far from every point.
+struct SparseCapture {
+    labeller: PointLabeller,
+    views: Vec<View>,
+    far: Vec<Vec<bool>>,
+    /// The last walk over the points: the classes and seed maps it started from, and each
+    /// point's class (the page asks again after every edit, most of which leave the seeds as
+    /// they were).
+    last: Option<LastPointWalk>,
+}
+
+/// Per frame (by index), a label map.
+type FrameMaps = Vec<(u32, Vec<u16>)>;
+
+/// The classes and seed maps a walk over the points started from, and each point's class.
+type LastPointWalk = (usize, FrameMaps, Vec<u16>);
+
+impl SparseCapture {
+    fn new(scene: &Scene) -> SparseCapture {
+        let labeller = PointLabeller::new(scene, &PointWalkOptions::default());
+        let views: Vec<View> = (0..scene.frames.len())
+            .map(|f| View::of_frame(scene, f, labeller.positions()))
+            .collect();
+        let far = views.iter().map(View::far_from_points).collect();
+        SparseCapture {
+            labeller,
+            views,
+            far,
+            last: None,
+        }
+    }
+
+    /// Each point's class from the walk over the points seeded by `walked`.
+    fn point_classes(&mut self, walked: FrameMaps, classes: usize) -> &[u16] {
+        let stale = !matches!(&self.last, Some((c, seen, _)) if *c == classes && *seen == walked);
+        if stale {
+            let point_classes = self.labeller.point_classes(&walked, classes);
+            self.last = Some((classes, walked, point_classes));
+        }
+        self.last.as_ref().map_or(&[], |(_, _, p)| p.as_slice())
     }
 }
 
@@ -351,14 +397,9 @@ fn frame_seeds(
             (*frame, map)
         })
         .collect();
-    let labeller = cache
-        .points
-        .get_or_insert_with(|| PointLabeller::new(scene, &PointWalkOptions::default()));
-    let point_classes = labeller.point_classes(&walked, classes);
-    let views: Vec<View> = (0..scene.frames.len())
-        .map(|f| View::of_frame(scene, f, labeller.positions()))
-        .collect();
-    let far: Vec<Vec<bool>> = views.iter().map(View::far_from_points).collect();
+    let sparse = cache.sparse.get_or_insert_with(|| SparseCapture::new(scene));
+    let point_classes = sparse.point_classes(walked, classes).to_vec();
+    let (views, far) = (&sparse.views, &sparse.far);
     let drawn: Vec<(&[u16], &[bool])> = strokes
         .iter()
         .map(|(f, map)| (map.as_slice(), far[*f as usize].as_slice()))

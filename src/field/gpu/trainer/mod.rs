@@ -135,6 +135,8 @@ pub struct Trainer {
     seed: u32,
     /// Pixels training draws labels from (the strokes, spread by propagation).
     labelled_pixels: usize,
+    /// Frames with at least one of those pixels.
+    labelled_frames: usize,
     propagation: PropagationCache,
     pending_losses: Option<(u32, PendingRead<f32>)>,
     last_losses: Option<StepLosses>,
@@ -411,6 +413,7 @@ impl Trainer {
             step: 0,
             seed,
             labelled_pixels: 0,
+            labelled_frames: 0,
             propagation: PropagationCache::default(),
             pending_losses: None,
             last_losses: None,
@@ -440,15 +443,26 @@ impl Trainer {
             self.cfg.num_classes,
         );
         self.labelled_pixels = index.labelled_pixel_count();
+        self.labelled_frames = maps
+            .iter()
+            .filter(|(_, map)| map.iter().any(|&c| c != crate::labels::UNLABELLED))
+            .count();
         self.scene.upload_labels(&self.ctx, &index)?;
         self.ray_batch.follow_labels(&self.ctx, &self.scene);
         Ok(())
     }
 
-    /// Pixels training draws labels from: the current strokes, spread inside their frames
+    /// Pixels training draws labels from: the current strokes, spread inside their frames (and,
+    /// on a capture with sparse depth, to the other frames)
     /// (`FieldConfig::scribble_propagation`).
     pub fn labelled_pixels(&self) -> usize {
         self.labelled_pixels
+    }
+
+    /// Frames holding the pixels of [`Trainer::labelled_pixels`]: on a capture with sparse
+    /// depth the strokes reach frames that were never drawn on.
+    pub fn labelled_frames(&self) -> usize {
+        self.labelled_frames
     }
 
     pub fn config(&self) -> &FieldConfig {
