@@ -1,7 +1,7 @@
 //! The batched `f32` engine of the dense layer: `act(x Wᵀ + b + residual)` for many rows at
-//! once, through a packed, register-blocked matrix product (LLVM autovectorizes the inner loops;
-//! on x86-64 the same code is also compiled with AVX2+FMA and picked at run time), with the work
-//! split over output rows with `std::thread::scope`.
+//! once, through `matrixmultiply`'s blocked product (its own run-time-selected AVX/FMA kernels),
+//! with the work split over output rows with `std::thread::scope`.
+use super::DenseLayer;
 
 /// What follows a layer's bias (and residual).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -77,29 +77,16 @@ where
     });
 }
 
-#[inline(always)]
-fn madd<const FMA: bool>(a: f32, b: f32, c: f32) -> f32 {
-    if FMA { a.mul_add(b, c) } else { a * b + c }
-}
+/// Rows handed to one thread at a time are a multiple of this.
+const ROW_GRAIN: usize = 4;
 
-#[cfg(target_arch = "x86_64")]
-fn has_avx2_fma() -> bool {
-    std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
-}
-
-/// Output columns per packed weight panel and rows per micro-kernel call.
-const NR: usize = 16;
-const MR: usize = 4;
-/// Rows per cache block: a panel (`cin * NR` values) is reused over this many rows.
-const MC: usize = 64;
-
-/// A fully connected layer `y = x W^T + b` on rows of `cin` values, with `W` packed in panels of
-/// `NR` output columns (`panels[p][k][j] = W[p * NR + j][k]`, zero past `cout`).
+/// A fully connected layer `y = x Wᵀ + b` on rows of `cin` values, owning its weights
+/// (`weight[o * cin + i]`, PyTorch's `[out, in]` layout) and biases.
 #[derive(Clone, Debug)]
 pub struct Dense {
     pub cin: usize,
     pub cout: usize,
-    panels: Vec<f32>,
+    weight: Vec<f32>,
     bias: Vec<f32>,
 }
 
@@ -108,21 +95,17 @@ impl Dense {
     pub fn new(cin: usize, cout: usize, weight: &[f32], bias: &[f32]) -> Self {
         assert_eq!(weight.len(), cin * cout, "weight size");
         assert_eq!(bias.len(), cout, "bias size");
-        let np = cout.div_ceil(NR);
-        let mut panels = vec![0.0; np * cin * NR];
-        for o in 0..cout {
-            for i in 0..cin {
-                panels[(o / NR) * cin * NR + i * NR + o % NR] = weight[o * cin + i];
-            }
-        }
-        let mut padded = vec![0.0; np * NR];
-        padded[..cout].copy_from_slice(bias);
         Dense {
             cin,
             cout,
-            panels,
-            bias: padded,
+            weight: weight.to_vec(),
+            bias: bias.to_vec(),
         }
+    }
+
+    /// The layer as a [`DenseLayer`] over its weights.
+    pub fn layer(&self) -> DenseLayer<'_, f32> {
+        DenseLayer::new(self.cin, self.cout, &self.weight, Some(&self.bias))
     }
 
     /// `act(x W^T + b + residual)` for `x` of `rows x cin` values; `rows x cout` values out.
@@ -141,21 +124,48 @@ impl Dense {
             assert_eq!(r.len(), rows * self.cout, "residual size");
         }
         assert_eq!(out.len(), rows * self.cout, "output size");
-        parallel_rows(out, self.cout, threads, MR, |row0, chunk| {
-            let job = DenseJob {
-                layer: self,
-                x,
-                residual,
-                act,
-                row0,
-            };
-            #[cfg(target_arch = "x86_64")]
-            if has_avx2_fma() {
-                // SAFETY: the CPU supports AVX2 and FMA (checked just above).
-                unsafe { dense_rows_avx2(&job, chunk) };
-                return;
+        let (cin, cout) = (self.cin, self.cout);
+        parallel_rows(out, cout, threads, ROW_GRAIN, |row0, chunk| {
+            let n = chunk.len() / cout.max(1);
+            // C starts as the bias (plus the residual), and the product is added to it.
+            for (r, o) in chunk.chunks_exact_mut(cout).enumerate() {
+                o.copy_from_slice(&self.bias);
+                if let Some(res) = residual {
+                    for (o, &s) in o.iter_mut().zip(&res[(row0 + r) * cout..][..cout]) {
+                        *o += s;
+                    }
+                }
             }
-            dense_rows::<false>(&job, chunk);
+            if n > 0 && cin > 0 && cout > 0 {
+                let x = &x[row0 * cin..][..n * cin];
+                // SAFETY: A is the n x cin rows of `x` (row stride cin), B = Wᵀ is cin x cout read
+                // from `weight` (row stride 1, column stride cin), C the n x cout `chunk` (row stride
+                // cout): every index the product touches lies inside the three slices, whose
+                // lengths were checked above, and C aliases neither input.
+                unsafe {
+                    matrixmultiply::sgemm(
+                        n,
+                        cin,
+                        cout,
+                        1.0,
+                        x.as_ptr(),
+                        cin as isize,
+                        1,
+                        self.weight.as_ptr(),
+                        1,
+                        cin as isize,
+                        1.0,
+                        chunk.as_mut_ptr(),
+                        cout as isize,
+                        1,
+                    );
+                }
+            }
+            if act != Activation::None {
+                for v in chunk.iter_mut() {
+                    *v = act.apply(*v);
+                }
+            }
         });
     }
 
@@ -165,88 +175,9 @@ impl Dense {
     }
 }
 
-struct DenseJob<'a> {
-    layer: &'a Dense,
-    x: &'a [f32],
-    residual: Option<&'a [f32]>,
-    act: Activation,
-    /// The first row (of `x`) of the output chunk.
-    row0: usize,
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn dense_rows_avx2(job: &DenseJob, out: &mut [f32]) {
-    dense_rows::<true>(job, out)
-}
-
-/// `bias + sum_k x_r[k] * panel[k]` for 4 rows: 4 x `NR` accumulators that stay in registers.
-#[inline(always)]
-fn micro_kernel<const FMA: bool>(panel: &[f32], x: [&[f32]; MR], bias: &[f32; NR]) -> [[f32; NR]; MR] {
-    let mut acc = [*bias; MR];
-    for ((((w, &a0), &a1), &a2), &a3) in panel.chunks_exact(NR).zip(x[0]).zip(x[1]).zip(x[2]).zip(x[3]) {
-        let w: &[f32; NR] = w.try_into().unwrap();
-        for j in 0..NR {
-            acc[0][j] = madd::<FMA>(a0, w[j], acc[0][j]);
-            acc[1][j] = madd::<FMA>(a1, w[j], acc[1][j]);
-            acc[2][j] = madd::<FMA>(a2, w[j], acc[2][j]);
-            acc[3][j] = madd::<FMA>(a3, w[j], acc[3][j]);
-        }
-    }
-    acc
-}
-
-#[inline(always)]
-fn dense_rows<const FMA: bool>(job: &DenseJob, out: &mut [f32]) {
-    let d = job.layer;
-    let (cin, cout) = (d.cin, d.cout);
-    let n = out.len() / cout;
-    // Rows past the end of a chunk (at most 3) read zeros.
-    let zeros = vec![0.0; cin];
-    let xrow = |r: usize| {
-        if r < n {
-            &job.x[(job.row0 + r) * cin..][..cin]
-        } else {
-            &zeros[..]
-        }
-    };
-    for mc in (0..n).step_by(MC) {
-        let mend = (mc + MC).min(n);
-        for (p, panel) in d.panels.chunks_exact(cin * NR).enumerate() {
-            let c0 = p * NR;
-            let cw = NR.min(cout - c0);
-            let bias: &[f32; NR] = d.bias[c0..c0 + NR].try_into().unwrap();
-            for r in (mc..mend).step_by(MR) {
-                let acc = micro_kernel::<FMA>(panel, [xrow(r), xrow(r + 1), xrow(r + 2), xrow(r + 3)], bias);
-                for (i, acc) in acc.iter().enumerate() {
-                    let row = r + i;
-                    if row >= mend {
-                        break;
-                    }
-                    let o = &mut out[row * cout + c0..][..cw];
-                    match job.residual {
-                        Some(res) => {
-                            let res = &res[(job.row0 + row) * cout + c0..][..cw];
-                            for ((o, &a), &s) in o.iter_mut().zip(acc).zip(res) {
-                                *o = job.act.apply(a + s);
-                            }
-                        }
-                        None => {
-                            for (o, &a) in o.iter_mut().zip(acc) {
-                                *o = job.act.apply(a);
-                            }
-                        }
-                    }
-                }
-            }
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::dense::DenseLayer;
 
     /// A deterministic pseudo-random sequence in [-1, 1).
     fn noise(n: usize, seed: u64) -> Vec<f32> {
