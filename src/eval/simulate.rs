@@ -35,6 +35,7 @@ use crate::scene::Scene;
 
 use super::curves::{CurvePoint, curve_csv};
 use super::headless::render_and_score;
+use super::run_lock::RunLock;
 
 pub const STATE_FILE: &str = "simulate.json";
 pub const CURVE_FILE: &str = "curve.csv";
@@ -66,7 +67,7 @@ pub enum SimulateError {
     Output { path: PathBuf, problem: String },
 }
 
-fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> SimulateError + '_ {
+pub(super) fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> SimulateError + '_ {
     move |source| SimulateError::Io {
         path: path.to_path_buf(),
         source,
@@ -456,53 +457,6 @@ pub fn run(
         save(out, &state, &labels, &trainer)?;
     }
     Ok(state)
-}
-
-/// `simulate.lock` holding the process id; removed when dropped. A lock left by a process that
-/// no longer runs (killed, interrupted) is taken over where that can be checked (`/proc`).
-struct RunLock {
-    path: PathBuf,
-}
-
-impl RunLock {
-    fn acquire(out: &Path) -> Result<RunLock, SimulateError> {
-        let path = out.join(LOCK_FILE);
-        for _ in 0..2 {
-            match std::fs::OpenOptions::new().write(true).create_new(true).open(&path) {
-                Ok(mut file) => {
-                    use std::io::Write;
-                    write!(file, "{}", std::process::id()).map_err(io_error(&path))?;
-                    return Ok(RunLock { path });
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                    let holder = std::fs::read_to_string(&path).unwrap_or_default();
-                    let pid = holder.trim();
-                    let proc = Path::new("/proc");
-                    let stale = proc.join("self").exists() && !pid.is_empty() && !proc.join(pid).exists();
-                    if !stale {
-                        return Err(SimulateError::Output {
-                            path,
-                            problem: format!(
-                                "another run (process {pid}) is writing this folder; wait for it, or delete the lock file if no such process runs"
-                            ),
-                        });
-                    }
-                    std::fs::remove_file(&path).map_err(io_error(&path))?;
-                }
-                Err(e) => return Err(io_error(&path)(e)),
-            }
-        }
-        Err(SimulateError::Output {
-            path,
-            problem: "could not take the lock".into(),
-        })
-    }
-}
-
-impl Drop for RunLock {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.path);
-    }
 }
 
 fn check_scene(scene: &Scene, settings: &SimulateSettings) -> Result<(), SimulateError> {
