@@ -7,8 +7,6 @@ pub mod headless;
 pub mod metrics;
 pub mod plot;
 #[cfg(not(target_arch = "wasm32"))]
-mod run_lock;
-#[cfg(not(target_arch = "wasm32"))]
 pub mod simulate;
 
 pub use metrics::{Confusion, EvalReport};

@@ -7,7 +7,7 @@ use std::fs::{File, OpenOptions, TryLockError};
 use std::io::{Read, Seek, Write};
 use std::path::{Path, PathBuf};
 
-use super::simulate::{LOCK_FILE, SimulateError, io_error};
+use super::{LOCK_FILE, SimulateError, io_error};
 
 pub(super) struct RunLock {
     path: PathBuf,
