@@ -175,17 +175,28 @@ fn generate_binding_tables(stages: &[shader_check::ExpandedShader]) -> String {
         }
         out.push_str("];\n\n");
     }
+    // Keyed by a hash of the source, not the source: looking a table up must not pull every
+    // stage's text into a binary (the wasm module keeps only the stages it uses).
     out.push_str(
-        "/// Every stage's binding table, by file name.\npub const ALL_BINDINGS: &[(&str, &[ShaderBinding])] = &[\n",
+        "/// Every stage's binding table: (file name, FNV-1a hash and length of its source, table).\npub const ALL_BINDINGS: &[(&str, u64, usize, &[ShaderBinding])] = &[\n",
     );
     for stage in stages {
         let _ = writeln!(
             out,
-            "    ({:?}, {}_BINDINGS),",
+            "    ({:?}, {:#x}, {}, {}_BINDINGS),",
             stage.file,
+            fnv1a(&stage.source),
+            stage.source.len(),
             shader_check::constant_name(&stage.file)
         );
     }
     out.push_str("];\n");
     out
+}
+
+/// 64-bit FNV-1a, as `gpu::shaders::source_hash` computes it.
+fn fnv1a(text: &str) -> u64 {
+    text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
 }

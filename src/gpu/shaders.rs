@@ -14,10 +14,21 @@ pub struct ShaderBinding {
     pub binding: u32,
 }
 
-/// The binding table of the stage whose (expanded) source is `source`.
+/// The binding table of the stage whose (expanded) source is `source`, found by the source's
+/// hash and length (`build.rs` computes the same).
 pub fn bindings_of(source: &str) -> Option<&'static [ShaderBinding]> {
-    let (file, _) = ALL.iter().find(|(_, s)| *s == source)?;
-    ALL_BINDINGS.iter().find(|(f, _)| f == file).map(|(_, table)| *table)
+    let hash = source_hash(source);
+    ALL_BINDINGS
+        .iter()
+        .find(|(_, h, len, _)| *h == hash && *len == source.len())
+        .map(|(_, _, _, table)| *table)
+}
+
+/// 64-bit FNV-1a of a stage's source.
+fn source_hash(text: &str) -> u64 {
+    text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
 }
 
 #[cfg(test)]
@@ -27,6 +38,13 @@ mod tests {
     #[test]
     fn every_stage_has_a_binding_table_by_entry_point() {
         assert_eq!(ALL.len(), ALL_BINDINGS.len());
+        for ((file, source), (table_file, ..)) in ALL.iter().zip(ALL_BINDINGS) {
+            assert_eq!(file, table_file);
+            assert!(std::ptr::eq(
+                bindings_of(source).unwrap(),
+                ALL_BINDINGS.iter().find(|t| t.0 == *file).unwrap().3
+            ));
+        }
         let composite = bindings_of(COMPOSITE).unwrap();
         assert!(composite.contains(&ShaderBinding {
             entry_point: "composite",
