@@ -1,8 +1,8 @@
 //! Validates every `shaders/*.wgsl` with naga (a broken shader fails the build, naming the file,
 //! line and column), checks that every Rust struct uploaded as a WGSL struct has naga's layout of
 //! it (`src/gpu/uniform_layout.rs`; a mismatch fails the build, naming the struct, field and both
-//! offsets) and embeds the include-expanded stages as `$OUT_DIR/shaders.rs`, which
-//! `src/gpu/shaders.rs` includes. Conventions: `shaders/README.md`.
+//! offsets) and embeds the include-expanded stages, with the bindings each entry point uses by
+//! name, as `$OUT_DIR/shaders.rs`, which `src/gpu/shaders.rs` includes. Conventions: `shaders/README.md`.
 extern crate naga;
 
 #[path = "src/gpu/shader_check.rs"]
@@ -33,7 +33,8 @@ fn main() {
     check_uniform_mirrors(&manifest_dir, &stages);
 
     let out_dir = PathBuf::from(std::env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
-    let generated = generate_constants(&stages);
+    let mut generated = generate_constants(&stages);
+    generated.push_str(&generate_binding_tables(&stages));
     if let Err(error) = std::fs::write(out_dir.join("shaders.rs"), generated) {
         fail(
             "build script",
@@ -129,4 +130,73 @@ fn fail(kind: &str, messages: &[String]) -> ! {
         eprintln!("  {}", message.lines().next().unwrap_or_default());
     }
     std::process::exit(1);
+}
+
+/// For every stage, the resource bindings each entry point uses, by the WGSL variable's name:
+/// `<STAGE>_BINDINGS` and `ALL_BINDINGS` (file name, table). Passes bind their buffers by these
+/// names (`gpu::dispatch`), checked against this table when the bind group is made.
+fn generate_binding_tables(stages: &[shader_check::ExpandedShader]) -> String {
+    let mut out = String::new();
+    for stage in stages {
+        let name = shader_check::constant_name(&stage.file);
+        let module = match naga::front::wgsl::parse_str(&stage.source) {
+            Ok(module) => module,
+            Err(error) => fail("shader", &[format!("{}: {}", stage.file, error.message())]),
+        };
+        let info = match naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            shader_check::webgpu_baseline_capabilities(),
+        )
+        .validate(&module)
+        {
+            Ok(info) => info,
+            Err(error) => fail("shader", &[format!("{}: {error}", stage.file)]),
+        };
+        let _ = writeln!(
+            out,
+            "/// The bindings each entry point of `shaders/{}` uses.\npub const {name}_BINDINGS: &[ShaderBinding] = &[",
+            stage.file
+        );
+        for (index, entry) in module.entry_points.iter().enumerate() {
+            let uses = info.get_entry_point(index);
+            for (handle, global) in module.global_variables.iter() {
+                let (Some(binding), Some(var)) = (&global.binding, &global.name) else {
+                    continue;
+                };
+                if uses[handle].is_empty() {
+                    continue;
+                }
+                let _ = writeln!(
+                    out,
+                    "    ShaderBinding {{ entry_point: {:?}, name: {:?}, group: {}, binding: {} }},",
+                    entry.name, var, binding.group, binding.binding
+                );
+            }
+        }
+        out.push_str("];\n\n");
+    }
+    // Keyed by a hash of the source, not the source: looking a table up must not pull every
+    // stage's text into a binary (the wasm module keeps only the stages it uses).
+    out.push_str(
+        "/// Every stage's binding table: (file name, FNV-1a hash and length of its source, table).\npub const ALL_BINDINGS: &[(&str, u64, usize, &[ShaderBinding])] = &[\n",
+    );
+    for stage in stages {
+        let _ = writeln!(
+            out,
+            "    ({:?}, {:#x}, {}, {}_BINDINGS),",
+            stage.file,
+            fnv1a(&stage.source),
+            stage.source.len(),
+            shader_check::constant_name(&stage.file)
+        );
+    }
+    out.push_str("];\n");
+    out
+}
+
+/// 64-bit FNV-1a, as `gpu::shaders::source_hash` computes it.
+fn fnv1a(text: &str) -> u64 {
+    text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
 }

@@ -2,6 +2,7 @@
 pub mod adam;
 pub mod app;
 pub mod colors;
+pub mod dense;
 pub mod eval;
 pub mod export;
 #[cfg(not(target_arch = "wasm32"))]

@@ -4,7 +4,8 @@ use scribblefield::gpu::buffers::{
     GARBAGE_WORDS, fill_with_garbage, garbage_words, read_buffer_async, read_buffer_blocking, read_elements_async,
     storage_buffer_from, storage_buffer_garbage, storage_buffer_zeroed, uniform_buffer_from,
 };
-use scribblefield::gpu::pipeline::{Dispatch1d, KernelSpec, bind_buffers, create_compute_pipeline, run_1d};
+use scribblefield::gpu::dispatch::{bind_named, whole};
+use scribblefield::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline, run_1d};
 use scribblefield::gpu::shaders;
 use scribblefield::gpu::test_support::gpu_for_tests;
 
@@ -124,11 +125,8 @@ fn dispatch_beyond_65535_workgroups_reaches_every_item_once() {
     let dispatch = Dispatch1d::for_device(&ctx, count, WORKGROUP_SIZE).unwrap();
     assert!(dispatch.y > 1, "{dispatch:?} should need a second dimension");
 
-    let pipeline = pollster::block_on(create_compute_pipeline(
-        &ctx,
-        &KernelSpec::new("iota", shaders::IOTA, "iota"),
-    ))
-    .unwrap();
+    let iota = KernelSpec::new("iota", shaders::IOTA, "iota");
+    let pipeline = pollster::block_on(create_compute_pipeline(&ctx, &iota)).unwrap();
     // Room past the end: items the overshooting workgroups must not touch.
     let slack = 1000;
     let out = storage_buffer_garbage::<u32>(&ctx, "iota out", count as usize + slack).unwrap();
@@ -140,7 +138,8 @@ fn dispatch_beyond_65535_workgroups_reaches_every_item_once() {
             _pad: [0; 3],
         },
     );
-    let bind_group = bind_buffers(&ctx, "iota", &pipeline.get_bind_group_layout(0), &[&params, &out]);
+    let bindings = whole(&[("params", &params), ("out", &out)]);
+    let bind_group = bind_named(&ctx, &iota, &pipeline.get_bind_group_layout(0), 0, &bindings).unwrap();
     run_1d(&ctx, "iota", &pipeline, &bind_group, dispatch);
 
     let values: Vec<u32> = read_buffer_blocking(&ctx, &out).unwrap();
@@ -150,4 +149,29 @@ fn dispatch_beyond_65535_workgroups_reaches_every_item_once() {
         values[count as usize..],
         garbage_words(count as usize + slack)[count as usize..]
     );
+}
+
+#[test]
+fn bindings_are_given_by_their_wgsl_names_and_checked() {
+    let Some(ctx) = gpu_for_tests("bindings_are_given_by_their_wgsl_names_and_checked") else {
+        return;
+    };
+    let iota = KernelSpec::new("iota", shaders::IOTA, "iota");
+    let pipeline = pollster::block_on(create_compute_pipeline(&ctx, &iota)).unwrap();
+    let layout = pipeline.get_bind_group_layout(0);
+    let out = storage_buffer_garbage::<u32>(&ctx, "iota out", 4).unwrap();
+    let params = uniform_buffer_from(&ctx, "iota params", &IotaParams { count: 4, _pad: [0; 3] });
+    let bind = |bindings: &[(&str, &wgpu::Buffer)]| bind_named(&ctx, &iota, &layout, 0, &whole(bindings));
+    assert!(bind(&[("out", &out), ("params", &params)]).is_ok(), "any order");
+    let e = bind(&[("params", &params), ("output", &out)]).unwrap_err().to_string();
+    assert!(
+        e.contains("`output` is not a binding it uses") && e.contains("\"out\""),
+        "{e}"
+    );
+    let e = bind(&[("params", &params)]).unwrap_err().to_string();
+    assert!(e.contains("`out` (@binding(1)) is not given"), "{e}");
+    let e = bind(&[("params", &params), ("out", &out), ("out", &out)])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("`out` is given twice"), "{e}");
 }

@@ -193,9 +193,14 @@ fn simulated_user_clicks_wrong_pixels_and_resumes_where_it_stopped() {
 
     // A second run while one writes the folder is refused; a lock left by a dead process is not.
     assert!(!out.join(simulate::LOCK_FILE).exists(), "the lock outlived its run");
-    std::fs::write(out.join(simulate::LOCK_FILE), "1").unwrap(); // pid 1 is alive
+    // Another run: the lock file locked by a live holder (this test, in the name of pid 1).
+    std::fs::write(out.join(simulate::LOCK_FILE), "1").unwrap();
+    let holder = std::fs::File::open(out.join(simulate::LOCK_FILE)).unwrap();
+    holder.try_lock().unwrap();
     let err = simulate::run(&ctx, &scene, &s, options, &out, &mut |_| {}).unwrap_err();
     assert!(err.to_string().contains("another run (process 1)"), "{err}");
+    drop(holder);
+    // A dead run's lock: the file is there, nobody holds it.
     std::fs::write(out.join(simulate::LOCK_FILE), "4000000000").unwrap(); // no such process
     simulate::run(&ctx, &scene, &s, options, &out, &mut |_| {}).unwrap();
 

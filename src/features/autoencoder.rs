@@ -8,6 +8,7 @@
 //! every minibatch across threads, each computing the gradient of its rows; the partial
 //! gradients are summed in thread order, so a fit is deterministic for a given thread count.
 use crate::adam::{Adam, AdamHyper};
+use crate::dense::DenseLayer;
 use crate::rng::SplitMix64;
 
 #[derive(Clone, Debug, PartialEq)]
@@ -37,7 +38,7 @@ impl Default for AutoencoderConfig {
     }
 }
 
-/// A dense layer `y = x·W + b`, W stored input-major (`w[i * outputs + j]`).
+/// One layer's weights (`w[o * inputs + i]`) and biases, run as the crate's CPU dense layer.
 #[derive(Clone, Debug)]
 struct Dense {
     inputs: usize,
@@ -48,17 +49,28 @@ struct Dense {
 
 impl Dense {
     fn new(inputs: usize, outputs: usize, rng: &mut SplitMix64) -> Dense {
-        // He-uniform: keeps activations of ReLU stacks at a steady scale.
+        // He-uniform: keeps activations of ReLU stacks at a steady scale. Drawn input-major
+        // (the order of the first fits), stored output-major.
         let bound = (6.0 / inputs as f64).sqrt();
-        let w = (0..inputs * outputs)
+        let drawn: Vec<f32> = (0..inputs * outputs)
             .map(|_| rng.uniform(-bound, bound) as f32)
             .collect();
+        let mut w = vec![0.0; inputs * outputs];
+        for i in 0..inputs {
+            for o in 0..outputs {
+                w[o * inputs + i] = drawn[i * outputs + o];
+            }
+        }
         Dense {
             inputs,
             outputs,
             w,
             b: vec![0.0; outputs],
         }
+    }
+
+    fn layer(&self) -> DenseLayer<'_, f32> {
+        DenseLayer::new(self.inputs, self.outputs, &self.w, Some(&self.b))
     }
 
     fn params(&self) -> usize {
@@ -68,56 +80,19 @@ impl Dense {
     fn forward(&self, x: &[f32], rows: usize, y: &mut Vec<f32>) {
         y.clear();
         y.resize(rows * self.outputs, 0.0);
-        for (xr, yr) in x.chunks_exact(self.inputs).zip(y.chunks_exact_mut(self.outputs)) {
-            yr.copy_from_slice(&self.b);
-            for (&xi, wr) in xr.iter().zip(self.w.chunks_exact(self.outputs)) {
-                if xi != 0.0 {
-                    for (yj, &wij) in yr.iter_mut().zip(wr) {
-                        *yj += xi * wij;
-                    }
-                }
-            }
-        }
+        self.layer().forward(x, y);
     }
 
     /// Adds dL/dW and dL/db to `grad` (laid out `[w..., b...]`) and writes dL/dx when asked.
     fn backward(&self, x: &[f32], dy: &[f32], grad: &mut [f32], dx: Option<&mut Vec<f32>>) {
         let (gw, gb) = grad.split_at_mut(self.w.len());
-        for (xr, dyr) in x.chunks_exact(self.inputs).zip(dy.chunks_exact(self.outputs)) {
-            for (g, &d) in gb.iter_mut().zip(dyr) {
-                *g += d;
-            }
-            for (&xi, gr) in xr.iter().zip(gw.chunks_exact_mut(self.outputs)) {
-                if xi != 0.0 {
-                    for (g, &d) in gr.iter_mut().zip(dyr) {
-                        *g += xi * d;
-                    }
-                }
-            }
-        }
-        if let Some(dx) = dx {
+        let dx = dx.map(|dx| {
             dx.clear();
             dx.resize(x.len(), 0.0);
-            for (dxr, dyr) in dx.chunks_exact_mut(self.inputs).zip(dy.chunks_exact(self.outputs)) {
-                for (v, wr) in dxr.iter_mut().zip(self.w.chunks_exact(self.outputs)) {
-                    *v = dot(wr, dyr);
-                }
-            }
-        }
+            &mut dx[..]
+        });
+        self.layer().backward(x, dy, gw, Some(gb), dx);
     }
-}
-
-/// A dot product in eight independent lanes, so the compiler can vectorize it.
-fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let tail: f32 = ca.remainder().iter().zip(cb.remainder()).map(|(x, y)| x * y).sum();
-    for (x, y) in ca.zip(cb) {
-        for k in 0..8 {
-            acc[k] += x[k] * y[k];
-        }
-    }
-    acc.iter().sum::<f32>() + tail
 }
 
 fn relu_in_place(v: &mut [f32]) {

@@ -2,8 +2,9 @@
 //! what a device can do (see `matmul_bench`), not part of the trainer.
 use super::buffers::{read_buffer_async, storage_buffer_from, storage_buffer_garbage, uniform_buffer_from};
 use super::context::GpuContext;
+use super::dispatch::{bind_named, whole};
 use super::error::GpuError;
-use super::pipeline::{KernelSpec, bind_buffers, create_compute_pipeline};
+use super::pipeline::{KernelSpec, create_compute_pipeline};
 use super::shaders;
 
 /// Side of the square tile of C one workgroup of `matmul.wgsl` computes (its `OUTPUT_TILE`).
@@ -60,6 +61,14 @@ pub fn matmul_reference(a: &[f32], b: &[f32], dims: MatmulDims) -> Vec<f32> {
     c
 }
 
+const MATMUL_KERNEL: KernelSpec<'static> = KernelSpec {
+    label: "matmul",
+    source: shaders::MATMUL,
+    entry_point: "matmul",
+    layout: None,
+    constants: &[],
+};
+
 /// The compiled kernel, reusable across products.
 pub struct MatmulKernel {
     pipeline: wgpu::ComputePipeline,
@@ -76,7 +85,7 @@ pub struct MatmulJob {
 impl MatmulKernel {
     pub async fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
         ctx.ensure_workgroup_storage_fits("matmul tiles", 2 * u64::from(OUTPUT_TILE * K_SLICE) * 4)?;
-        let pipeline = create_compute_pipeline(ctx, &KernelSpec::new("matmul", shaders::MATMUL, "matmul")).await?;
+        let pipeline = create_compute_pipeline(ctx, &MATMUL_KERNEL).await?;
         let layout = pipeline.get_bind_group_layout(0);
         Ok(MatmulKernel { pipeline, layout })
     }
@@ -123,7 +132,8 @@ impl MatmulKernel {
                 _pad: 0,
             },
         );
-        let bind_group = bind_buffers(ctx, "matmul", &self.layout, &[&uniform, &a, &b, &c]);
+        let bindings = whole(&[("dims", &uniform), ("a", &a), ("b", &b), ("c", &c)]);
+        let bind_group = bind_named(ctx, &MATMUL_KERNEL, &self.layout, 0, &bindings)?;
         Ok(MatmulJob { dims, c, bind_group })
     }
 

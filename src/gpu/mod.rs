@@ -4,6 +4,7 @@
 //! few blocking helpers are native-only.
 pub mod buffers;
 pub mod context;
+pub mod dispatch;
 pub mod error;
 pub mod matmul;
 pub mod matmul_bench;

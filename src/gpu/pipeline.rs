@@ -1,6 +1,6 @@
 //! Compute pipelines from the embedded shaders (compiled once per device: see
-//! `gpu::pipeline_cache`), bind groups of plain buffers, and 1D dispatches that stay within the
-//! per-dimension workgroup limit.
+//! `gpu::pipeline_cache`) and 1D dispatches that stay within the per-dimension workgroup limit.
+//! Bind groups are made by binding name (`gpu::dispatch`).
 use super::context::GpuContext;
 use super::error::GpuError;
 use super::pipeline_cache::PipelineKey;
@@ -123,50 +123,6 @@ pub fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
         },
         count: None,
     }
-}
-
-/// A bind group binding whole buffers in order: `buffers[i]` at `@binding(i)`.
-pub fn bind_buffers(
-    ctx: &GpuContext,
-    label: &str,
-    layout: &wgpu::BindGroupLayout,
-    buffers: &[&wgpu::Buffer],
-) -> wgpu::BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
-        .iter()
-        .enumerate()
-        .map(|(binding, buffer)| wgpu::BindGroupEntry {
-            binding: binding as u32,
-            resource: buffer.as_entire_binding(),
-        })
-        .collect();
-    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some(label),
-        layout,
-        entries: &entries,
-    })
-}
-
-/// A bind group with buffers at the given binding numbers, for pipelines whose derived layout
-/// uses only some of a shader's bindings (one entry point of several).
-pub fn bind_numbered(
-    ctx: &GpuContext,
-    label: &str,
-    layout: &wgpu::BindGroupLayout,
-    bindings: &[(u32, &wgpu::Buffer)],
-) -> wgpu::BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry<'_>> = bindings
-        .iter()
-        .map(|&(binding, buffer)| wgpu::BindGroupEntry {
-            binding,
-            resource: buffer.as_entire_binding(),
-        })
-        .collect();
-    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some(label),
-        layout,
-        entries: &entries,
-    })
 }
 
 /// Workgroup counts for `items` independent items in workgroups of `workgroup_size`, spread over

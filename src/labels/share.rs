@@ -16,6 +16,9 @@
 //! Decoding bounds the inflated size and every count, so a hostile link cannot exhaust memory.
 use std::io::{Read, Write};
 
+use base64::alphabet;
+use base64::engine::{DecodePaddingMode, GeneralPurpose, GeneralPurposeConfig};
+use base64::{DecodeError, Engine as _};
 use flate2::Compression;
 use flate2::read::DeflateDecoder;
 use flate2::write::DeflateEncoder;
@@ -309,53 +312,48 @@ impl Reader<'_> {
     }
 }
 
-const BASE64URL: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_";
+/// base64url without padding, as links are written; padding is accepted when decoding, and so
+/// are leftover bits in the last character (the codec this replaced ignored them).
+const URL_SAFE: GeneralPurpose = GeneralPurpose::new(
+    &alphabet::URL_SAFE,
+    GeneralPurposeConfig::new()
+        .with_encode_padding(false)
+        .with_decode_padding_mode(DecodePaddingMode::Indifferent)
+        .with_decode_allow_trailing_bits(true),
+);
+/// Standard base64, decoded too: a link that went through a tool that rewrote it still opens.
+const STANDARD: GeneralPurpose = GeneralPurpose::new(
+    &alphabet::STANDARD,
+    GeneralPurposeConfig::new()
+        .with_decode_padding_mode(DecodePaddingMode::Indifferent)
+        .with_decode_allow_trailing_bits(true),
+);
 
 fn base64url_encode(data: &[u8]) -> String {
-    let mut out = String::with_capacity(data.len().div_ceil(3) * 4);
-    for chunk in data.chunks(3) {
-        let n = chunk
-            .iter()
-            .enumerate()
-            .fold(0u32, |n, (i, &b)| n | u32::from(b) << (16 - 8 * i));
-        for i in 0..=chunk.len() {
-            out.push(BASE64URL[(n >> (18 - 6 * i) & 63) as usize] as char);
-        }
-    }
-    out
+    URL_SAFE.encode(data)
 }
 
 fn base64url_decode(text: &str) -> Result<Vec<u8>, ShareError> {
-    // Standard base64 too: a link that went through a tool that rewrote it still opens.
-    let value = |c: u8| match c {
-        b'A'..=b'Z' => Some(c - b'A'),
-        b'a'..=b'z' => Some(c - b'a' + 26),
-        b'0'..=b'9' => Some(c - b'0' + 52),
-        b'-' | b'+' => Some(62),
-        b'_' | b'/' => Some(63),
-        _ => None,
+    let engine = if text.contains(['+', '/']) {
+        &STANDARD
+    } else {
+        &URL_SAFE
     };
-    let text = text.trim_end_matches('=');
-    let mut out = Vec::with_capacity(text.len() * 3 / 4);
-    for chunk in text.as_bytes().chunks(4) {
-        if chunk.len() == 1 {
-            return Err(corrupt("its base64 has a stray character at the end"));
+    engine.decode(text).map_err(|e| match e {
+        DecodeError::InvalidByte(_, c) => corrupt(format!("{:?} is not a base64url character", c as char)),
+        DecodeError::InvalidLength(_) => corrupt("its base64 has a stray character at the end"),
+        DecodeError::InvalidLastSymbol(_, c) => {
+            corrupt(format!("its base64 ends in {:?}, which no code ends in", c as char))
         }
-        let mut n = 0u32;
-        for (i, &c) in chunk.iter().enumerate() {
-            let v = value(c).ok_or_else(|| corrupt(format!("{:?} is not a base64url character", c as char)))?;
-            n |= u32::from(v) << (18 - 6 * i);
-        }
-        for i in 0..chunk.len() - 1 {
-            out.push((n >> (16 - 8 * i)) as u8);
-        }
-    }
-    Ok(out)
+        DecodeError::InvalidPadding => corrupt("its base64 padding is wrong"),
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    const BASE64URL: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_";
 
     fn labels() -> LabelSet {
         let mut l = LabelSet::new(vec![

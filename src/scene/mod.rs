@@ -10,6 +10,7 @@ pub mod import;
 pub mod label_set;
 pub mod manifest;
 pub mod pca;
+pub mod resample;
 
 pub use archive::{read_archive, read_archive_path, write_archive, write_archive_path};
 pub use camera::{Bounds, Intrinsics, Pose};

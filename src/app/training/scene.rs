@@ -2,9 +2,10 @@
 //! Training cost does not depend on resolution (a batch is a fixed number of rays), but every
 //! render of the live mask and the masks download render every pixel: on a CPU rasterizer a
 //! full 160 x 120 frame takes tens of seconds, a quarter-size one a few. Masks come back at
-//! the training resolution and are enlarged (nearest) for display and download.
+//! the training resolution and are enlarged (nearest pixel centre, `scene::resample`) for display and download.
 use image::imageops::{self, FilterType};
 
+use crate::scene::resample::resize_nearest;
 use crate::scene::{Frame, Scene};
 
 /// Pixels per frame the field renders on a software rasterizer, at most, when the page picks
@@ -48,8 +49,8 @@ pub fn downscale(scene: &Scene, factor: u32, keep_codes: bool) -> Scene {
             .map(|f| Frame {
                 pose: f.pose,
                 rgb: imageops::resize(&f.rgb, w, h, FilterType::Triangle),
-                depth: f.depth.as_ref().map(|d| imageops::resize(d, w, h, FilterType::Nearest)),
-                gt: f.gt.as_ref().map(|g| imageops::resize(g, w, h, FilterType::Nearest)),
+                depth: f.depth.as_ref().map(|d| resize_nearest(d, (w, h))),
+                gt: f.gt.as_ref().map(|g| resize_nearest(g, (w, h))),
                 source: f.source.clone(),
             })
             .collect(),
@@ -67,6 +68,6 @@ pub fn upscale_mask(mask: image::GrayImage, width: u32, height: u32) -> image::G
     if mask.dimensions() == (width, height) {
         mask
     } else {
-        imageops::resize(&mask, width, height, FilterType::Nearest)
+        resize_nearest(&mask, (width, height))
     }
 }

@@ -10,6 +10,7 @@
 //! offset; the kernel itself only ever sees one segment.
 use crate::field::config::AdamConfig;
 use crate::gpu::buffers::uniform_buffer_from;
+use crate::gpu::dispatch::{Dispatch, bind_named};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
@@ -35,15 +36,9 @@ pub struct AdamBuffers<'a> {
     pub second_moment: &'a wgpu::Buffer,
 }
 
-struct Segment {
-    bind_group: wgpu::BindGroup,
-    dispatch: Dispatch1d,
-}
-
-/// One Adam step over `count` parameters.
+/// One Adam step over `count` parameters: one dispatch per segment of the buffers.
 pub struct AdamPass {
-    pipeline: wgpu::ComputePipeline,
-    segments: Vec<Segment>,
+    segments: Vec<Dispatch>,
 }
 
 impl AdamPass {
@@ -122,42 +117,20 @@ impl AdamPass {
                     size: Some(size),
                 })
             };
-            let entries = [
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: uniform.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: step.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: slice(buffers.params),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: slice(buffers.grads),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: slice(buffers.first_moment),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: slice(buffers.second_moment),
-                },
+            let bindings = [
+                ("constants", uniform.as_entire_binding()),
+                ("step_info", step.as_entire_binding()),
+                ("params", slice(buffers.params)),
+                ("grads", slice(buffers.grads)),
+                ("first_moment", slice(buffers.first_moment)),
+                ("second_moment", slice(buffers.second_moment)),
             ];
-            let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("adam"),
-                layout: &layout,
-                entries: &entries,
-            });
-            let dispatch = Dispatch1d::for_device(ctx, len, WORKGROUP)?;
-            segments.push(Segment { bind_group, dispatch });
+            let bind_group = bind_named(ctx, &spec, &layout, 0, &bindings)?;
+            let groups = Dispatch1d::for_device(ctx, len, WORKGROUP)?;
+            segments.push(Dispatch::new(pipeline.clone(), bind_group, groups));
             start += len;
         }
-        Ok(AdamPass { pipeline, segments })
+        Ok(AdamPass { segments })
     }
 
     /// Segments the buffers were split into (1 unless they exceed one storage binding).
@@ -166,10 +139,8 @@ impl AdamPass {
     }
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        pass.set_pipeline(&self.pipeline);
         for segment in &self.segments {
-            pass.set_bind_group(0, &segment.bind_group, &[]);
-            segment.dispatch.record(pass);
+            segment.record(pass);
         }
     }
 }

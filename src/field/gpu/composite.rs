@@ -19,7 +19,8 @@
 use crate::field::config::FieldConfig;
 use crate::field::reference::Channels;
 use crate::gpu::buffers::{storage_buffer_zeroed, uniform_buffer_from};
-use crate::gpu::pipeline::{Dispatch1d, KernelSpec, bind_buffers, create_compute_pipeline};
+use crate::gpu::dispatch::{Dispatch, whole};
+use crate::gpu::pipeline::{Dispatch1d, KernelSpec};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
 use super::rays::{RAY_WORKGROUP_SIZE, TARGET_HEADER_WORDS};
@@ -118,9 +119,7 @@ impl CompositeLayout {
 
 /// Compositing, losses and their backward for a batch of `cfg.batch_rays` rays.
 pub struct CompositePass {
-    pipeline: wgpu::ComputePipeline,
-    bind_group: wgpu::BindGroup,
-    dispatch: Dispatch1d,
+    dispatch: Dispatch,
     pub layout: CompositeLayout,
     /// B·S rows of [`CompositeLayout::grad_stride`] f32.
     pub grad_heads: wgpu::Buffer,
@@ -177,25 +176,22 @@ impl CompositePass {
         let ray_outputs =
             storage_buffer_zeroed::<f32>(ctx, "ray losses and renders", batch * layout.ray_output_stride())?;
         let uniform = uniform_buffer_from(ctx, "composite uniforms", &uniforms);
-        let pipeline =
-            create_compute_pipeline(ctx, &KernelSpec::new("composite", shaders::COMPOSITE, "composite")).await?;
-        let dispatch = Dispatch1d::for_device(ctx, batch as u64, RAY_WORKGROUP_SIZE)?;
-        let buffers = [
-            inputs.step_uniforms,
-            &uniform,
-            &inputs.h0.buffer,
-            &inputs.color.buffer,
-            &inputs.logits.buffer,
-            &inputs.feature.buffer,
-            inputs.intervals,
-            inputs.targets,
-            &grad_heads,
-            &ray_outputs,
-        ];
-        let bind_group = bind_buffers(ctx, "composite", &pipeline.get_bind_group_layout(0), &buffers);
+        let spec = KernelSpec::new("composite", shaders::COMPOSITE, "composite");
+        let groups = Dispatch1d::for_device(ctx, batch as u64, RAY_WORKGROUP_SIZE)?;
+        let bindings = whole(&[
+            ("step_info", inputs.step_uniforms),
+            ("params", &uniform),
+            ("h0_source", &inputs.h0.buffer),
+            ("color_source", &inputs.color.buffer),
+            ("logits_source", &inputs.logits.buffer),
+            ("feature_source", &inputs.feature.buffer),
+            ("intervals", inputs.intervals),
+            ("targets", inputs.targets),
+            ("grad_heads", &grad_heads),
+            ("ray_outputs", &ray_outputs),
+        ]);
+        let dispatch = Dispatch::build(ctx, &spec, &bindings, groups).await?;
         Ok(CompositePass {
-            pipeline,
-            bind_group,
             dispatch,
             layout,
             grad_heads,
@@ -204,8 +200,6 @@ impl CompositePass {
     }
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
         self.dispatch.record(pass);
     }
 }

@@ -20,7 +20,8 @@ use crate::field::config::FieldConfig;
 use crate::field::reference::hash_grid::HashGrid;
 use crate::field::reference::sh::SH_COEFFS;
 use crate::gpu::buffers::uniform_buffer_from;
-use crate::gpu::pipeline::{Dispatch1d, KernelSpec, bind_buffers, create_compute_pipeline};
+use crate::gpu::dispatch::{Dispatch, whole};
+use crate::gpu::pipeline::{Dispatch1d, KernelSpec};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
 /// Invocations per workgroup of the three kernels (their `WORKGROUP_SIZE`).
@@ -142,9 +143,7 @@ pub struct PositionEncodeBuffers<'a> {
 /// Forward of the position encoding (see the module docs).
 #[derive(Debug)]
 pub struct PositionEncodePass {
-    pipeline: wgpu::ComputePipeline,
-    bind_group: wgpu::BindGroup,
-    dispatch: Dispatch1d,
+    dispatch: Dispatch,
     /// Kept with the pass that reads it.
     _uniforms: wgpu::Buffer,
 }
@@ -178,32 +177,27 @@ impl PositionEncodePass {
         let slots = uniforms.levels + u32::from(uniforms.frequencies > 0);
         let items = u64::from(slots) * samples as u64;
         check_index_range(WHAT, items + u64::from(WORKGROUP_SIZE) * u64::from(u16::MAX))?;
-        let dispatch = Dispatch1d::for_device(ctx, items, WORKGROUP_SIZE)?;
+        let groups = Dispatch1d::for_device(ctx, items, WORKGROUP_SIZE)?;
 
-        let pipeline =
-            create_compute_pipeline(ctx, &KernelSpec::new(WHAT, shaders::HASH_ENCODE, "hash_encode")).await?;
+        let spec = KernelSpec::new(WHAT, shaders::HASH_ENCODE, "hash_encode");
         let uniform_buffer = uniform_buffer_from(ctx, "position encoding uniforms", &uniforms);
-        let bind_group = bind_buffers(
-            ctx,
-            WHAT,
-            &pipeline.get_bind_group_layout(0),
-            &[&uniform_buffer, buffers.positions, buffers.params, buffers.encoding],
-        );
+        let bindings = whole(&[
+            ("grid", &uniform_buffer),
+            ("positions", buffers.positions),
+            ("params", buffers.params),
+            ("encoding", buffers.encoding),
+        ]);
+        let dispatch = Dispatch::build(ctx, &spec, &bindings, groups).await?;
         Ok(PositionEncodePass {
-            pipeline,
-            bind_group,
             dispatch,
             _uniforms: uniform_buffer,
         })
     }
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        if self.dispatch.workgroups() == 0 {
-            return;
+        if !self.dispatch.is_empty() {
+            self.dispatch.record(pass);
         }
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
-        self.dispatch.record(pass);
     }
 }
 
@@ -243,9 +237,7 @@ pub struct HashGridBackwardPass {
 
 #[derive(Debug)]
 struct BoundKernel {
-    pipeline: wgpu::ComputePipeline,
-    bind_group: wgpu::BindGroup,
-    dispatch: Dispatch1d,
+    dispatch: Dispatch,
     _uniforms: wgpu::Buffer,
 }
 
@@ -296,7 +288,7 @@ impl HashGridBackwardPass {
         // One workgroup per (level, WORKGROUP_SIZE consecutive samples).
         let workgroups = u64::from(uniforms.levels) * u64::from(uniforms.groups_per_level);
         check_index_range(WHAT, workgroups + u64::from(u16::MAX))?;
-        let dispatch = Dispatch1d::for_device(ctx, workgroups * u64::from(WORKGROUP_SIZE), WORKGROUP_SIZE)?;
+        let groups = Dispatch1d::for_device(ctx, workgroups * u64::from(WORKGROUP_SIZE), WORKGROUP_SIZE)?;
         let workgroup_bytes = u64::from(WORKGROUP_SIZE) * (16 + 16 + MAX_HASH_FEATURES as u64 * F32_BYTES);
         ctx.ensure_workgroup_storage_fits("hash grid backward run merging", workgroup_bytes)?;
 
@@ -306,23 +298,16 @@ impl HashGridBackwardPass {
             constants: &constants,
             ..KernelSpec::new(WHAT, shaders::HASH_BACKWARD, "hash_backward")
         };
-        let pipeline = create_compute_pipeline(ctx, &spec).await?;
         let uniform_buffer = uniform_buffer_from(ctx, "hash grid backward uniforms", &uniforms);
-        let bind_group = bind_buffers(
-            ctx,
-            WHAT,
-            &pipeline.get_bind_group_layout(0),
-            &[
-                &uniform_buffer,
-                buffers.positions,
-                buffers.encoding_grad,
-                buffers.gradient,
-            ],
-        );
+        let bindings = whole(&[
+            ("grid", &uniform_buffer),
+            ("positions", buffers.positions),
+            ("encoding_grad", buffers.encoding_grad),
+            ("gradient", buffers.gradient),
+        ]);
+        let dispatch = Dispatch::build(ctx, &spec, &bindings, groups).await?;
         Ok(HashGridBackwardPass {
             kernel: Some(BoundKernel {
-                pipeline,
-                bind_group,
                 dispatch,
                 _uniforms: uniform_buffer,
             }),
@@ -343,8 +328,6 @@ impl HashGridBackwardPass {
     /// Records the accumulation of ∂L/∂table into the (zeroed) gradient buffer.
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         let Some(kernel) = &self.kernel else { return };
-        pass.set_pipeline(&kernel.pipeline);
-        pass.set_bind_group(0, &kernel.bind_group, &[]);
         kernel.dispatch.record(pass);
     }
 }
@@ -373,9 +356,7 @@ pub struct DirectionShBuffers<'a> {
 /// Degree-4 SH of each ray's direction, written for each of its samples (see the module docs).
 #[derive(Debug)]
 pub struct DirectionShPass {
-    pipeline: wgpu::ComputePipeline,
-    bind_group: wgpu::BindGroup,
-    dispatch: Dispatch1d,
+    dispatch: Dispatch,
     _uniforms: wgpu::Buffer,
 }
 
@@ -434,30 +415,25 @@ impl DirectionShPass {
             _pad0: 0,
             _pad1: 0,
         };
-        let dispatch = Dispatch1d::for_device(ctx, samples as u64, WORKGROUP_SIZE)?;
-        let pipeline = create_compute_pipeline(ctx, &KernelSpec::new(WHAT, shaders::SH_ENCODE, "sh_encode")).await?;
+        let groups = Dispatch1d::for_device(ctx, samples as u64, WORKGROUP_SIZE)?;
+        let spec = KernelSpec::new(WHAT, shaders::SH_ENCODE, "sh_encode");
         let uniform_buffer = uniform_buffer_from(ctx, "view direction SH uniforms", &uniforms);
-        let bind_group = bind_buffers(
-            ctx,
-            WHAT,
-            &pipeline.get_bind_group_layout(0),
-            &[&uniform_buffer, buffers.directions, buffers.output],
-        );
+        let bindings = whole(&[
+            ("sh_layout", &uniform_buffer),
+            ("directions", buffers.directions),
+            ("sh_out", buffers.output),
+        ]);
+        let dispatch = Dispatch::build(ctx, &spec, &bindings, groups).await?;
         Ok(DirectionShPass {
-            pipeline,
-            bind_group,
             dispatch,
             _uniforms: uniform_buffer,
         })
     }
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        if self.dispatch.workgroups() == 0 {
-            return;
+        if !self.dispatch.is_empty() {
+            self.dispatch.record(pass);
         }
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
-        self.dispatch.record(pass);
     }
 }
 

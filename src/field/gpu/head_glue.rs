@@ -4,7 +4,8 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::gpu::buffers::uniform_buffer_from;
-use crate::gpu::pipeline::{Dispatch1d, KernelSpec, bind_numbered, create_compute_pipeline};
+use crate::gpu::dispatch::{Dispatch, whole};
+use crate::gpu::pipeline::{Dispatch1d, KernelSpec};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
 const WORKGROUP_SIZE: u32 = 128;
@@ -49,90 +50,89 @@ pub struct GlueBuffers<'a> {
     pub feature_in_grad: &'a wgpu::Buffer,
 }
 
-struct Stage {
-    pipeline: wgpu::ComputePipeline,
-    bind_group: wgpu::BindGroup,
-}
-
 pub struct HeadGluePass {
-    assemble: Stage,
-    gather_feature: Stage,
-    gather_geometry: Stage,
-    dispatch: Dispatch1d,
+    assemble: Dispatch,
+    gather_feature: Dispatch,
+    gather_geometry: Dispatch,
 }
 
-async fn stage(ctx: &GpuContext, entry: &str, bindings: &[(u32, &wgpu::Buffer)]) -> Result<Stage, GpuError> {
-    let pipeline = create_compute_pipeline(ctx, &KernelSpec::new(entry, shaders::HEAD_GLUE, entry)).await?;
-    let bind_group = bind_numbered(ctx, entry, &pipeline.get_bind_group_layout(0), bindings);
-    Ok(Stage { pipeline, bind_group })
+async fn stage(
+    ctx: &GpuContext,
+    entry: &str,
+    groups: Dispatch1d,
+    bindings: &[(&str, &wgpu::Buffer)],
+) -> Result<Dispatch, GpuError> {
+    Dispatch::build(
+        ctx,
+        &KernelSpec::new(entry, shaders::HEAD_GLUE, entry),
+        &whole(bindings),
+        groups,
+    )
+    .await
 }
 
 impl HeadGluePass {
     pub async fn new(ctx: &GpuContext, dims: GlueDims, b: &GlueBuffers<'_>) -> Result<Self, GpuError> {
         let uniform = uniform_buffer_from(ctx, "head glue dims", &dims);
+        let groups = Dispatch1d::for_device(ctx, dims.samples.into(), WORKGROUP_SIZE)?;
         let assemble = stage(
             ctx,
             "assemble",
+            groups,
             &[
-                (0, &uniform),
-                (1, b.density_out),
-                (2, b.feature_out),
-                (3, b.color_in),
-                (4, b.semantic_in),
+                ("dims", &uniform),
+                ("density_out", b.density_out),
+                ("feature_out", b.feature_out),
+                ("color_in", b.color_in),
+                ("semantic_in", b.semantic_in),
             ],
         )
         .await?;
         let gather_feature = stage(
             ctx,
             "gather_feature",
+            groups,
             &[
-                (0, &uniform),
-                (2, b.feature_out),
-                (5, b.semantic_in_grad),
-                (6, b.grad_heads),
+                ("dims", &uniform),
+                ("feature_out", b.feature_out),
+                ("semantic_in_grad", b.semantic_in_grad),
+                ("grad_heads", b.grad_heads),
             ],
         )
         .await?;
         let gather_geometry = stage(
             ctx,
             "gather_geometry",
+            groups,
             &[
-                (0, &uniform),
-                (5, b.semantic_in_grad),
-                (6, b.grad_heads),
-                (7, b.density_out_grad),
-                (8, b.color_in_grad),
-                (9, b.feature_in_grad),
+                ("dims", &uniform),
+                ("semantic_in_grad", b.semantic_in_grad),
+                ("grad_heads", b.grad_heads),
+                ("density_out_grad", b.density_out_grad),
+                ("color_in_grad", b.color_in_grad),
+                ("feature_in_grad", b.feature_in_grad),
             ],
         )
         .await?;
-        let dispatch = Dispatch1d::for_device(ctx, dims.samples.into(), WORKGROUP_SIZE)?;
         Ok(HeadGluePass {
             assemble,
             gather_feature,
             gather_geometry,
-            dispatch,
         })
-    }
-
-    fn record(&self, pass: &mut wgpu::ComputePass<'_>, stage: &Stage) {
-        pass.set_pipeline(&stage.pipeline);
-        pass.set_bind_group(0, &stage.bind_group, &[]);
-        self.dispatch.record(pass);
     }
 
     /// Forward: colour input's g columns and the whole semantic input.
     pub fn record_assemble(&self, pass: &mut wgpu::ComputePass<'_>) {
-        self.record(pass, &self.assemble);
+        self.assemble.record(pass);
     }
 
     /// Backward, after the semantic head: dL/df += relu'(f) · dL/d(semantic input)[f part].
     pub fn record_gather_feature(&self, pass: &mut wgpu::ComputePass<'_>) {
-        self.record(pass, &self.gather_feature);
+        self.gather_feature.record(pass);
     }
 
     /// Backward, after all heads: dL/dg into columns 1.. of the density output gradient.
     pub fn record_gather_geometry(&self, pass: &mut wgpu::ComputePass<'_>) {
-        self.record(pass, &self.gather_geometry);
+        self.gather_geometry.record(pass);
     }
 }

@@ -19,7 +19,8 @@
 //! normalized position (xyz in [0,1]³, w = t) and (δ, z-depth).
 use crate::field::config::FieldConfig;
 use crate::gpu::buffers::{storage_buffer_zeroed, uniform_buffer_from};
-use crate::gpu::pipeline::{Dispatch1d, KernelSpec, bind_buffers, bind_numbered, create_compute_pipeline};
+use crate::gpu::dispatch::{Dispatch, bind_named, whole};
+use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
 use crate::scene::Bounds;
 
@@ -170,11 +171,17 @@ fn check_batch(cfg: &FieldConfig, what: &str) -> Result<(), GpuError> {
         .map_err(|error| GpuError::invalid_argument(what, error.to_string()))
 }
 
+const RAY_BATCH_KERNEL: KernelSpec<'static> = KernelSpec {
+    label: "ray batch",
+    source: shaders::RAY_BATCH,
+    entry_point: "ray_batch",
+    layout: None,
+    constants: &[],
+};
+
 /// Picks the batch's rays and writes their geometry and targets.
 pub struct RayBatchPass {
-    pipeline: wgpu::ComputePipeline,
-    bind_group: wgpu::BindGroup,
-    dispatch: Dispatch1d,
+    dispatch: Dispatch,
     step_uniforms: wgpu::Buffer,
     labels_generation: u64,
     /// `cfg.batch_rays` [`RayGeometry`] records.
@@ -196,14 +203,11 @@ impl RayBatchPass {
         let target_stride = TARGET_HEADER_WORDS as u32 + cfg.feature_dim;
         let rays = storage_buffer_zeroed::<RayGeometry>(ctx, "ray geometry", batch)?;
         let targets = storage_buffer_zeroed::<u32>(ctx, "ray targets", batch * target_stride as usize)?;
-        let pipeline =
-            create_compute_pipeline(ctx, &KernelSpec::new("ray batch", shaders::RAY_BATCH, "ray_batch")).await?;
-        let dispatch = Dispatch1d::for_device(ctx, batch as u64, RAY_WORKGROUP_SIZE)?;
-        let bind_group = Self::bind(ctx, &pipeline, scene, step_uniforms, &rays, &targets);
+        let pipeline = create_compute_pipeline(ctx, &RAY_BATCH_KERNEL).await?;
+        let groups = Dispatch1d::for_device(ctx, batch as u64, RAY_WORKGROUP_SIZE)?;
+        let bind_group = Self::bind(ctx, &pipeline, scene, step_uniforms, &rays, &targets)?;
         Ok(RayBatchPass {
-            pipeline,
-            bind_group,
-            dispatch,
+            dispatch: Dispatch::new(pipeline, bind_group, groups),
             step_uniforms: step_uniforms.clone(),
             labels_generation: scene.labels_generation(),
             rays,
@@ -219,40 +223,39 @@ impl RayBatchPass {
         step_uniforms: &wgpu::Buffer,
         rays: &wgpu::Buffer,
         targets: &wgpu::Buffer,
-    ) -> wgpu::BindGroup {
-        let buffers = [
-            step_uniforms,
-            &scene.uniforms,
-            &scene.rgb,
-            &scene.depth,
-            &scene.poses,
-            &scene.features,
-            &scene.labels,
-            rays,
-            targets,
-        ];
-        bind_buffers(ctx, "ray batch", &pipeline.get_bind_group_layout(0), &buffers)
+    ) -> Result<wgpu::BindGroup, GpuError> {
+        let bindings = whole(&[
+            ("step_info", step_uniforms),
+            ("scene", &scene.uniforms),
+            ("rgb", &scene.rgb),
+            ("depth", &scene.depth),
+            ("poses", &scene.poses),
+            ("features", &scene.features),
+            ("labels", &scene.labels),
+            ("rays", rays),
+            ("targets", targets),
+        ]);
+        bind_named(ctx, &RAY_BATCH_KERNEL, &pipeline.get_bind_group_layout(0), 0, &bindings)
     }
 
     /// Rebinds after [`SceneBuffers::upload_labels`] replaced the labels buffer (a no-op
     /// otherwise). Call between steps, before recording.
     pub fn follow_labels(&mut self, ctx: &GpuContext, scene: &SceneBuffers) {
         if scene.labels_generation() != self.labels_generation {
-            self.bind_group = Self::bind(
+            self.dispatch.bind_group = Self::bind(
                 ctx,
-                &self.pipeline,
+                &self.dispatch.pipeline,
                 scene,
                 &self.step_uniforms,
                 &self.rays,
                 &self.targets,
-            );
+            )
+            .expect("the same bindings by the same names were accepted when the pass was made");
             self.labels_generation = scene.labels_generation();
         }
     }
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
         self.dispatch.record(pass);
     }
 }
@@ -271,9 +274,7 @@ pub struct TileUniforms {
 /// `rays` and `targets` buffers as [`RayBatchPass`], so every later pass works unchanged.
 /// Rays past the tile's pixel count miss the scene.
 pub struct FrameTilePass {
-    pipeline: wgpu::ComputePipeline,
-    bind_group: wgpu::BindGroup,
-    dispatch: Dispatch1d,
+    dispatch: Dispatch,
     tile: wgpu::Buffer,
 }
 
@@ -296,27 +297,21 @@ impl FrameTilePass {
                 _pad1: 0,
             },
         );
-        let pipeline =
-            create_compute_pipeline(ctx, &KernelSpec::new("frame tile", shaders::RAY_BATCH, "frame_tile")).await?;
-        let dispatch = Dispatch1d::for_device(ctx, u64::from(cfg.batch_rays), RAY_WORKGROUP_SIZE)?;
-        let bindings: [(u32, &wgpu::Buffer); 9] = [
-            (0, step_uniforms),
-            (1, &scene.uniforms),
-            (2, &scene.rgb),
-            (3, &scene.depth),
-            (4, &scene.poses),
-            (5, &scene.features),
-            (7, &batch.rays),
-            (8, &batch.targets),
-            (9, &tile),
-        ];
-        let bind_group = bind_numbered(ctx, "frame tile", &pipeline.get_bind_group_layout(0), &bindings);
-        Ok(FrameTilePass {
-            pipeline,
-            bind_group,
-            dispatch,
-            tile,
-        })
+        let spec = KernelSpec::new("frame tile", shaders::RAY_BATCH, "frame_tile");
+        let groups = Dispatch1d::for_device(ctx, u64::from(cfg.batch_rays), RAY_WORKGROUP_SIZE)?;
+        let bindings = whole(&[
+            ("step_info", step_uniforms),
+            ("scene", &scene.uniforms),
+            ("rgb", &scene.rgb),
+            ("depth", &scene.depth),
+            ("poses", &scene.poses),
+            ("features", &scene.features),
+            ("rays", &batch.rays),
+            ("targets", &batch.targets),
+            ("tile", &tile),
+        ]);
+        let dispatch = Dispatch::build(ctx, &spec, &bindings, groups).await?;
+        Ok(FrameTilePass { dispatch, tile })
     }
 
     /// Points the next recorded dispatch at pixels `first_pixel .. first_pixel + count`.
@@ -331,8 +326,6 @@ impl FrameTilePass {
     }
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
         self.dispatch.record(pass);
     }
 }
@@ -363,9 +356,7 @@ impl SamplePlanUniforms {
 
 /// Places `cfg.samples_per_ray()` samples on every ray of a [`RayBatchPass`].
 pub struct SamplePointsPass {
-    pipeline: wgpu::ComputePipeline,
-    bind_group: wgpu::BindGroup,
-    dispatch: Dispatch1d,
+    dispatch: Dispatch,
     /// B·S `vec4<f32>`: normalized position (xyz), t (w).
     pub positions: wgpu::Buffer,
     /// B·S `vec2<f32>`: (δ, z-depth of the sample).
@@ -386,21 +377,17 @@ impl SamplePointsPass {
         let positions = storage_buffer_zeroed::<[f32; 4]>(ctx, "sample positions", samples)?;
         let intervals = storage_buffer_zeroed::<[f32; 2]>(ctx, "sample intervals", samples)?;
         let plan = uniform_buffer_from(ctx, "sample plan", &SamplePlanUniforms::new(cfg, bounds));
-        let pipeline = create_compute_pipeline(
-            ctx,
-            &KernelSpec::new("sample points", shaders::SAMPLE_POINTS, "sample_points"),
-        )
-        .await?;
-        let dispatch = Dispatch1d::for_device(ctx, u64::from(cfg.batch_rays), RAY_WORKGROUP_SIZE)?;
-        let bind_group = bind_buffers(
-            ctx,
-            "sample points",
-            &pipeline.get_bind_group_layout(0),
-            &[step_uniforms, &plan, rays, &positions, &intervals],
-        );
+        let spec = KernelSpec::new("sample points", shaders::SAMPLE_POINTS, "sample_points");
+        let groups = Dispatch1d::for_device(ctx, u64::from(cfg.batch_rays), RAY_WORKGROUP_SIZE)?;
+        let bindings = whole(&[
+            ("step_info", step_uniforms),
+            ("plan", &plan),
+            ("rays", rays),
+            ("positions", &positions),
+            ("intervals", &intervals),
+        ]);
+        let dispatch = Dispatch::build(ctx, &spec, &bindings, groups).await?;
         Ok(SamplePointsPass {
-            pipeline,
-            bind_group,
             dispatch,
             positions,
             intervals,
@@ -408,8 +395,6 @@ impl SamplePointsPass {
     }
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
         self.dispatch.record(pass);
     }
 }

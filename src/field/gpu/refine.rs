@@ -5,7 +5,8 @@
 //! without blocking.
 use crate::field::refine::{Guide, HALF_TAPS, RefineOptions, TapScales, check_inputs, log_depth};
 use crate::gpu::buffers::{read_elements_async, storage_buffer_from, storage_buffer_zeroed, uniform_buffer_from};
-use crate::gpu::pipeline::{Dispatch1d, KernelSpec, bind_buffers, create_compute_pipeline};
+use crate::gpu::dispatch::{Dispatch, bind_named, whole};
+use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
 const WORKGROUP: u32 = 64;
@@ -78,11 +79,18 @@ pub struct RefinePass {
     pipeline: wgpu::ComputePipeline,
 }
 
+const REFINE_KERNEL: KernelSpec<'static> = KernelSpec {
+    label: "refine",
+    source: shaders::REFINE,
+    entry_point: "refine",
+    layout: None,
+    constants: &[],
+};
+
 impl RefinePass {
     pub async fn new(ctx: &GpuContext) -> Result<RefinePass, GpuError> {
-        let spec = KernelSpec::new("refine", shaders::REFINE, "refine");
         Ok(RefinePass {
-            pipeline: create_compute_pipeline(ctx, &spec).await?,
+            pipeline: create_compute_pipeline(ctx, &REFINE_KERNEL).await?,
         })
     }
 
@@ -96,19 +104,26 @@ impl RefinePass {
         input: &wgpu::Buffer,
         output: &wgpu::Buffer,
     ) -> Result<(), GpuError> {
-        let dispatch = Dispatch1d::for_device(ctx, guide.pixels, WORKGROUP)?;
-        let bind_group = bind_buffers(
+        let groups = Dispatch1d::for_device(ctx, guide.pixels, WORKGROUP)?;
+        let bindings = whole(&[
+            ("u", &guide.uniforms),
+            ("colour", &guide.colour),
+            ("log_depth", &guide.log_depth),
+            ("probabilities_in", input),
+            ("probabilities_out", output),
+        ]);
+        let bind_group = bind_named(
             ctx,
-            "refine",
+            &REFINE_KERNEL,
             &self.pipeline.get_bind_group_layout(0),
-            &[&guide.uniforms, &guide.colour, &guide.log_depth, input, output],
-        );
+            0,
+            &bindings,
+        )?;
+        let dispatch = Dispatch::new(self.pipeline.clone(), bind_group, groups);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("refine"),
             timestamp_writes: None,
         });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
         dispatch.record(&mut pass);
         Ok(())
     }

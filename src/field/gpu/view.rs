@@ -10,6 +10,7 @@ use crate::field::refine::{Guide, RefineOptions, argmax_and_confidence, refine_p
 use crate::gpu::{GpuContext, GpuError};
 
 use super::refine::RefinePass;
+use crate::scene::resample::nearest_source;
 use crate::scene::{Bounds, Intrinsics, Pca, Pose, Scene};
 
 use super::rays::{RAY_HITS_BOX, RayGeometry};
@@ -49,14 +50,14 @@ pub enum DepthGuide<'a> {
     Estimate,
 }
 
-/// Frame `frame`'s measured depth resampled (nearest pixel) to `width × height`, in metres,
+/// Frame `frame`'s measured depth resampled (nearest pixel centre, `scene::resample`) to `width × height`, in metres,
 /// 0 where there is none: the guide for rendering a scene frame at another resolution.
 pub fn frame_depth_at(scene: &Scene, frame: usize, width: u32, height: u32) -> Vec<f32> {
     let mut out = Vec::with_capacity(width as usize * height as usize);
     for y in 0..height {
-        let sy = ((u64::from(y) * 2 + 1) * u64::from(scene.height) / (2 * u64::from(height))) as u32;
+        let sy = nearest_source(y, scene.height, height);
         for x in 0..width {
-            let sx = ((u64::from(x) * 2 + 1) * u64::from(scene.width) / (2 * u64::from(width))) as u32;
+            let sx = nearest_source(x, scene.width, width);
             out.push(scene.depth_m(frame, sx, sy).unwrap_or(0.0) as f32);
         }
     }

@@ -2,8 +2,10 @@
 //! caller applies the output activation).
 //!
 //! `dims` = [in, hidden…, out]; `weights` holds the layers back to back, layer k a row-major
-//! `[dims[k+1]][dims[k]]` matrix (the layout of `field::params::MlpLayout`).
+//! `[dims[k+1]][dims[k]]` matrix (the layout of `field::params::MlpLayout`). Each layer is the
+//! crate's one CPU dense layer, `crate::dense::DenseLayer`, without bias.
 use super::real::Real;
+use crate::dense::DenseLayer;
 
 /// Number of weights of an MLP with these layer sizes.
 pub fn weight_count(dims: &[usize]) -> usize {
@@ -34,16 +36,12 @@ pub fn forward<R: Real>(dims: &[usize], weights: &[R], input: &[R]) -> MlpTrace<
     let mut offset = 0;
     for k in 0..layers {
         let (n_in, n_out) = (dims[k], dims[k + 1]);
-        let w = &weights[offset..offset + n_in * n_out];
-        let x = &activations[k];
-        let hidden = k + 1 < layers;
-        let y: Vec<R> = w
-            .chunks_exact(n_in)
-            .map(|row| {
-                let v: R = row.iter().zip(x).map(|(a, b)| *a * *b).sum();
-                if hidden { v.max(R::ZERO) } else { v }
-            })
-            .collect();
+        let layer = DenseLayer::new(n_in, n_out, &weights[offset..offset + n_in * n_out], None);
+        let mut y = vec![R::ZERO; n_out];
+        layer.forward(&activations[k], &mut y);
+        if k + 1 < layers {
+            y.iter_mut().for_each(|v| *v = v.max(R::ZERO));
+        }
         activations.push(y);
         offset += n_in * n_out;
     }
@@ -71,17 +69,11 @@ pub fn backward<R: Real>(
     let mut grad = grad_out.to_vec();
     for k in (0..layers).rev() {
         let (n_in, n_out) = (dims[k], dims[k + 1]);
-        let w = &weights[offsets[k]..offsets[k] + n_in * n_out];
+        let layer = DenseLayer::new(n_in, n_out, &weights[offsets[k]..offsets[k] + n_in * n_out], None);
         let wg = &mut weight_grad[offsets[k]..offsets[k] + n_in * n_out];
         let x = &trace.activations[k];
         let mut grad_in = vec![R::ZERO; n_in];
-        for o in 0..n_out {
-            let g = grad[o];
-            for i in 0..n_in {
-                wg[o * n_in + i] += g * x[i];
-                grad_in[i] += g * w[o * n_in + i];
-            }
-        }
+        layer.backward(x, &grad, wg, None, Some(&mut grad_in));
         if k > 0 {
             // x is the ReLU output of the previous layer.
             for (gi, xi) in grad_in.iter_mut().zip(x) {

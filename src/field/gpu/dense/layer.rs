@@ -8,6 +8,7 @@ use super::tiled::{REDUCE_SHAPE, REDUCE_WORKGROUP, TileShape, weight_chunks};
 use super::uniform::{UniformWeightPartials, WindowedLayer, uniform_weight_chunks};
 use super::{Activation, DenseFamily, RowView};
 use crate::gpu::buffers::{storage_buffer_zeroed, uniform_buffer_from};
+use crate::gpu::dispatch::{Dispatch, bind_named};
 use crate::gpu::pipeline::Dispatch1d;
 use crate::gpu::{GpuContext, GpuError};
 
@@ -81,40 +82,15 @@ impl DenseLayerSpec {
     }
 }
 
-/// A pipeline, its bind group and workgroup counts: one recorded dispatch.
-pub(super) struct BoundDispatch {
-    pub(super) pipeline: wgpu::ComputePipeline,
-    pub(super) bind_group: wgpu::BindGroup,
-    pub(super) workgroups: [u32; 3],
-}
-
-impl BoundDispatch {
-    pub(super) fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
-        let [x, y, z] = self.workgroups;
-        pass.dispatch_workgroups(x, y, z);
-    }
-}
-
-pub(super) fn bind_group(
+/// One dense kernel's dispatch, its group 0 bound by the WGSL names of `kernel`'s bindings.
+pub(super) fn bound(
     ctx: &GpuContext,
-    label: &str,
-    pipeline: &wgpu::ComputePipeline,
-    resources: &[(u32, wgpu::BindingResource<'_>)],
-) -> wgpu::BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry<'_>> = resources
-        .iter()
-        .map(|(binding, resource)| wgpu::BindGroupEntry {
-            binding: *binding,
-            resource: resource.clone(),
-        })
-        .collect();
-    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some(label),
-        layout: &pipeline.get_bind_group_layout(0),
-        entries: &entries,
-    })
+    (pipeline, kernel): (wgpu::ComputePipeline, DenseKernel),
+    resources: &[(&str, wgpu::BindingResource<'_>)],
+    workgroups: impl Into<[u32; 3]>,
+) -> Result<Dispatch, GpuError> {
+    let bind_group = bind_named(ctx, &kernel.spec(), &pipeline.get_bind_group_layout(0), 0, resources)?;
+    Ok(Dispatch::new(pipeline, bind_group, workgroups))
 }
 
 /// The part of a flat buffer holding `range` (in f32), bound from an offset the device accepts,
@@ -157,7 +133,7 @@ fn check_binding(ctx: &GpuContext, what: &str, buffer: &wgpu::Buffer) -> Result<
 /// The forward of one layer, bound to its buffers.
 pub struct DenseForward {
     spec: DenseLayerSpec,
-    dispatch: BoundDispatch,
+    dispatch: Dispatch,
     family: DenseFamily,
 }
 
@@ -178,7 +154,7 @@ impl DenseForward {
         output.check(&format!("{label} output"), spec.rows, spec.out_dim)?;
         check_binding(ctx, &label, &input.buffer)?;
         check_binding(ctx, &label, &output.buffer)?;
-        let (pipeline, (weights, weight_offset), workgroups, family) = pipelines
+        let (kernel, (weights, weight_offset), workgroups, family) = pipelines
             .product_kernel(ctx, &label, params, spec, ProductKind::Forward)
             .await?;
         let dims = DenseDims {
@@ -190,24 +166,20 @@ impl DenseForward {
             ..spec.base_dims()
         };
         let uniform = uniform_buffer_from(ctx, &label, &dims);
-        let bind_group = bind_group(
+        let dispatch = bound(
             ctx,
-            &label,
-            &pipeline,
+            kernel,
             &[
-                (0, uniform.as_entire_binding()),
-                (1, input.buffer.as_entire_binding()),
-                (2, weights),
-                (3, output.buffer.as_entire_binding()),
+                ("dims", uniform.as_entire_binding()),
+                ("x", input.buffer.as_entire_binding()),
+                ("weights", weights),
+                ("y", output.buffer.as_entire_binding()),
             ],
-        );
+            workgroups,
+        )?;
         Ok(DenseForward {
             spec: spec.clone(),
-            dispatch: BoundDispatch {
-                pipeline,
-                bind_group,
-                workgroups,
-            },
+            dispatch,
             family,
         })
     }
@@ -239,16 +211,16 @@ pub struct DenseGradients<'a> {
 
 /// The backward of one layer, bound to its buffers; owns the per-chunk partial sums of dW.
 pub struct DenseBackward {
-    input_grad: Option<BoundDispatch>,
+    input_grad: Option<Dispatch>,
     partial_sums: WeightPartials,
-    reduce: BoundDispatch,
+    reduce: Dispatch,
     chunks: u32,
 }
 
 /// The first half of dW: every chunk of rows' partial matrix.
 enum WeightPartials {
     /// One dispatch of the tiled kernel over all chunks.
-    Tiled(BoundDispatch),
+    Tiled(Dispatch),
     /// dZ masked into a packed buffer, then one dispatch per chunk reading it as uniform.
     Uniform(UniformWeightPartials),
 }
@@ -298,7 +270,7 @@ impl DenseBackward {
                 let label = format!("{label} input gradient");
                 input_grad.check(&label, spec.rows, spec.in_dim)?;
                 check_binding(ctx, &label, &input_grad.buffer)?;
-                let (pipeline, (weights, weight_offset), workgroups, _) = pipelines
+                let (kernel, (weights, weight_offset), workgroups, _) = pipelines
                     .product_kernel(ctx, &label, params, spec, ProductKind::BackwardInput)
                     .await?;
                 let dims = DenseDims {
@@ -308,23 +280,18 @@ impl DenseBackward {
                     ..base
                 };
                 let uniform = uniform_buffer_from(ctx, &label, &dims);
-                let bind_group = bind_group(
+                Some(bound(
                     ctx,
-                    &label,
-                    &pipeline,
+                    kernel,
                     &[
-                        (0, uniform.as_entire_binding()),
-                        (1, output_grad.buffer.as_entire_binding()),
-                        (2, output.buffer.as_entire_binding()),
-                        (3, weights),
-                        (4, input_grad.buffer.as_entire_binding()),
+                        ("dims", uniform.as_entire_binding()),
+                        ("dy", output_grad.buffer.as_entire_binding()),
+                        ("y", output.buffer.as_entire_binding()),
+                        ("weights", weights),
+                        ("dx", input_grad.buffer.as_entire_binding()),
                     ],
-                );
-                Some(BoundDispatch {
-                    pipeline,
-                    bind_group,
                     workgroups,
-                })
+                )?)
             }
         };
 
@@ -370,48 +337,38 @@ impl DenseBackward {
             ),
             None => {
                 let pipeline = pipelines.get(ctx, DenseKernel::PartialSums, shape).await?;
-                let bind = bind_group(
-                    ctx,
-                    &label,
-                    &pipeline,
-                    &[
-                        (0, uniform.as_entire_binding()),
-                        (1, output_grad.buffer.as_entire_binding()),
-                        (2, output.buffer.as_entire_binding()),
-                        (3, input.buffer.as_entire_binding()),
-                        (4, partials.as_entire_binding()),
-                    ],
-                );
                 let workgroups = [
                     spec.in_dim.div_ceil(shape.tile_columns()),
                     spec.out_dim.div_ceil(shape.tile_rows()),
                     chunks,
                 ];
-                WeightPartials::Tiled(BoundDispatch {
-                    pipeline,
-                    bind_group: bind,
+                WeightPartials::Tiled(bound(
+                    ctx,
+                    (pipeline, DenseKernel::PartialSums),
+                    &[
+                        ("dims", uniform.as_entire_binding()),
+                        ("dy", output_grad.buffer.as_entire_binding()),
+                        ("y", output.buffer.as_entire_binding()),
+                        ("x", input.buffer.as_entire_binding()),
+                        ("partials", partials.as_entire_binding()),
+                    ],
                     workgroups,
-                })
+                )?)
             }
         };
 
         let pipeline = pipelines.get(ctx, DenseKernel::ReduceChunks, REDUCE_SHAPE).await?;
-        let bind = bind_group(
-            ctx,
-            &label,
-            &pipeline,
-            &[
-                (0, uniform.as_entire_binding()),
-                (4, partials.as_entire_binding()),
-                (5, grads),
-            ],
-        );
         let reduce_groups = Dispatch1d::for_device(ctx, matrix as u64, REDUCE_WORKGROUP)?;
-        let reduce = BoundDispatch {
-            pipeline,
-            bind_group: bind,
-            workgroups: [reduce_groups.x, reduce_groups.y, 1],
-        };
+        let reduce = bound(
+            ctx,
+            (pipeline, DenseKernel::ReduceChunks),
+            &[
+                ("dims", uniform.as_entire_binding()),
+                ("partials", partials.as_entire_binding()),
+                ("grads", grads),
+            ],
+            reduce_groups,
+        )?;
         Ok(DenseBackward {
             input_grad,
             partial_sums,

@@ -22,6 +22,13 @@ pub(super) enum DenseKernel {
 }
 
 impl DenseKernel {
+    /// The kernel's shader and entry point (no override constants): what its bindings are
+    /// named by (`gpu::dispatch::bind_named`).
+    pub(super) fn spec(self) -> KernelSpec<'static> {
+        let (label, source, entry_point) = self.source();
+        KernelSpec::new(label, source, entry_point)
+    }
+
     pub(super) fn source(self) -> (&'static str, &'static str, &'static str) {
         match self {
             DenseKernel::Forward => ("dense forward", shaders::DENSE_FORWARD, "forward"),
@@ -133,10 +140,10 @@ pub(super) enum ProductKind {
     BackwardInput,
 }
 
-/// A pipeline, the weights' binding (and where the layer starts in it), the workgroup counts and
-/// the family actually used.
+/// A pipeline and the kernel it runs, the weights' binding (and where the layer starts in it),
+/// the workgroup counts and the family actually used.
 pub(super) type ProductKernel<'a> = (
-    wgpu::ComputePipeline,
+    (wgpu::ComputePipeline, DenseKernel),
     (wgpu::BindingResource<'a>, u32),
     [u32; 3],
     DenseFamily,
@@ -164,12 +171,17 @@ impl DensePipelines {
         if let Some(binding) = self.uniform_weights(ctx, params, &spec.weights) {
             let pipeline = self.get_uniform(ctx, uniform_kernel, uniform_block(columns)).await?;
             let workgroups = uniform_dispatch(ctx, spec.rows, columns)?;
-            return Ok((pipeline, binding, workgroups, DenseFamily::UniformWeights));
+            return Ok((
+                (pipeline, uniform_kernel),
+                binding,
+                workgroups,
+                DenseFamily::UniformWeights,
+            ));
         }
         let shape = TileShape::for_product(columns, None);
         let pipeline = self.get(ctx, tiled_kernel, shape).await?;
         let binding = range_binding(ctx, label, params, &spec.weights)?;
         let workgroups = row_tile_dispatch(ctx, spec.rows, shape, columns.div_ceil(shape.tile_columns()))?;
-        Ok((pipeline, binding, workgroups, DenseFamily::Tiled))
+        Ok(((pipeline, tiled_kernel), binding, workgroups, DenseFamily::Tiled))
     }
 }

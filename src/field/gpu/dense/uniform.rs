@@ -4,9 +4,10 @@
 use std::num::NonZeroU64;
 use std::ops::Range;
 
-use super::layer::{BoundDispatch, DenseLayerSpec, bind_group};
+use super::layer::{DenseLayerSpec, bound};
 use super::pipelines::{DenseKernel, DensePipelines};
 use super::{DenseFamily, RowView};
+use crate::gpu::dispatch::{Dispatch, bind_named};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError};
 
@@ -55,7 +56,7 @@ pub(super) struct WindowedLayer<'a> {
 }
 
 pub(super) struct UniformWeightPartials {
-    mask: BoundDispatch,
+    mask: Dispatch,
     pipeline: wgpu::ComputePipeline,
     common: wgpu::BindGroup,
     windows: wgpu::BindGroup,
@@ -112,67 +113,58 @@ impl UniformWeightPartials {
         );
 
         let mask_pipeline = pipelines.compile(ctx, DenseKernel::MaskOutputGradient, &[]).await?;
-        let mask_bind = bind_group(
-            ctx,
-            label,
-            &mask_pipeline,
-            &[
-                (0, dims.as_entire_binding()),
-                (1, output_grad.buffer.as_entire_binding()),
-                (2, output.buffer.as_entire_binding()),
-                (6, dz.as_entire_binding()),
-            ],
-        );
         let groups = Dispatch1d::for_device(ctx, u64::from(spec.rows) * u64::from(spec.out_dim), UNIFORM_WORKGROUP)?;
-        let mask = BoundDispatch {
-            pipeline: mask_pipeline,
-            bind_group: mask_bind,
-            workgroups: [groups.x, groups.y, 1],
-        };
+        let mask = bound(
+            ctx,
+            (mask_pipeline, DenseKernel::MaskOutputGradient),
+            &[
+                ("dims", dims.as_entire_binding()),
+                ("dy", output_grad.buffer.as_entire_binding()),
+                ("y", output.buffer.as_entire_binding()),
+                ("dz_out", dz.as_entire_binding()),
+            ],
+            groups,
+        )?;
 
         let block = uniform_block(spec.out_dim);
         let columns = spec.in_dim.next_power_of_two().clamp(8, UNIFORM_WORKGROUP);
         let (pipeline, layouts) = pipelines.chunk_sums_pipeline(ctx, block, columns).await?;
-        let common = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(label),
-            layout: &layouts[0],
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: dims.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: input.buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: partials.as_entire_binding(),
-                },
+        let sums = DenseKernel::ChunkPartialSums.spec();
+        let common = bind_named(
+            ctx,
+            &sums,
+            &layouts[0],
+            0,
+            &[
+                ("dims", dims.as_entire_binding()),
+                ("x", input.buffer.as_entire_binding()),
+                ("partials", partials.as_entire_binding()),
             ],
-        });
-        let windows = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(label),
-            layout: &layouts[1],
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+        )?;
+        let windows = bind_named(
+            ctx,
+            &sums,
+            &layouts[1],
+            1,
+            &[
+                (
+                    "dz",
+                    wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                         buffer: &dz,
                         offset: 0,
                         size: NonZeroU64::new(UNIFORM_WEIGHT_FLOATS as u64 * 4),
                     }),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                ),
+                (
+                    "chunk",
+                    wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                         buffer: &info,
                         offset: 0,
                         size: NonZeroU64::new(size_of::<ChunkInfo>() as u64),
                     }),
-                },
+                ),
             ],
-        });
+        )?;
         Ok(UniformWeightPartials {
             mask,
             pipeline,

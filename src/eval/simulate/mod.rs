@@ -24,8 +24,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::field::FieldConfig;
-use crate::field::gpu::trainer::{Trainer, TrainerState};
+use crate::field::gpu::trainer::Trainer;
 use crate::field::refine::RefineOptions;
 use crate::gpu::{GpuContext, GpuError};
 use crate::labels::{LabelSet, Stroke, UNLABELLED, rasterize_frame};
@@ -33,7 +32,7 @@ use crate::rng::SplitMix64;
 use crate::scene::GT_VOID;
 use crate::scene::Scene;
 
-use super::curves::{CurvePoint, curve_csv};
+use super::curves::CurvePoint;
 use super::headless::render_and_score;
 
 pub const STATE_FILE: &str = "simulate.json";
@@ -47,6 +46,15 @@ const STATE_VERSION: u32 = 1;
 const TRAINER_MAGIC: &[u8; 8] = b"SFTRAIN1";
 /// Steps trained between loss read-backs (and progress reports).
 const CHUNK: u32 = 10;
+
+mod files;
+mod run_lock;
+mod settings;
+
+pub use files::{decode_trainer_state, encode_trainer_state};
+use files::{load_state, save};
+use run_lock::RunLock;
+pub use settings::{FrameSplit, SceneId, SimulateSettings};
 
 #[derive(Debug, thiserror::Error)]
 pub enum SimulateError {
@@ -70,156 +78,6 @@ fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> SimulateError + '_ {
     move |source| SimulateError::Io {
         path: path.to_path_buf(),
         source,
-    }
-}
-
-/// Which frames the user clicks on and which are scored.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct FrameSplit {
-    pub train: Vec<u32>,
-    pub held_out: Vec<u32>,
-}
-
-impl FrameSplit {
-    /// Every `n`-th frame held out: frames n-1, 2n-1, … (so frame 0 is a training frame).
-    pub fn every(frames: u32, n: u32) -> Result<FrameSplit, SimulateError> {
-        if n < 2 {
-            return Err(SimulateError::Invalid(format!(
-                "--held-out-every {n}: must be at least 2 (1 would hold out every frame)"
-            )));
-        }
-        let held_out: Vec<u32> = (0..frames).filter(|i| i % n == n - 1).collect();
-        Self::explicit(frames, &held_out).map_err(|e| SimulateError::Invalid(format!("--held-out-every {n}: {e}")))
-    }
-
-    /// The given frames held out, the others trained on.
-    pub fn explicit(frames: u32, held_out: &[u32]) -> Result<FrameSplit, SimulateError> {
-        if let Some(bad) = held_out.iter().find(|&&f| f >= frames) {
-            return Err(SimulateError::Invalid(format!(
-                "held-out frame {bad} does not exist (the scene has {frames} frames)"
-            )));
-        }
-        let mut held: Vec<u32> = held_out.to_vec();
-        held.sort_unstable();
-        held.dedup();
-        let train: Vec<u32> = (0..frames).filter(|f| !held.contains(f)).collect();
-        if held.is_empty() {
-            return Err(SimulateError::Invalid(format!(
-                "no frame is held out for scoring (the scene has {frames} frames)"
-            )));
-        }
-        if train.is_empty() {
-            return Err(SimulateError::Invalid(
-                "every frame is held out: none is left to click on".into(),
-            ));
-        }
-        Ok(FrameSplit { train, held_out: held })
-    }
-}
-
-/// What identifies a scene for resuming: a hash of the archive's bytes and its shape.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct SceneId {
-    /// FNV-1a (64 bit) of the archive file, hex.
-    pub archive_fnv1a: String,
-    pub frames: u32,
-    pub width: u32,
-    pub height: u32,
-}
-
-impl SceneId {
-    pub fn new(archive_bytes: &[u8], scene: &Scene) -> SceneId {
-        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-        for &b in archive_bytes {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-        SceneId {
-            archive_fnv1a: format!("{h:016x}"),
-            frames: scene.frames.len() as u32,
-            width: scene.width,
-            height: scene.height,
-        }
-    }
-}
-
-/// Everything that decides a run (a resumed run must have the same).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct SimulateSettings {
-    pub scene: SceneId,
-    pub config: FieldConfig,
-    pub seed: u32,
-    pub warmup: u32,
-    pub steps_per_round: u32,
-    pub clicks_per_round: u32,
-    /// Brush radius of a click; 0.5 labels exactly the clicked pixel.
-    pub click_radius: f32,
-    /// Evaluate every this many rounds (and after the last one).
-    pub eval_every: u32,
-    pub frames: FrameSplit,
-}
-
-impl SimulateSettings {
-    pub fn check(&self) -> Result<(), SimulateError> {
-        let positive = [
-            ("--steps-per-round", self.steps_per_round),
-            ("--clicks-per-round", self.clicks_per_round),
-            ("--eval-every", self.eval_every),
-        ];
-        for (flag, v) in positive {
-            if v == 0 {
-                return Err(SimulateError::Invalid(format!("{flag} 0: must be at least 1")));
-            }
-        }
-        if !(self.click_radius.is_finite() && self.click_radius >= 0.5 && self.click_radius <= 64.0) {
-            return Err(SimulateError::Invalid(format!(
-                "--click-radius {}: must be between 0.5 (one pixel) and 64",
-                self.click_radius
-            )));
-        }
-        self.config
-            .validate()
-            .map_err(|e| SimulateError::Invalid(e.to_string()))
-    }
-
-    /// Names the settings that differ from `other`, as "name: this vs other" (config fields one
-    /// level down, e.g. `config.batch_rays`).
-    pub fn differences(&self, other: &SimulateSettings) -> Vec<String> {
-        let (a, b) = (
-            serde_json::to_value(self).expect("settings serialize"),
-            serde_json::to_value(other).expect("settings serialize"),
-        );
-        let mut out = Vec::new();
-        diff_values("", &a, &b, 2, &mut out);
-        out
-    }
-}
-
-fn diff_values(prefix: &str, a: &serde_json::Value, b: &serde_json::Value, depth: u32, out: &mut Vec<String>) {
-    use serde_json::Value;
-    match (a, b) {
-        (Value::Object(ma), Value::Object(mb)) if depth > 0 => {
-            let mut keys: Vec<&String> = ma.keys().chain(mb.keys()).collect();
-            keys.sort();
-            keys.dedup();
-            for k in keys {
-                let name = if prefix.is_empty() {
-                    k.clone()
-                } else {
-                    format!("{prefix}.{k}")
-                };
-                let null = Value::Null;
-                diff_values(
-                    &name,
-                    ma.get(k).unwrap_or(&null),
-                    mb.get(k).unwrap_or(&null),
-                    depth - 1,
-                    out,
-                );
-            }
-        }
-        _ if a != b => out.push(format!("{prefix}: {a} vs {b}")),
-        _ => {}
     }
 }
 
@@ -458,53 +316,6 @@ pub fn run(
     Ok(state)
 }
 
-/// `simulate.lock` holding the process id; removed when dropped. A lock left by a process that
-/// no longer runs (killed, interrupted) is taken over where that can be checked (`/proc`).
-struct RunLock {
-    path: PathBuf,
-}
-
-impl RunLock {
-    fn acquire(out: &Path) -> Result<RunLock, SimulateError> {
-        let path = out.join(LOCK_FILE);
-        for _ in 0..2 {
-            match std::fs::OpenOptions::new().write(true).create_new(true).open(&path) {
-                Ok(mut file) => {
-                    use std::io::Write;
-                    write!(file, "{}", std::process::id()).map_err(io_error(&path))?;
-                    return Ok(RunLock { path });
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                    let holder = std::fs::read_to_string(&path).unwrap_or_default();
-                    let pid = holder.trim();
-                    let proc = Path::new("/proc");
-                    let stale = proc.join("self").exists() && !pid.is_empty() && !proc.join(pid).exists();
-                    if !stale {
-                        return Err(SimulateError::Output {
-                            path,
-                            problem: format!(
-                                "another run (process {pid}) is writing this folder; wait for it, or delete the lock file if no such process runs"
-                            ),
-                        });
-                    }
-                    std::fs::remove_file(&path).map_err(io_error(&path))?;
-                }
-                Err(e) => return Err(io_error(&path)(e)),
-            }
-        }
-        Err(SimulateError::Output {
-            path,
-            problem: "could not take the lock".into(),
-        })
-    }
-}
-
-impl Drop for RunLock {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.path);
-    }
-}
-
 fn check_scene(scene: &Scene, settings: &SimulateSettings) -> Result<(), SimulateError> {
     if !scene.has_gt() || scene.classes.is_empty() {
         return Err(SimulateError::Invalid(
@@ -571,129 +382,11 @@ fn evaluate(trainer: &mut Trainer, scene: &Scene, state: &SimulateState) -> Resu
     })
 }
 
-/// Writes `path` through a temporary file and a rename, so a crash leaves the old or the new.
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SimulateError> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, bytes).map_err(io_error(&tmp))?;
-    std::fs::rename(&tmp, path).map_err(io_error(path))
-}
-
-fn save(out: &Path, state: &SimulateState, labels: &LabelSet, trainer: &Trainer) -> Result<(), SimulateError> {
-    let trainer_state = pollster::block_on(trainer.read_state())?;
-    write_atomic(
-        &out.join(TRAINER_FILE),
-        &encode_trainer_state(state.rounds, &trainer_state),
-    )?;
-    write_atomic(&out.join(LABELS_FILE), labels.to_json().as_bytes())?;
-    write_atomic(&out.join(CURVE_FILE), curve_csv(&state.curve).as_bytes())?;
-    let json = serde_json::to_string_pretty(state).expect("state serializes");
-    write_atomic(&out.join(STATE_FILE), json.as_bytes())
-}
-
-/// The saved run in `out`, if any, checked against `settings`.
-fn load_state(
-    out: &Path,
-    settings: &SimulateSettings,
-) -> Result<Option<(SimulateState, LabelSet, TrainerState)>, SimulateError> {
-    let path = out.join(STATE_FILE);
-    if !path.exists() {
-        return Ok(None);
-    }
-    let text = std::fs::read(&path).map_err(io_error(&path))?;
-    let damaged = |problem: String| SimulateError::Output {
-        path: path.clone(),
-        problem: format!("{problem}; pass --restart to start over"),
-    };
-    let state: SimulateState =
-        serde_json::from_slice(&text).map_err(|e| damaged(format!("not a simulate state: {e}")))?;
-    if state.format != STATE_FORMAT || state.version != STATE_VERSION {
-        return Err(damaged(format!(
-            "format {:?} version {} (expected {STATE_FORMAT:?} version {STATE_VERSION})",
-            state.format, state.version
-        )));
-    }
-    let diff = state.settings.differences(settings);
-    if !diff.is_empty() {
-        return Err(SimulateError::Output {
-            path,
-            problem: format!(
-                "holds a run with other settings (saved vs now: {}); use another output folder or --restart",
-                diff.join("; ")
-            ),
-        });
-    }
-    let labels_path = out.join(LABELS_FILE);
-    let text = std::fs::read(&labels_path).map_err(io_error(&labels_path))?;
-    let labels = LabelSet::from_json(&text, &labels_path.display().to_string(), settings.scene.frames)
-        .map_err(|e| SimulateError::Invalid(e.to_string()))?;
-    let trainer_path = out.join(TRAINER_FILE);
-    let bytes = std::fs::read(&trainer_path).map_err(io_error(&trainer_path))?;
-    let (round, trainer_state) = decode_trainer_state(&bytes).map_err(|problem| SimulateError::Output {
-        path: trainer_path.clone(),
-        problem,
-    })?;
-    if round != state.rounds || trainer_state.step != state.steps {
-        return Err(SimulateError::Output {
-            path: trainer_path,
-            problem: format!(
-                "holds round {round} (step {}) but {STATE_FILE} says round {} (step {}): interrupted while saving; pass --restart",
-                trainer_state.step, state.rounds, state.steps
-            ),
-        });
-    }
-    Ok(Some((state, labels, trainer_state)))
-}
-
-/// `trainer.bin`: magic, round, step, count (u32 LE each), then params, first and second
-/// moment (count f32 LE each).
-pub fn encode_trainer_state(round: u32, s: &TrainerState) -> Vec<u8> {
-    let n = s.params.len();
-    let mut out = Vec::with_capacity(20 + 12 * n);
-    out.extend_from_slice(TRAINER_MAGIC);
-    for v in [round, s.step, n as u32] {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
-    for part in [&s.params, &s.first_moment, &s.second_moment] {
-        for v in part.iter() {
-            out.extend_from_slice(&v.to_le_bytes());
-        }
-    }
-    out
-}
-
-pub fn decode_trainer_state(bytes: &[u8]) -> Result<(u32, TrainerState), String> {
-    if bytes.len() < 20 || &bytes[..8] != TRAINER_MAGIC {
-        return Err("not a trainer checkpoint (bad header)".into());
-    }
-    let word = |i: usize| u32::from_le_bytes(bytes[8 + 4 * i..12 + 4 * i].try_into().expect("4 bytes"));
-    let (round, step, n) = (word(0), word(1), word(2) as usize);
-    if bytes.len() != 20 + 12 * n {
-        return Err(format!(
-            "{} bytes, expected {} for {n} parameters",
-            bytes.len(),
-            20 + 12 * n
-        ));
-    }
-    let floats = |k: usize| -> Vec<f32> {
-        bytes[20 + 4 * n * k..20 + 4 * n * (k + 1)]
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
-            .collect()
-    };
-    Ok((
-        round,
-        TrainerState {
-            step,
-            params: floats(0),
-            first_moment: floats(1),
-            second_moment: floats(2),
-        },
-    ))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::field::FieldConfig;
+    use crate::field::gpu::trainer::TrainerState;
 
     #[test]
     fn clicks_are_distinct_wrong_unlabelled_and_never_void() {
