@@ -3,7 +3,7 @@
 //! centre (interpolating depth would invent surfaces between foreground and background, and
 //! interpolating class ids would invent classes).
 use image::imageops::FilterType;
-use image::{ImageBuffer, Luma, Pixel, RgbImage};
+use image::{ImageBuffer, Luma, RgbImage};
 
 /// Output size for an image of `size` whose longest side may be at most `max_side`: only ever
 /// smaller, aspect ratio kept, at least one pixel per side.
@@ -27,21 +27,8 @@ pub fn resize_rgb(img: &RgbImage, to: (u32, u32)) -> RgbImage {
     image::imageops::resize(img, to.0, to.1, FilterType::Triangle)
 }
 
-/// Nearest-pixel-centre resampling: output pixel centre (x + 0.5) maps to source coordinate
-/// (x + 0.5) * from / to, the same mapping `Intrinsics::scaled` assumes.
-pub fn resize_nearest<P: Pixel>(
-    img: &ImageBuffer<P, Vec<P::Subpixel>>,
-    to: (u32, u32),
-) -> ImageBuffer<P, Vec<P::Subpixel>> {
-    let (w, h) = img.dimensions();
-    if (w, h) == to {
-        return img.clone();
-    }
-    let src = |dst: u32, from: u32, to: u32| (((dst as f64 + 0.5) * from as f64 / to as f64) as u32).min(from - 1);
-    let xs: Vec<u32> = (0..to.0).map(|x| src(x, w, to.0)).collect();
-    let ys: Vec<u32> = (0..to.1).map(|y| src(y, h, to.1)).collect();
-    ImageBuffer::from_fn(to.0, to.1, |x, y| *img.get_pixel(xs[x as usize], ys[y as usize]))
-}
+/// Nearest-pixel-centre resampling, the one the page and the masks use too.
+pub use crate::scene::resample::resize_nearest;
 
 /// Whether two image sizes have the same aspect ratio (to within a pixel of rounding), so one
 /// can be resampled onto the other without distorting it.
