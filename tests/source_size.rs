@@ -46,6 +46,7 @@ fn fails(o: &Output, mentions: &[&str]) {
     for m in mentions {
         assert!(t.contains(m), "output should mention {m:?}:\n{t}");
     }
+    eprintln!("refused as it should be: {}", t.lines().last().unwrap_or(""));
 }
 
 /// Writes `scene` as an autolabel capture folder (rgb/, depth/ in mm, pose/ world-to-camera,
@@ -133,8 +134,8 @@ fn masks_at_the_capture_size_agree_with_the_archive_size() {
     let segment = |out: &str, extra: &[&str]| {
         let (scene, labels, out, cfg) = (path("s.scene.zip"), path("l.json"), path(out), path("c.json"));
         let mut args = vec![
-            "segment", &scene, "--labels", &labels, "-o", &out, "--preset", "tiny", "--config", &cfg, "--warmup", "20",
-            "--steps", "80",
+            "segment", &scene, "--labels", &labels, "-o", &out, "--preset", "tiny", "--config", &cfg, "--warmup", "10",
+            "--steps", "60",
         ];
         args.extend_from_slice(extra);
         run(&args)
@@ -195,7 +196,34 @@ fn masks_at_the_capture_size_agree_with_the_archive_size() {
     std::fs::create_dir_all(d.join("empty")).unwrap();
     let o = segment("x3", &["--source", &path("empty")]);
     fails(&o, &["--source", "empty", "not a capture layout"]);
-    for out in ["x1", "x2", "x3"] {
+    // The same photos with another camera matrix (fx doubled).
+    let zoomed = capture(&d.join("zoomed"), 0);
+    let k = std::fs::read_to_string(zoomed.join("intrinsics.txt")).unwrap();
+    let fx: f64 = k.split_whitespace().next().unwrap().parse().unwrap();
+    std::fs::write(
+        zoomed.join("intrinsics.txt"),
+        k.replacen(&fx.to_string(), &(2.0 * fx).to_string(), 1),
+    )
+    .unwrap();
+    let o = segment("x4", &["--source", zoomed.to_str().unwrap()]);
+    fails(&o, &["--source", "intrinsics fx", "at 96 x 72", "s.scene.zip"]);
+    // An archive not packed from a capture: the demo scene names its frames demo-000, ...
+    ok(&run(&[
+        "demo-scene",
+        "-o",
+        &path("demo.scene.zip"),
+        "--size",
+        "48x36",
+        "--frames",
+        "12",
+    ]));
+    let (demo, labels, out) = (path("demo.scene.zip"), path("l.json"), path("x5"));
+    let o = run(&["segment", &demo, "--labels", &labels, "-o", &out, "--source", cap]);
+    fails(
+        &o,
+        &["frame 0 of", "(\"demo-000\") is not in this capture", "12 frames"],
+    );
+    for out in ["x1", "x2", "x3", "x4", "x5"] {
         assert!(!d.join(out).exists(), "a refused run must not create its output folder");
     }
 }

@@ -157,9 +157,11 @@ fn import_chunk(dir: &Path, names: &[String], frames: &[usize], archive_name: &s
             .find(|&&i| e.contains(&format!("no frame named {:?}", names[i])))
         {
             Some(&i) => format!(
-                "--source {}: frame {i} of {archive_name} ({:?}) is not in this capture: {e}",
+                "--source {}: frame {i} of {archive_name} ({:?}) is not in this capture{}",
                 dir.display(),
-                names[i]
+                names[i],
+                // "(its 11 frames are named ...)", from the importer's message.
+                e.rfind(" (its ").map_or(String::new(), |at| e[at..].to_string())
             ),
             None => format!("--source {}: {e}", dir.display()),
         }
