@@ -10,6 +10,7 @@ use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::field::refine::RefineOptions;
 use scribblefield::gpu::{GpuContext, GpuOptions};
 use scribblefield::labels::LabelSet;
+use scribblefield::scene::import::Background;
 use scribblefield::scene::{Scene, read_archive_path};
 
 use super::field_config::{FieldConfigArgs, without_missing_codes};
@@ -88,6 +89,12 @@ pub fn run(mut args: SegmentArgs) -> CliResult {
                 scene.width,
                 scene.height
             );
+            if capture.background != Background::default() {
+                println!(
+                    "source: transparent pixels composited on {}, as when the archive was packed",
+                    capture.background.name()
+                );
+            }
             Some(capture)
         }
         None => None,

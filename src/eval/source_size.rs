@@ -17,7 +17,7 @@ use crate::field::gpu::view::ViewCamera;
 use crate::field::refine::{Guide, RefineOptions, argmax_and_confidence, refine_probabilities};
 use crate::scene::Scene;
 use crate::scene::camera::Pose;
-use crate::scene::import::{ImportOptions, Layout, import};
+use crate::scene::import::{Background, ImportOptions, Layout, import};
 
 /// Frames re-imported at a time.
 pub const CHUNK_FRAMES: usize = 8;
@@ -41,6 +41,8 @@ pub struct SourceCapture {
     /// The capture's image size: the size of the masks.
     pub width: u32,
     pub height: u32,
+    /// What transparent pixels are composited on, as when the archive was packed.
+    pub background: Background,
     /// Source name of each archive frame.
     names: Vec<String>,
 }
@@ -57,16 +59,18 @@ impl SourceCapture {
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<SourceCapture, String> {
         let names = source_names(archive, archive_name)?;
+        let background = packed_background(archive);
         let mut capture: Option<SourceCapture> = None;
         let total = names.len();
         progress(0, total);
         for first in (0..total).step_by(CHUNK_FRAMES) {
             let frames: Vec<usize> = (first..(first + CHUNK_FRAMES).min(total)).collect();
-            let (layout, scene) = import_chunk(dir, &names, &frames, archive_name)?;
+            let (layout, scene) = import_chunk(dir, &names, &frames, background, archive_name)?;
             let (width, height) = (scene.width, scene.height);
             let known = capture.get_or_insert_with(|| SourceCapture {
                 dir: dir.to_path_buf(),
                 layout,
+                background,
                 width,
                 height,
                 names: names.clone(),
@@ -104,7 +108,7 @@ impl SourceCapture {
     /// full size, in the same order.
     pub fn load(&self, frames: std::ops::Range<usize>, archive_name: &str) -> Result<Scene, String> {
         let list: Vec<usize> = frames.collect();
-        let (_, scene) = import_chunk(&self.dir, &self.names, &list, archive_name)?;
+        let (_, scene) = import_chunk(&self.dir, &self.names, &list, self.background, archive_name)?;
         if (scene.width, scene.height) != (self.width, self.height) {
             return Err(format!(
                 "--source {}: the capture changed while it was read: its frames are now {} x {}, were {} x {}",
@@ -144,9 +148,16 @@ fn source_names(archive: &Scene, archive_name: &str) -> Result<Vec<String>, Stri
 
 /// Imports archive frames `frames` (named `names[i]`) from `dir` at full size; the scene's frames
 /// come back in the order of `frames`.
-fn import_chunk(dir: &Path, names: &[String], frames: &[usize], archive_name: &str) -> Result<(Layout, Scene), String> {
+fn import_chunk(
+    dir: &Path,
+    names: &[String],
+    frames: &[usize],
+    background: Background,
+    archive_name: &str,
+) -> Result<(Layout, Scene), String> {
     let opts = ImportOptions {
         only: Some(frames.iter().map(|&i| names[i].clone()).collect()),
+        background,
         ..ImportOptions::default()
     };
     let imported = import(dir, &opts, &mut |_, _| {}).map_err(|e| {
@@ -182,6 +193,17 @@ fn import_chunk(dir: &Path, names: &[String], frames: &[usize], archive_name: &s
         scene.frames.push(frame);
     }
     Ok((imported.layout, scene))
+}
+
+/// The background `pack` composited transparent pixels on, from the line it left in the
+/// archive's provenance notes ("... composited on black ..."); white, the default, otherwise.
+pub fn packed_background(archive: &Scene) -> Background {
+    let black = format!("composited on {}", Background::Black.name());
+    if archive.provenance.notes.iter().any(|n| n.contains(&black)) {
+        Background::Black
+    } else {
+        Background::White
+    }
 }
 
 /// The capture must show what the archive shows at another scale: same aspect ratio, and the
@@ -308,5 +330,20 @@ mod tests {
         assert!((shift - 0.5).abs() < 1e-12, "{shift}");
         assert_eq!(pose_difference(&b, &b).1, 0.0);
         assert!(pose_difference(&b, &b).0 < 1e-7);
+    }
+
+    #[test]
+    fn the_background_packed_on_is_read_from_the_provenance() {
+        let mut scene = crate::scene::demo::demo_scene(&crate::scene::demo::DemoOptions {
+            width: 16,
+            height: 16,
+            frames: 1,
+            ..Default::default()
+        })
+        .unwrap();
+        assert_eq!(packed_background(&scene), Background::White);
+        scene.provenance.notes =
+            vec!["3 of 3 images have an alpha channel: composited on black (--background white for white)".into()];
+        assert_eq!(packed_background(&scene), Background::Black);
     }
 }
