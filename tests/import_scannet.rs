@@ -166,6 +166,35 @@ fn downscaled_exports_register_at_the_packed_size() {
     check_registration(&imported, (40, 30));
 }
 
+/// `ImportOptions::only` (what `segment --source` re-imports with) picks frames by the names
+/// the archive keeps, `color/N.jpg`, and names one the export lacks or lost.
+#[test]
+fn frames_are_picked_by_their_source_names() {
+    let tmp = scan();
+    let only = |names: &[&str]| ImportOptions {
+        only: Some(names.iter().map(|n| n.to_string()).collect()),
+        ..Default::default()
+    };
+    let imported = run_with(tmp.path(), &only(&["color/4.jpg", "color/1.jpg"])).unwrap();
+    let sources: Vec<&str> = imported
+        .scene
+        .frames
+        .iter()
+        .map(|f| f.source.as_deref().unwrap())
+        .collect();
+    assert_eq!(sources, ["color/1.jpg", "color/4.jpg"]);
+    assert_eq!((imported.scene.width, imported.scene.height), COLOR);
+    // Frame 2's pose is lost (-inf): it is not there to pick.
+    expect_err(
+        run_with(tmp.path(), &only(&["color/2.jpg"])),
+        &[
+            "no frame named \"color/2.jpg\"",
+            "4 frames",
+            "\"color/0.jpg\" ... \"color/4.jpg\"",
+        ],
+    );
+}
+
 /// A fresh export with `file` (relative) replaced by `contents`.
 fn with_file(file: &str, contents: &str) -> TempDir {
     let tmp = scan();

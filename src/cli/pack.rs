@@ -68,6 +68,7 @@ pub fn run(args: PackArgs) -> CliResult {
         splits: args.splits,
         background: args.background,
         alpha_gt: args.alpha_gt,
+        only: None,
     };
     let bar = progress::bar("loading");
     let mut imported = import(&args.input, &opts, &mut |done, total| {

@@ -1,14 +1,17 @@
 use std::path::PathBuf;
 
 use clap::Args;
+use scribblefield::eval::Confusion;
 use scribblefield::eval::headless::{render_and_score, train_schedule};
-use scribblefield::export::MaskSet;
+use scribblefield::eval::source_size::{SourceCapture, render_at_source};
+use scribblefield::export::{MaskDirWriter, MaskSet};
 use scribblefield::field::gpu::scene_buffers::LabelIndex;
 use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::field::refine::RefineOptions;
 use scribblefield::gpu::{GpuContext, GpuOptions};
 use scribblefield::labels::LabelSet;
-use scribblefield::scene::read_archive_path;
+use scribblefield::scene::import::Background;
+use scribblefield::scene::{Scene, read_archive_path};
 
 use super::field_config::{FieldConfigArgs, without_missing_codes};
 use super::{CliResult, progress};
@@ -37,6 +40,11 @@ pub struct SegmentArgs {
     /// field's own argmax); see `field::refine`.
     #[arg(long, default_value_t = RefineOptions::default().iterations)]
     refine_iterations: u32,
+    /// The capture folder the archive was packed from (any layout `pack` reads): the masks are
+    /// rendered and refined at its images' resolution instead of the archive's. Every archive
+    /// frame must be found there by name with the same pose.
+    #[arg(long, value_name = "DIR")]
+    source: Option<PathBuf>,
 }
 
 pub fn run(mut args: SegmentArgs) -> CliResult {
@@ -62,6 +70,35 @@ pub fn run(mut args: SegmentArgs) -> CliResult {
         ..RefineOptions::default()
     };
     refine.validate()?;
+    let archive_name = args.archive.display().to_string();
+    let source = match &args.source {
+        Some(dir) => {
+            let bar = progress::bar("reading");
+            let capture = SourceCapture::check(&scene, &archive_name, dir, &mut |done, total| {
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            })?;
+            bar.finish_and_clear();
+            println!(
+                "source: {} ({} layout), all {} frames found with the archive's poses; masks at {} x {} (the archive is {} x {})",
+                dir.display(),
+                capture.layout.name(),
+                scene.frames.len(),
+                capture.width,
+                capture.height,
+                scene.width,
+                scene.height
+            );
+            if capture.background != Background::default() {
+                println!(
+                    "source: transparent pixels composited on {}, as when the archive was packed",
+                    capture.background.name()
+                );
+            }
+            Some(capture)
+        }
+        None => None,
+    };
 
     let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
     eprintln!("training on {}", ctx.describe());
@@ -110,9 +147,12 @@ pub fn run(mut args: SegmentArgs) -> CliResult {
         );
     }
 
+    let names: Vec<String> = labels.classes.iter().map(|c| c.name.clone()).collect();
+    if let Some(capture) = &source {
+        return write_at_source(&mut trainer, &scene, capture, &labels, &names, &refine, &args);
+    }
     let render = progress::bar("rendering");
     render.set_length(scene.frames.len() as u64);
-    let names: Vec<String> = labels.classes.iter().map(|c| c.name.clone()).collect();
     let mut masks = Vec::with_capacity(scene.frames.len());
     let mut bad_size = false;
     let frames = 0..scene.frames.len();
@@ -132,7 +172,21 @@ pub fn run(mut args: SegmentArgs) -> CliResult {
         masks,
     };
     set.write_dir(&args.output, Some(&labels))?;
-    println!("wrote {} masks to {}", scene.frames.len(), args.output.display());
+    println!(
+        "wrote {} masks of {} x {} (the archive's resolution; --source CAPTURE for the capture's) to {}",
+        scene.frames.len(),
+        scene.width,
+        scene.height,
+        args.output.display()
+    );
+    say_refinement(&refine);
+    if scene.has_gt() {
+        print!("{}", report.table());
+    }
+    Ok(())
+}
+
+fn say_refinement(refine: &RefineOptions) {
     if refine.is_off() {
         println!("masks: the field's own class maps (--refine-iterations 0)");
     } else {
@@ -141,8 +195,69 @@ pub fn run(mut args: SegmentArgs) -> CliResult {
             refine.iterations
         );
     }
-    if scene.has_gt() {
-        print!("{}", report.table());
+}
+
+/// Renders every frame at the capture's size (chunk by chunk, as `SourceCapture` reads it),
+/// refines it with the capture's image and depth, writes each mask as it comes, and scores the
+/// masks against the capture's ground truth where it has some.
+fn write_at_source(
+    trainer: &mut Trainer,
+    scene: &Scene,
+    capture: &SourceCapture,
+    labels: &LabelSet,
+    names: &[String],
+    refine: &RefineOptions,
+    args: &SegmentArgs,
+) -> CliResult {
+    let archive_name = args.archive.display().to_string();
+    let render = progress::bar("rendering");
+    render.set_length(scene.frames.len() as u64);
+    let quiet = render.is_hidden();
+    let mut writer = MaskDirWriter::new(&args.output, labels.classes.clone())?;
+    let mut confusion = Confusion::new(names.len());
+    let mut scored = 0;
+    let started = std::time::Instant::now();
+    for frames in capture.chunks() {
+        let source = capture.load(frames.clone(), &archive_name)?;
+        for (k, i) in frames.enumerate() {
+            let mask = render_at_source(trainer, scene, i, &source, k, refine)?;
+            if let Some(gt) = &source.frames[k].gt {
+                confusion.add(gt.as_raw(), mask.as_raw());
+                scored += 1;
+            }
+            writer.frame(&mask)?;
+            render.inc(1);
+            if quiet {
+                eprintln!(
+                    "frame {}/{} at {} x {}{}",
+                    i + 1,
+                    scene.frames.len(),
+                    capture.width,
+                    capture.height,
+                    progress::left(&render)
+                );
+            }
+        }
+    }
+    render.finish_and_clear();
+    let written = writer.finish(Some(labels))?;
+    println!(
+        "wrote {written} masks of {} x {} (the capture's resolution, from {}; the archive is {} x {}) to {} in {:.1} s",
+        capture.width,
+        capture.height,
+        capture.dir.display(),
+        scene.width,
+        scene.height,
+        args.output.display(),
+        started.elapsed().as_secs_f64()
+    );
+    say_refinement(refine);
+    if scored > 0 {
+        println!(
+            "scored against the capture's ground truth at {} x {}:",
+            capture.width, capture.height
+        );
+        print!("{}", confusion.report(names, scored).table());
     }
     Ok(())
 }

@@ -8,5 +8,7 @@ pub mod metrics;
 pub mod plot;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod simulate;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod source_size;
 
 pub use metrics::{Confusion, EvalReport};

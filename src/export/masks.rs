@@ -59,11 +59,7 @@ impl MaskSet {
 
     /// The colour preview of frame `i`: class colours, black for unknown ids.
     pub fn preview(&self, i: usize) -> RgbImage {
-        let m = &self.masks[i];
-        RgbImage::from_fn(m.width(), m.height(), |x, y| {
-            let c = m.get_pixel(x, y).0[0] as usize;
-            image::Rgb(self.classes.get(c).map(|k| k.color).unwrap_or([0, 0, 0]))
-        })
+        preview_of(&self.masks[i], &self.classes)
     }
 
     /// Every file of the export as (relative path, bytes).
@@ -108,6 +104,92 @@ impl MaskSet {
             std::fs::write(&path, bytes).map_err(|e| SceneError::io(path, e))?;
         }
         Ok(())
+    }
+}
+
+/// The colour preview of `mask`: class colours, black for unknown ids.
+fn preview_of(mask: &GrayImage, classes: &[ClassInfo]) -> RgbImage {
+    RgbImage::from_fn(mask.width(), mask.height(), |x, y| {
+        let c = mask.get_pixel(x, y).0[0] as usize;
+        image::Rgb(classes.get(c).map(|k| k.color).unwrap_or([0, 0, 0]))
+    })
+}
+
+/// Writes the same folder as [`MaskSet::write_dir`] one frame at a time, so that large masks
+/// (`segment --source` at a capture's full resolution) need not all be held: `frame` writes
+/// frame i's mask and preview as it comes, `finish` the manifest and the annotations.
+pub struct MaskDirWriter {
+    dir: std::path::PathBuf,
+    classes: Vec<ClassInfo>,
+    size: Option<(u32, u32)>,
+    frames: usize,
+}
+
+impl MaskDirWriter {
+    /// Creates `dir` (and `preview/`) as needed.
+    pub fn new(dir: &Path, classes: Vec<ClassInfo>) -> Result<Self> {
+        std::fs::create_dir_all(dir.join("preview")).map_err(|e| SceneError::io(dir, e))?;
+        Ok(MaskDirWriter {
+            dir: dir.to_path_buf(),
+            classes,
+            size: None,
+            frames: 0,
+        })
+    }
+
+    /// Writes the next frame's mask; every mask must have the first one's size.
+    pub fn frame(&mut self, mask: &GrayImage) -> Result<()> {
+        let name = mask_name(self.frames);
+        let size = *self.size.get_or_insert(mask.dimensions());
+        if mask.dimensions() != size {
+            return Err(SceneError::invalid(
+                self.dir.join(&name).display().to_string(),
+                format!(
+                    "mask is {} x {}, the first was {} x {}",
+                    mask.width(),
+                    mask.height(),
+                    size.0,
+                    size.1
+                ),
+            ));
+        }
+        for (path, img) in [
+            (self.dir.join(&name), DynamicImage::ImageLuma8(mask.clone())),
+            (
+                self.dir.join("preview").join(&name),
+                DynamicImage::ImageRgb8(preview_of(mask, &self.classes)),
+            ),
+        ] {
+            std::fs::write(&path, png(img)).map_err(|e| SceneError::io(path, e))?;
+        }
+        self.frames += 1;
+        Ok(())
+    }
+
+    /// Writes `classes.json` (and `labels.json`); returns the number of frames written.
+    pub fn finish(self, labels: Option<&LabelSet>) -> Result<usize> {
+        let (width, height) = self.size.unwrap_or((0, 0));
+        let manifest = MasksManifest {
+            format: MASKS_FORMAT.into(),
+            version: MASKS_VERSION,
+            frames: self.frames as u32,
+            width,
+            height,
+            classes: self.classes,
+            files: (0..self.frames).map(mask_name).collect(),
+        };
+        let mut files = vec![(
+            MANIFEST.to_string(),
+            serde_json::to_vec_pretty(&manifest).expect("manifest serializes"),
+        )];
+        if let Some(l) = labels {
+            files.push(("labels.json".into(), l.to_json().into_bytes()));
+        }
+        for (name, bytes) in files {
+            let path = self.dir.join(name);
+            std::fs::write(&path, bytes).map_err(|e| SceneError::io(path, e))?;
+        }
+        Ok(self.frames)
     }
 }
 
@@ -217,6 +299,29 @@ mod tests {
         let err = read_masks(&dir, 3, 6, 4).unwrap_err().to_string();
         assert!(err.contains("5 x 4"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn writing_frame_by_frame_makes_the_same_folder() {
+        let s = set();
+        let labels = LabelSet::new(s.classes.clone());
+        let base = std::env::temp_dir().join(format!("sf-mask-writer-{}", std::process::id()));
+        let (whole, streamed) = (base.join("whole"), base.join("streamed"));
+        s.write_dir(&whole, Some(&labels)).unwrap();
+        let mut w = MaskDirWriter::new(&streamed, s.classes.clone()).unwrap();
+        for m in &s.masks {
+            w.frame(m).unwrap();
+        }
+        let err = w.frame(&GrayImage::new(3, 3)).unwrap_err().to_string();
+        assert!(
+            err.contains("00003.png") && err.contains("3 x 3") && err.contains("5 x 4"),
+            "{err}"
+        );
+        assert_eq!(w.finish(Some(&labels)).unwrap(), 3);
+        for (name, bytes) in s.files(Some(&labels)) {
+            assert_eq!(std::fs::read(streamed.join(&name)).unwrap(), bytes, "{name}");
+        }
+        std::fs::remove_dir_all(&base).unwrap();
     }
 
     #[test]

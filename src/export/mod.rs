@@ -3,7 +3,7 @@
 //! layout, and `read_masks` reads either back for evaluation.
 mod masks;
 
-pub use masks::{MaskSet, MasksManifest, read_masks, read_masks_zip};
+pub use masks::{MaskDirWriter, MaskSet, MasksManifest, read_masks, read_masks_zip};
 
 #[cfg(test)]
 mod zip_contents_tests;

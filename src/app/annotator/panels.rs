@@ -131,7 +131,11 @@ impl Annotator {
             None => {
                 if ui
                     .add_enabled(running, egui::Button::new("⬇ download masks (D)"))
-                    .on_hover_text("a zip with a class-id PNG per frame, colour previews and the annotations")
+                    .on_hover_text(format!(
+                        "a zip with a class-id PNG per frame at the archive's {} x {}, colour previews and the \
+                         annotations; `scribblefield segment --source CAPTURE` makes them at the capture's resolution",
+                        self.doc.scene.width, self.doc.scene.height
+                    ))
                     .clicked()
                 {
                     self.download_masks();

@@ -226,6 +226,11 @@ impl FrameAssembler {
         &self.frame.depth
     }
 
+    /// The class probabilities alone, `C` per pixel.
+    pub fn into_probabilities(self) -> Vec<f32> {
+        self.frame.probabilities
+    }
+
     /// The finished frame (classes and confidence from the probabilities), its features shown
     /// through `pca` (or a PCA fitted to them).
     pub fn finish(mut self, pca: Option<&Pca>) -> RenderedFrame {

@@ -69,7 +69,7 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
         }
     }
 
-    let (keep, mut notes) = select(names.len(), opts)?;
+    let (keep, mut notes) = select(&names, opts)?;
     let dropped_scribbles = names
         .iter()
         .enumerate()

@@ -104,9 +104,11 @@ pub(super) struct Loaded {
     pub report: Vec<String>,
 }
 
-/// The indices of frames to keep out of `count`: every `every`-th, then at most `max_frames`.
-/// Returns notes describing what was dropped.
-pub(super) fn select(count: usize, opts: &ImportOptions) -> Result<(Vec<usize>, Vec<String>)> {
+/// The indices of frames to keep out of the capture's frames, named `names` in capture order:
+/// those `only` names (all when it is `None`), then every `every`-th, then at most `max_frames`.
+/// Returns notes describing what was dropped. A name in `only` that the capture lacks is an
+/// error naming it.
+pub(super) fn select(names: &[String], opts: &ImportOptions) -> Result<(Vec<usize>, Vec<String>)> {
     if opts.every == 0 {
         return Err(SceneError::invalid("options", "--every must be at least 1"));
     }
@@ -116,14 +118,31 @@ pub(super) fn select(count: usize, opts: &ImportOptions) -> Result<(Vec<usize>, 
     if opts.max_size == Some(0) {
         return Err(SceneError::invalid("options", "--max-size must be at least 1"));
     }
-    let mut keep: Vec<usize> = (0..count).step_by(opts.every as usize).collect();
+    let count = names.len();
+    let candidates: Vec<usize> = match &opts.only {
+        Some(only) => {
+            let index: BTreeMap<&str, usize> = names.iter().enumerate().map(|(i, n)| (n.as_str(), i)).collect();
+            if let Some(absent) = only.iter().find(|n| !index.contains_key(n.as_str())) {
+                return Err(SceneError::invalid(
+                    "capture",
+                    format!("has no frame named {absent:?} ({})", listed(names)),
+                ));
+            }
+            let mut kept: Vec<usize> = only.iter().map(|n| index[n.as_str()]).collect();
+            kept.sort_unstable();
+            kept
+        }
+        None => (0..count).collect(),
+    };
+    let selected = candidates.len();
+    let mut keep: Vec<usize> = candidates.into_iter().step_by(opts.every as usize).collect();
     let mut notes = Vec::new();
     if opts.every > 1 {
         notes.push(format!(
             "kept one frame in {} ({} of {}, --every)",
             opts.every,
             keep.len(),
-            count
+            selected
         ));
     }
     if let Some(m) = opts.max_frames
@@ -146,6 +165,16 @@ pub(super) fn select(count: usize, opts: &ImportOptions) -> Result<(Vec<usize>, 
         ));
     }
     Ok((keep, notes))
+}
+
+/// "its N frames are named a, b, ... z", for a message about a frame that is not there.
+fn listed(names: &[String]) -> String {
+    match names {
+        [] => "it has no frames".into(),
+        [one] => format!("its one frame is named {one:?}"),
+        [a, b] => format!("its 2 frames are named {a:?} and {b:?}"),
+        [first, .., last] => format!("its {} frames are named {first:?} ... {last:?}", names.len()),
+    }
 }
 
 /// Decodes the frames, downscaling to at most `max_size` on the longest side. Depth and ground
@@ -353,14 +382,33 @@ mod tests {
             max_frames: Some(2),
             ..Default::default()
         };
-        let (keep, notes) = select(10, &opts).unwrap();
+        let names = |n: usize| (0..n).map(|i| format!("f{i}")).collect::<Vec<_>>();
+        let (keep, notes) = select(&names(10), &opts).unwrap();
         assert_eq!(keep, vec![0, 3]);
         assert_eq!(notes.len(), 2);
-        assert_eq!(select(5, &ImportOptions::default()).unwrap().0, vec![0, 1, 2, 3, 4]);
+        assert_eq!(
+            select(&names(5), &ImportOptions::default()).unwrap().0,
+            vec![0, 1, 2, 3, 4]
+        );
         let zero = ImportOptions {
             every: 0,
             ..Default::default()
         };
-        assert!(select(5, &zero).unwrap_err().to_string().contains("--every"));
+        assert!(select(&names(5), &zero).unwrap_err().to_string().contains("--every"));
+    }
+
+    #[test]
+    fn selection_by_name_keeps_capture_order_and_names_an_absent_frame() {
+        let names: Vec<String> = ["a", "b", "c", "d"].iter().map(|s| s.to_string()).collect();
+        let only = |list: &[&str]| ImportOptions {
+            only: Some(list.iter().map(|s| s.to_string()).collect()),
+            ..Default::default()
+        };
+        assert_eq!(select(&names, &only(&["d", "b"])).unwrap().0, vec![1, 3]);
+        let err = select(&names, &only(&["b", "x"])).unwrap_err().to_string();
+        assert!(
+            err.contains("no frame named \"x\"") && err.contains("4 frames are named \"a\" ... \"d\""),
+            "{err}"
+        );
     }
 }

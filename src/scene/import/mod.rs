@@ -2,6 +2,7 @@
 //! 7-Scenes folders, NeRF-style `transforms.json` and NeRF-synthetic split folders, COLMAP sparse
 //! models, ScanNet SensReader exports). Each layout has its own module; they share decoding,
 //! resizing, frame selection and bounds estimation.
+use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use crate::scene::Scene;
@@ -51,6 +52,10 @@ pub struct ImportOptions {
     pub background: Background,
     /// NeRF captures: alpha becomes 2-class ground truth (`mask_classes`; 0 < alpha < 255 void).
     pub alpha_gt: bool,
+    /// Keep only the frames of these names (`Frame::source`), before `every` and `max_frames`;
+    /// a name the capture lacks is an error. `segment --source` re-imports an archive's frames
+    /// at full size with it.
+    pub only: Option<BTreeSet<String>>,
 }
 
 impl Default for ImportOptions {
@@ -65,6 +70,7 @@ impl Default for ImportOptions {
             splits: Vec::new(),
             background: Background::White,
             alpha_gt: false,
+            only: None,
         }
     }
 }

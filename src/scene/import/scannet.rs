@@ -74,13 +74,18 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
         ));
     }
 
-    let (keep, mut notes) = select(posed.len(), opts)?;
+    // Frames are named by their colour file, as `Frame::source` keeps them.
+    let source_names: Vec<String> = posed
+        .iter()
+        .map(|(name, _)| format!("{COLOR_DIR}/{}", file_name(&color[*name])))
+        .collect();
+    let (keep, mut notes) = select(&source_names, opts)?;
     let files: Vec<FrameFiles> = keep
         .iter()
         .map(|&i| {
             let (name, pose) = posed[i];
             FrameFiles {
-                name: format!("{COLOR_DIR}/{}", file_name(&color[name])),
+                name: source_names[i].clone(),
                 rgb: color[name].clone(),
                 // Registered below: depth is not a resampling of the colour view.
                 depth: None,

@@ -45,7 +45,7 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
     check_matched(dir, &color, &depth, DEPTH, "png")?;
     check_matched(dir, &color, &pose, POSE, "txt")?;
 
-    let (keep, mut notes) = select(names.len(), opts)?;
+    let (keep, mut notes) = select(&names, opts)?;
     let mut files = Vec::with_capacity(keep.len());
     for &i in &keep {
         let name = &names[i];

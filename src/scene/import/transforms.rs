@@ -213,7 +213,8 @@ pub(super) fn build(
     };
     let k = intrinsics(camera, native, file)?;
 
-    let (keep, mut notes) = select(entries.len(), opts)?;
+    let names: Vec<String> = entries.iter().map(|e| e.name.clone()).collect();
+    let (keep, mut notes) = select(&names, opts)?;
     let mut files = Vec::with_capacity(keep.len());
     for &j in &keep {
         let entry = &entries[j];

@@ -1,5 +1,9 @@
 //! Rendering with a trainer's field: whole frames and free views, in tiles of one batch of rays.
 use super::*;
+use crate::scene::camera::Intrinsics;
+
+/// Most pixels [`Trainer::render_probabilities`] renders in one band of rows.
+pub const BAND_PIXELS: usize = 1 << 18;
 
 impl Trainer {
     /// Renders frame `frame` at its own resolution, in tiles of one batch of rays each, with the
@@ -55,6 +59,47 @@ impl Trainer {
             }
         };
         Ok(self.render_rays(view, depth).await?.finish(self.display_pca.as_ref()))
+    }
+
+    /// The class probabilities (`num_classes` per pixel, row-major) of any camera at any
+    /// resolution, with `depth` (metres per pixel, 0: none) guiding the samples. Rendered in
+    /// bands of rows of at most [`BAND_PIXELS`] pixels, each a view of its own (the principal
+    /// point moved up by the band's first row), so that what is held besides the result stays
+    /// one band whatever the size: a 1920 x 1440 frame is 2.8 M pixels.
+    pub async fn render_probabilities(&mut self, view: &ViewCamera, depth: &[f32]) -> Result<Vec<f32>, GpuError> {
+        let pixels = view.pixels();
+        if pixels == 0 || view.width > 16384 || view.height > 16384 {
+            return Err(GpuError::invalid_argument(
+                "render",
+                format!("a view of {} x {} pixels cannot be rendered", view.width, view.height),
+            ));
+        }
+        if depth.len() != pixels {
+            return Err(GpuError::invalid_argument(
+                "render",
+                format!("depth guide has {} values for a view of {pixels} pixels", depth.len()),
+            ));
+        }
+        let width = view.width as usize;
+        let rows = (BAND_PIXELS / width).max(1) as u32;
+        let mut out = Vec::with_capacity(pixels * self.cfg.num_classes as usize);
+        let mut top = 0u32;
+        while top < view.height {
+            let height = rows.min(view.height - top);
+            let band = ViewCamera {
+                intrinsics: Intrinsics {
+                    cy: view.intrinsics.cy - f64::from(top),
+                    ..view.intrinsics
+                },
+                height,
+                ..*view
+            };
+            let first = top as usize * width;
+            let guide = &depth[first..first + band.pixels()];
+            out.extend(self.render_rays(&band, Some(guide)).await?.into_probabilities());
+            top += height;
+        }
+        Ok(out)
     }
 
     async fn render_rays(&mut self, view: &ViewCamera, depth: Option<&[f32]>) -> Result<FrameAssembler, GpuError> {

@@ -164,7 +164,8 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
         ));
     }
 
-    let (keep, selection) = select(present.len(), opts)?;
+    let present_names: Vec<String> = present.iter().map(|i| i.name.clone()).collect();
+    let (keep, selection) = select(&present_names, opts)?;
     notes.extend(selection);
     let kept: Vec<&Image> = keep.iter().map(|&i| present[i]).collect();
     let masks = find_masks(input, opts, &kept, &mut warnings)?;
