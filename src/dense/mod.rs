@@ -18,6 +18,29 @@ mod batch;
 #[cfg(not(target_arch = "wasm32"))]
 pub use batch::{Activation, Dense, default_threads, erf, gelu, parallel_rows};
 
+/// What the tests of the batched layer and of the extractors' operations share.
+#[cfg(all(test, not(target_arch = "wasm32")))]
+pub(crate) mod test_support {
+    /// A deterministic pseudo-random sequence in [-1, 1).
+    pub fn noise(n: usize, seed: u64) -> Vec<f32> {
+        let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (0..n)
+            .map(|_| {
+                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+            })
+            .collect()
+    }
+
+    /// `a` equals `b` to within `tol`, relative to 1 + |b|.
+    pub fn assert_close(a: &[f32], b: &[f64], tol: f64) {
+        assert_eq!(a.len(), b.len());
+        for (i, (&a, &b)) in a.iter().zip(b).enumerate() {
+            assert!((a as f64 - b).abs() <= tol * (1.0 + b.abs()), "element {i}: {a} vs {b}");
+        }
+    }
+}
+
 /// What a layer computes in: `f32` and `f64` (and anything with the same arithmetic).
 /// `Default` is zero.
 pub trait Scalar: Copy + Default + PartialEq + Add<Output = Self> + Mul<Output = Self> + AddAssign {}

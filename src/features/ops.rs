@@ -181,24 +181,7 @@ pub fn conv_weight_to_im2col(weight: &[f32], cout: usize, cin: usize, k: usize) 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A deterministic pseudo-random sequence in [-1, 1).
-    fn noise(n: usize, seed: u64) -> Vec<f32> {
-        let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (0..n)
-            .map(|_| {
-                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-            })
-            .collect()
-    }
-
-    fn assert_close(a: &[f32], b: &[f64], tol: f64) {
-        assert_eq!(a.len(), b.len());
-        for (i, (&a, &b)) in a.iter().zip(b).enumerate() {
-            assert!((a as f64 - b).abs() <= tol * (1.0 + b.abs()), "element {i}: {a} vs {b}");
-        }
-    }
+    use crate::dense::test_support::{assert_close, noise};
 
     #[test]
     fn same_padding_matches_tensorflow() {

@@ -17,6 +17,26 @@ const PAD: f64 = 0.05;
 /// point they all look at (a forward-facing capture); about 2 degrees of spread.
 const MIN_AXIS_SPREAD: f64 = 1e-3;
 
+/// What [`from_depth`] did, as the note an importer keeps in the archive's provenance.
+pub(super) const FROM_DEPTH_NOTE: &str =
+    "bounds: central 98 % of back-projected depth and all camera centres, padded by 5 %";
+
+/// [`from_depth`] for a capture whose frames all come with depth: without any reading, an error
+/// that names `depth_source` (the depth folder or the capture).
+pub(super) fn from_required_depth(
+    frames: &[Frame],
+    k: &Intrinsics,
+    depth_scale: f64,
+    depth_source: &std::path::Path,
+) -> crate::scene::error::Result<Bounds> {
+    from_depth(frames, k, depth_scale).ok_or_else(|| {
+        crate::scene::error::SceneError::invalid(
+            super::shown(depth_source),
+            "no valid depth in any imported frame, so the scene's bounds cannot be found",
+        )
+    })
+}
+
 /// The box holding the central 98 % of back-projected depth on each axis, together with every
 /// camera centre (rays start there), padded by 5 %. None when no frame has a depth reading.
 pub(super) fn from_depth(frames: &[Frame], k: &Intrinsics, depth_scale: f64) -> Option<Bounds> {

@@ -6,7 +6,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use super::bounds::from_depth;
+use super::bounds::{FROM_DEPTH_NOTE, from_required_depth};
 use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, files_by_stem, frame_order, load_frames, scene_of, select};
 use super::images::load_depth;
 use super::register::register_depth;
@@ -136,13 +136,8 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
             loaded.size.0, loaded.size.1
         ));
     }
-    let bounds = from_depth(&loaded.frames, &intrinsics, DEPTH_SCALE).ok_or_else(|| {
-        SceneError::invalid(
-            shown(&dir.join(DEPTH_DIR)),
-            "no valid depth in any imported frame, so the scene's bounds cannot be found",
-        )
-    })?;
-    notes.push("bounds: central 98 % of back-projected depth and all camera centres, padded by 5 %".into());
+    let bounds = from_required_depth(&loaded.frames, &intrinsics, DEPTH_SCALE, &dir.join(DEPTH_DIR))?;
+    notes.push(FROM_DEPTH_NOTE.into());
 
     let scene = scene_of(loaded.frames, loaded.size, intrinsics, bounds);
     Ok(Built {

@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use super::bounds::from_depth;
+use super::bounds::{FROM_DEPTH_NOTE, from_required_depth};
 use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, files_by_stem, frame_order, load_frames, scene_of, select};
 use super::text::{read_intrinsics, read_pose};
 use super::{Built, ImportOptions, Layout, shown};
@@ -95,13 +95,8 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
         }
     };
     let intrinsics = k.scaled(loaded.native, loaded.size);
-    let bounds = from_depth(&loaded.frames, &intrinsics, DEPTH_SCALE).ok_or_else(|| {
-        SceneError::invalid(
-            shown(dir),
-            "no valid depth in any imported frame, so the scene's bounds cannot be found",
-        )
-    })?;
-    notes.push("bounds: central 98 % of back-projected depth and all camera centres, padded by 5 %".into());
+    let bounds = from_required_depth(&loaded.frames, &intrinsics, DEPTH_SCALE, dir)?;
+    notes.push(FROM_DEPTH_NOTE.into());
 
     let scene = scene_of(loaded.frames, loaded.size, intrinsics, bounds);
     Ok(Built {

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use super::alpha::{AlphaGt, alpha_gt_report};
-use super::bounds::{from_cameras, from_depth};
+use super::bounds::{FROM_DEPTH_NOTE, from_cameras, from_depth};
 use super::classes::class_infos;
 use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, load_frames, load_frames_prepared, scene_of, select};
 use super::images::dimensions;
@@ -245,7 +245,7 @@ pub(super) fn build(
     let intrinsics = k.scaled(loaded.native, loaded.size);
     let bounds = match from_depth(&loaded.frames, &intrinsics, DEPTH_SCALE) {
         Some(b) => {
-            notes.push("bounds: central 98 % of back-projected depth and all camera centres, padded by 5 %".into());
+            notes.push(FROM_DEPTH_NOTE.into());
             b
         }
         None => {
