@@ -384,3 +384,32 @@ fn frame_selection_and_other_layouts() {
 mod errors;
 #[path = "import_colmap/real.rs"]
 mod real;
+
+/// Spreading strokes over a capture with sparse depth gives its thread back between the
+/// iterations of its walks (the page draws on that thread: `field::pause`), gives the labels it
+/// gives without pauses, and does no walk again for labels it has already spread.
+#[test]
+fn spreading_over_sparse_depth_pauses_and_gives_the_same_labels() {
+    use scribblefield::field::pause::{CountPauses, run_to_end};
+    use scribblefield::field::point_walk::has_sparse_depth;
+    use scribblefield::field::propagate::{PropagationCache, PropagationOptions};
+    use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
+    let tmp = capture(&pinhole(), Format::Text, true);
+    let scene = run(tmp.path()).unwrap().scene;
+    assert!(has_sparse_depth(&scene));
+    let labels = scribble_frames(&scene, &[0], &ScribbleOptions::default());
+    let options = PropagationOptions::default();
+    let straight = PropagationCache::default().maps(&scene, &labels, 2, &options);
+    let mut cache = PropagationCache::default();
+    let mut pauses = CountPauses::default();
+    let paused = run_to_end(cache.maps_pausing(&scene, &labels, 2, &options, &mut pauses));
+    assert_eq!(paused, straight);
+    // A pause before each frame's view of the points is built, and before each iteration.
+    assert!(pauses.0 > scene.frames.len(), "{} pauses", pauses.0);
+    let mut again = CountPauses::default();
+    assert_eq!(
+        run_to_end(cache.maps_pausing(&scene, &labels, 2, &options, &mut again)),
+        straight
+    );
+    assert_eq!(again.0, 0, "unchanged labels walk nothing again");
+}

@@ -64,6 +64,15 @@ pub fn show(
             if ui.button(label).clicked() {
                 actions.toggle_pause = true;
             }
+            if reports.spreading {
+                ui.horizontal(|ui| {
+                    if animate {
+                        ui.spinner();
+                    }
+                    ui.label("spreading the strokes over the frames…")
+                        .on_hover_text("training waits until the new strokes have reached every frame they can");
+                });
+            }
         }
         Phase::Failed(message) => {
             ui.label(RichText::new(format!("stopped: {message}")).color(ui.visuals().error_fg_color));

@@ -10,6 +10,7 @@
 pub mod config;
 pub mod normals;
 pub mod params;
+pub mod pause;
 pub mod point_walk;
 pub mod presets;
 pub mod propagate;

@@ -11,6 +11,7 @@
 //! each frame then trains on (and walks from) the labels of its own readings.
 use glam::DVec3;
 
+use super::pause::{NoPause, Pause, run_to_end};
 use super::propagate::{conjugate_gradient, srgb_to_lab};
 use crate::labels::UNLABELLED;
 use crate::scene::Scene;
@@ -127,35 +128,42 @@ impl PointGraph {
 
     /// The probability that a walk from each point reaches a seed of `class` before a seed of
     /// another class (seeds fixed at 1 or 0; see `propagate`'s walk, here without fading).
-    fn walk(&self, seeds: &[u16], class: u16) -> Vec<f64> {
+    async fn walk(&self, seeds: &[u16], class: u16, pause: &mut impl Pause) -> Vec<f64> {
         let n = seeds.len();
         let free: Vec<usize> = (0..n).filter(|&i| seeds[i] == UNLABELLED).collect();
-        let mut slot = vec![usize::MAX; n];
+        let mut slot = vec![u32::MAX; n];
         for (k, &i) in free.iter().enumerate() {
-            slot[i] = k;
+            slot[i] = k as u32;
         }
+        // The system over the free points in one flat list (each free point's free neighbours,
+        // by slot), so each iteration reads memory in order.
         let mut degree = vec![0f64; free.len()];
         let mut rhs = vec![0f64; free.len()];
+        let mut starts = Vec::with_capacity(free.len() + 1);
+        let mut links: Vec<(u32, f64)> = Vec::new();
         for (k, &i) in free.iter().enumerate() {
+            starts.push(links.len());
             for &(j, w) in &self.edges[i] {
                 degree[k] += w;
                 if seeds[j as usize] == class {
                     rhs[k] += w;
                 }
+                if slot[j as usize] != u32::MAX {
+                    links.push((slot[j as usize], w));
+                }
             }
         }
+        starts.push(links.len());
         let apply = |x: &[f64], out: &mut [f64]| {
-            for (k, &i) in free.iter().enumerate() {
+            for (k, out) in out.iter_mut().enumerate() {
                 let mut sum = degree[k] * x[k];
-                for &(j, w) in &self.edges[i] {
-                    if slot[j as usize] != usize::MAX {
-                        sum -= w * x[slot[j as usize]];
-                    }
+                for &(j, w) in &links[starts[k]..starts[k + 1]] {
+                    sum -= w * x[j as usize];
                 }
-                out[k] = sum;
+                *out = sum;
             }
         };
-        let x = conjugate_gradient(apply, &rhs, &degree, 2000);
+        let x = conjugate_gradient(apply, &rhs, &degree, 2000, pause).await;
         let mut p: Vec<f64> = seeds.iter().map(|&s| if s == class { 1.0 } else { 0.0 }).collect();
         for (k, &i) in free.iter().enumerate() {
             p[i] = x[k].clamp(0.0, 1.0);
@@ -214,6 +222,16 @@ impl PointLabeller {
     /// clearly wins, and everywhere unless the strokes cover points of two classes), in the
     /// order of [`PointLabeller::positions`].
     pub fn point_classes(&self, strokes: &[(u32, Vec<u16>)], classes: usize) -> Vec<u16> {
+        run_to_end(self.point_classes_pausing(strokes, classes, &mut NoPause))
+    }
+
+    /// [`PointLabeller::point_classes`], pausing between iterations of its walks.
+    pub async fn point_classes_pausing(
+        &self,
+        strokes: &[(u32, Vec<u16>)],
+        classes: usize,
+        pause: &mut impl Pause,
+    ) -> Vec<u16> {
         let seeds: Vec<u16> = self
             .points
             .at
@@ -231,7 +249,10 @@ impl PointLabeller {
         if present.len() < 2 {
             return vec![UNLABELLED; seeds.len()];
         }
-        let probabilities: Vec<Vec<f64>> = present.iter().map(|&c| self.graph.walk(&seeds, c)).collect();
+        let mut probabilities: Vec<Vec<f64>> = Vec::with_capacity(present.len());
+        for &class in &present {
+            probabilities.push(self.graph.walk(&seeds, class, pause).await);
+        }
         (0..seeds.len())
             .map(|p| {
                 let (mut best, mut first, mut second) = (0, f64::MIN, f64::MIN);
@@ -390,7 +411,7 @@ mod tests {
         let mut seeds = vec![UNLABELLED; points.xyz.len()];
         seeds[3] = 0;
         seeds[260] = 1;
-        let p = graph.walk(&seeds, 1);
+        let p = run_to_end(graph.walk(&seeds, 1, &mut NoPause));
         assert!(p[..200].iter().all(|&v| v < 0.1), "the first blob is class 0");
         assert!(p[200..].iter().all(|&v| v > 0.9), "the second blob is class 1");
     }

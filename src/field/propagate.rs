@@ -19,6 +19,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::field::normals::depth_normals;
+use crate::field::pause::{NoPause, Pause, run_to_end};
 use crate::field::point_walk::{PointLabeller, PointWalkOptions, has_sparse_depth};
 use crate::field::refine::Guide;
 use crate::field::view_seeds::{View, unreconstructed_class};
@@ -143,6 +144,18 @@ pub fn propagate_frame(
     camera: Option<&Intrinsics>,
     options: &PropagationOptions,
 ) -> Vec<u16> {
+    run_to_end(walk_frame(strokes, classes, guide, camera, options, &mut NoPause))
+}
+
+/// [`propagate_frame`], pausing between iterations of its walks.
+async fn walk_frame(
+    strokes: &[u16],
+    classes: usize,
+    guide: Guide<'_>,
+    camera: Option<&Intrinsics>,
+    options: &PropagationOptions,
+    pause: &mut impl Pause,
+) -> Vec<u16> {
     let mut seeds: Vec<u16> = strokes
         .iter()
         .map(|&c| if (c as usize) < classes { c } else { UNLABELLED })
@@ -152,7 +165,10 @@ pub fn propagate_frame(
         return seeds;
     }
     let graph = Graph::new(guide, camera, options);
-    let probabilities: Vec<Vec<f32>> = present.iter().map(|&class| graph.walk(&seeds, class)).collect();
+    let mut probabilities: Vec<Vec<f32>> = Vec::with_capacity(present.len());
+    for &class in &present {
+        probabilities.push(graph.walk(&seeds, class, pause).await);
+    }
     for (pixel, label) in seeds.iter_mut().enumerate() {
         if *label != UNLABELLED {
             continue;
@@ -212,12 +228,24 @@ impl PropagationCache {
         classes: usize,
         options: &PropagationOptions,
     ) -> Vec<(u32, Vec<u16>)> {
+        run_to_end(self.maps_pausing(scene, labels, classes, options, &mut NoPause))
+    }
+
+    /// [`PropagationCache::maps`], pausing between iterations of its walks (`field::pause`).
+    pub async fn maps_pausing(
+        &mut self,
+        scene: &Scene,
+        labels: &LabelSet,
+        classes: usize,
+        options: &PropagationOptions,
+        pause: &mut impl Pause,
+    ) -> Vec<(u32, Vec<u16>)> {
         if self.settings != Some((classes, *options)) {
             self.frames.clear();
             self.drawn.clear();
             self.settings = Some((classes, *options));
         }
-        let seeds = frame_seeds(scene, labels, classes, options, self);
+        let seeds = frame_seeds(scene, labels, classes, options, self, pause).await;
         self.frames.retain(|frame, _| seeds.iter().any(|s| s.frame == *frame));
         let mut maps = Vec::with_capacity(seeds.len());
         for FrameSeeds {
@@ -244,7 +272,7 @@ impl PropagationCache {
                 (Some(start), Some(guide)) => Some(match self.frames.get(&frame).filter(|(seen, _)| *seen == start) {
                     Some((_, map)) => map.clone(),
                     None => {
-                        let map = propagate_frame(&start, classes, guide, Some(&scene.intrinsics), options);
+                        let map = walk_frame(&start, classes, guide, Some(&scene.intrinsics), options, pause).await;
                         self.frames.insert(frame, (start, map.clone()));
                         map
                     }
@@ -294,12 +322,16 @@ type FrameMaps = Vec<(u32, Vec<u16>)>;
 type LastPointWalk = (usize, FrameMaps, Vec<u16>);
 
 impl SparseCapture {
-    fn new(scene: &Scene) -> SparseCapture {
+    async fn new(scene: &Scene, pause: &mut impl Pause) -> SparseCapture {
         let labeller = PointLabeller::new(scene, &PointWalkOptions::default());
-        let views: Vec<View> = (0..scene.frames.len())
-            .map(|f| View::of_frame(scene, f, labeller.positions()))
-            .collect();
-        let far = views.iter().map(View::far_from_points).collect();
+        let mut views = Vec::with_capacity(scene.frames.len());
+        let mut far = Vec::with_capacity(scene.frames.len());
+        for f in 0..scene.frames.len() {
+            pause.pause().await;
+            let view = View::of_frame(scene, f, labeller.positions());
+            far.push(view.far_from_points());
+            views.push(view);
+        }
         SparseCapture {
             labeller,
             views,
@@ -309,10 +341,10 @@ impl SparseCapture {
     }
 
     /// Each point's class from the walk over the points seeded by `walked`.
-    fn point_classes(&mut self, walked: FrameMaps, classes: usize) -> &[u16] {
+    async fn point_classes(&mut self, walked: FrameMaps, classes: usize, pause: &mut impl Pause) -> &[u16] {
         let stale = !matches!(&self.last, Some((c, seen, _)) if *c == classes && *seen == walked);
         if stale {
-            let point_classes = self.labeller.point_classes(&walked, classes);
+            let point_classes = self.labeller.point_classes_pausing(&walked, classes, pause).await;
             self.last = Some((classes, walked, point_classes));
         }
         self.last.as_ref().map_or(&[], |(_, _, p)| p.as_slice())
@@ -339,12 +371,13 @@ enum Carried {
 
 /// What each frame starts from: its rasterized strokes, and on a capture with sparse depth
 /// (when `across_views`) the labels the points carry to it. Frames in ascending order.
-fn frame_seeds(
+async fn frame_seeds(
     scene: &Scene,
     labels: &LabelSet,
     classes: usize,
     options: &PropagationOptions,
     cache: &mut PropagationCache,
+    pause: &mut impl Pause,
 ) -> Vec<FrameSeeds> {
     let mut frames: Vec<u32> = labels
         .frames
@@ -380,25 +413,27 @@ fn frame_seeds(
         ..*options
     };
     cache.drawn.retain(|frame, _| strokes.iter().any(|(f, _)| f == frame));
-    let walked: Vec<(u32, Vec<u16>)> = strokes
-        .iter()
-        .map(|(frame, drawn)| {
-            let map = match cache.drawn.get(frame).filter(|(seen, _)| seen == drawn) {
-                Some((_, map)) => map.clone(),
-                None => {
-                    let map = match Guide::of_frame(scene, *frame as usize) {
-                        Some(guide) => propagate_frame(drawn, classes, guide, Some(&scene.intrinsics), &seeding),
-                        None => drawn.clone(),
-                    };
-                    cache.drawn.insert(*frame, (drawn.clone(), map.clone()));
-                    map
-                }
-            };
-            (*frame, map)
-        })
-        .collect();
-    let sparse = cache.sparse.get_or_insert_with(|| SparseCapture::new(scene));
-    let point_classes = sparse.point_classes(walked, classes).to_vec();
+    let mut walked: Vec<(u32, Vec<u16>)> = Vec::with_capacity(strokes.len());
+    for (frame, drawn) in &strokes {
+        let map = match cache.drawn.get(frame).filter(|(seen, _)| seen == drawn) {
+            Some((_, map)) => map.clone(),
+            None => {
+                let map = match Guide::of_frame(scene, *frame as usize) {
+                    Some(guide) => walk_frame(drawn, classes, guide, Some(&scene.intrinsics), &seeding, pause).await,
+                    None => drawn.clone(),
+                };
+                cache.drawn.insert(*frame, (drawn.clone(), map.clone()));
+                map
+            }
+        };
+        walked.push((*frame, map));
+    }
+    let sparse = match cache.sparse.take() {
+        Some(sparse) => sparse,
+        None => SparseCapture::new(scene, pause).await,
+    };
+    let sparse = cache.sparse.insert(sparse);
+    let point_classes = sparse.point_classes(walked, classes, pause).await.to_vec();
     let (views, far) = (&sparse.views, &sparse.far);
     let drawn: Vec<(&[u16], &[bool])> = strokes
         .iter()
@@ -558,35 +593,42 @@ impl Graph {
     /// another class and before it ends: strokes are fixed at 1 or 0, and every other pixel solves
     /// `(degree + absorption)·x_i − Σ w_ij·x_j = 0`, here by Jacobi-preconditioned conjugate gradients over the
     /// unlabelled pixels.
-    fn walk(&self, seeds: &[u16], class: u16) -> Vec<f32> {
+    async fn walk(&self, seeds: &[u16], class: u16, pause: &mut impl Pause) -> Vec<f32> {
         let n = seeds.len();
         let free: Vec<usize> = (0..n).filter(|&i| seeds[i] == UNLABELLED).collect();
-        let mut slot = vec![usize::MAX; n];
+        let mut slot = vec![u32::MAX; n];
         for (k, &i) in free.iter().enumerate() {
-            slot[i] = k;
+            slot[i] = k as u32;
         }
+        // The system over the free pixels in one flat list (each free pixel's free neighbours,
+        // by slot), so each iteration reads memory in order.
         let mut degree = vec![self.absorption; free.len()];
         let mut rhs = vec![0f64; free.len()];
+        let mut starts = Vec::with_capacity(free.len() + 1);
+        let mut links: Vec<(u32, f32)> = Vec::with_capacity(4 * free.len());
         for (k, &i) in free.iter().enumerate() {
+            starts.push(links.len() as u32);
             self.for_neighbours(i, |j, w| {
                 degree[k] += f64::from(w);
                 if seeds[j] == class {
                     rhs[k] += f64::from(w);
                 }
+                if slot[j] != u32::MAX {
+                    links.push((slot[j], w));
+                }
             });
         }
+        starts.push(links.len() as u32);
         let apply = |x: &[f64], out: &mut [f64]| {
-            for (k, &i) in free.iter().enumerate() {
+            for (k, out) in out.iter_mut().enumerate() {
                 let mut sum = degree[k] * x[k];
-                self.for_neighbours(i, |j, w| {
-                    if slot[j] != usize::MAX {
-                        sum -= f64::from(w) * x[slot[j]];
-                    }
-                });
-                out[k] = sum;
+                for &(j, w) in &links[starts[k] as usize..starts[k + 1] as usize] {
+                    sum -= f64::from(w) * x[j as usize];
+                }
+                *out = sum;
             }
         };
-        let x = conjugate_gradient(apply, &rhs, &degree, 4 * (self.width + self.height) + 200);
+        let x = conjugate_gradient(apply, &rhs, &degree, 4 * (self.width + self.height) + 200, pause).await;
         let mut p: Vec<f32> = seeds.iter().map(|&s| if s == class { 1.0 } else { 0.0 }).collect();
         for (k, &i) in free.iter().enumerate() {
             p[i] = x[k].clamp(0.0, 1.0) as f32;
@@ -596,12 +638,14 @@ impl Graph {
 }
 
 /// Solves `A x = b` for a symmetric positive definite `A` given as `apply(x, out)`, with the
-/// Jacobi preconditioner `diagonal`, from x = 0, for at most `max_iterations` iterations.
-pub(crate) fn conjugate_gradient(
+/// Jacobi preconditioner `diagonal`, from x = 0, for at most `max_iterations` iterations, pausing
+/// before each.
+pub(crate) async fn conjugate_gradient(
     apply: impl Fn(&[f64], &mut [f64]),
     b: &[f64],
     diagonal: &[f64],
     max_iterations: usize,
+    pause: &mut impl Pause,
 ) -> Vec<f64> {
     let n = b.len();
     let mut x = vec![0f64; n];
@@ -610,12 +654,18 @@ pub(crate) fn conjugate_gradient(
     if b_norm == 0.0 {
         return x;
     }
-    let precondition = |r: &[f64]| -> Vec<f64> { r.iter().zip(diagonal).map(|(r, d)| r / d.max(1e-30)).collect() };
-    let mut z = precondition(&r);
+    let precondition = |r: &[f64], z: &mut [f64]| {
+        for ((z, r), d) in z.iter_mut().zip(r).zip(diagonal) {
+            *z = r / d.max(1e-30);
+        }
+    };
+    let mut z = vec![0f64; n];
+    precondition(&r, &mut z);
     let mut p = z.clone();
     let mut rz: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
     let mut ap = vec![0f64; n];
     for _ in 0..max_iterations {
+        pause.pause().await;
         apply(&p, &mut ap);
         let pap: f64 = p.iter().zip(&ap).map(|(a, b)| a * b).sum();
         if pap <= 0.0 {
@@ -629,7 +679,7 @@ pub(crate) fn conjugate_gradient(
         if r.iter().map(|v| v * v).sum::<f64>().sqrt() <= TOLERANCE * b_norm {
             break;
         }
-        z = precondition(&r);
+        precondition(&r, &mut z);
         let rz_next: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
         let beta = rz_next / rz;
         rz = rz_next;

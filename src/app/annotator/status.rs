@@ -69,6 +69,7 @@ impl Annotator {
             s.training = match &reports.phase {
                 Phase::Starting => "starting",
                 Phase::Running if t.paused() => "paused",
+                Phase::Running if reports.spreading => "spreading",
                 Phase::Running => "running",
                 Phase::Exporting { .. } => "exporting",
                 Phase::Failed(_) => "failed",

@@ -44,6 +44,10 @@ pub enum TrainEvent {
     Refresh(RefreshTimes),
     /// The masks zip, once an export is done.
     Exported(Result<Vec<u8>, TrainError>),
+    /// The strokes are being spread over the frames (`true`), or that is done (`false`): on a
+    /// large capture with sparse depth it takes seconds, in slices that leave the page drawing,
+    /// and the field does not train meanwhile. Sent only when spreading outlasts one slice.
+    Spreading(bool),
     /// The wall-clock profile (`#profile` in the address), once measured.
     Profile(String),
 }

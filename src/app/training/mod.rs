@@ -101,6 +101,8 @@ pub struct Reports {
     pub progress: Progress,
     pub render_ms: f64,
     pub refresh: Option<RefreshTimes>,
+    /// The latest labels are being spread over the frames ([`TrainEvent::Spreading`]).
+    pub spreading: bool,
 }
 
 /// What [`Training::poll`] hands the page to act on.
@@ -145,6 +147,7 @@ impl Training {
                 },
                 render_ms: 0.0,
                 refresh: None,
+                spreading: false,
             },
             paused: false,
             visible_frame,
@@ -175,6 +178,7 @@ impl Training {
                 TrainEvent::Rendered(r) => delivered.rendered = Some(r),
                 TrainEvent::RenderTime(ms) => self.reports.render_ms = ms,
                 TrainEvent::Refresh(r) => self.reports.refresh = Some(r),
+                TrainEvent::Spreading(on) => self.reports.spreading = on,
                 TrainEvent::Exported(zip) => delivered.exported = Some(zip),
                 TrainEvent::Profile(text) => {
                     web_sys::console::log_1(&format!("scribblefield profile: {text}").into());

@@ -20,6 +20,7 @@ use crate::field::FieldConfig;
 use crate::field::gpu::refine::RefinePass;
 use crate::field::gpu::trainer::{DepthGuide, RenderedFrame, Trainer, ViewCamera};
 use crate::field::gpu::view::frame_depth_at;
+use crate::field::pause::Pause;
 use crate::field::refine::Guide;
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
@@ -32,6 +33,41 @@ const MAX_BATCH: u32 = 64;
 /// The visible frame is re-rendered at most this often while training (a render costs as much
 /// as tens of steps).
 const RENDER_INTERVAL_MS: f64 = 1500.0;
+
+/// Work on the page's thread between two gives back (it also draws the page and takes strokes).
+const SLICE_MS: f64 = 12.0;
+
+/// Pauses a long computation on the page's thread ([`crate::field::pause`]) once it has held the
+/// thread for [`SLICE_MS`], and tells the page the first time, so it can say what is going on.
+struct Slices<'a> {
+    task: &'a TrainingTask,
+    since_ms: f64,
+    reported: bool,
+}
+
+impl<'a> Slices<'a> {
+    fn new(task: &'a TrainingTask) -> Slices<'a> {
+        Slices {
+            task,
+            since_ms: now_ms(),
+            reported: false,
+        }
+    }
+}
+
+impl Pause for Slices<'_> {
+    async fn pause(&mut self) {
+        if now_ms() - self.since_ms < SLICE_MS {
+            return;
+        }
+        if !self.reported {
+            self.reported = true;
+            self.task.report(TrainEvent::Spreading(true));
+        }
+        sleep_ms(0).await;
+        self.since_ms = now_ms();
+    }
+}
 
 /// What the page has asked for, as of the latest commands.
 struct Requests {
@@ -250,7 +286,7 @@ impl TrainingTask {
             if !self.take_commands() {
                 return Ok(());
             }
-            self.upload_labels(trainer)?;
+            self.upload_labels(trainer).await?;
             match self.next_action() {
                 Action::Wait => sleep_ms(30).await,
                 Action::Paused => {
@@ -273,12 +309,18 @@ impl TrainingTask {
         }
     }
 
-    /// Hands the trainer the latest labels, if any came.
-    fn upload_labels(&mut self, trainer: &mut Trainer) -> Result<(), TrainError> {
+    /// Hands the trainer the latest labels, if any came. Spreading them can take seconds on a
+    /// capture with sparse depth: it runs in slices, giving the page's thread back between them.
+    async fn upload_labels(&mut self, trainer: &mut Trainer) -> Result<(), TrainError> {
         if let Some((version, labels)) = self.requests.labels.take() {
-            trainer
-                .set_labels(Some(&labels), &self.scene)
-                .map_err(TrainError::Labels)?;
+            let mut slices = Slices::new(self);
+            let spread = trainer
+                .set_labels_pausing(Some(&labels), &self.scene, &mut slices)
+                .await;
+            if slices.reported {
+                self.report(TrainEvent::Spreading(false));
+            }
+            spread.map_err(TrainError::Labels)?;
             self.trained_version = version;
             self.labels_refresh = true;
             self.trained_since_labels = false;

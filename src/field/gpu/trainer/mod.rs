@@ -11,6 +11,7 @@
 //! The same code runs natively and in the browser: nothing here blocks.
 use crate::field::config::FieldConfig;
 use crate::field::params::ParamLayout;
+use crate::field::pause::{NoPause, Pause, run_to_end};
 use crate::field::propagate::PropagationCache;
 use crate::field::reference::LossTerms;
 use crate::gpu::buffers::{
@@ -426,13 +427,29 @@ impl Trainer {
     /// annotated frame of `scene` (the scene this trainer was made for) with its strokes spread
     /// as `FieldConfig::scribble_propagation` says (`field::propagate`).
     pub fn set_labels(&mut self, labels: Option<&LabelSet>, scene: &Scene) -> Result<(), GpuError> {
+        run_to_end(self.set_labels_pausing(labels, scene, &mut NoPause))
+    }
+
+    /// [`Trainer::set_labels`], pausing between iterations of the walks that spread the strokes
+    /// (the page's thread also draws: `field::pause`).
+    pub async fn set_labels_pausing(
+        &mut self,
+        labels: Option<&LabelSet>,
+        scene: &Scene,
+        pause: &mut impl Pause,
+    ) -> Result<(), GpuError> {
         let maps = match labels {
-            Some(labels) => self.propagation.maps(
-                scene,
-                labels,
-                self.cfg.num_classes as usize,
-                &self.cfg.scribble_propagation,
-            ),
+            Some(labels) => {
+                self.propagation
+                    .maps_pausing(
+                        scene,
+                        labels,
+                        self.cfg.num_classes as usize,
+                        &self.cfg.scribble_propagation,
+                        pause,
+                    )
+                    .await
+            }
             None => Vec::new(),
         };
         let index = LabelIndex::from_maps(
