@@ -92,6 +92,9 @@ pub fn show(
                 ui.end_row();
             };
             row("steps", s.steps.to_string());
+            if let Some(spread) = reports.spread {
+                row("trains on", format!("{} px in {} frames", spread.pixels, spread.frames));
+            }
             row("steps/s", format!("{:.1}", s.steps_per_second));
             if let Some(l) = s.losses {
                 let per_ray = |v: f64| v / f64::from(cfg.batch_rays);

@@ -41,8 +41,11 @@ pub struct Annotating {
     pub strokes: usize,
     /// Labelled pixels over every frame.
     pub labelled: u64,
-    /// `none` (no GPU), `starting`, `running`, `paused`, `exporting`, `failed`.
+    /// `none` (no GPU), `starting`, `running`, `spreading` (the latest strokes are being spread
+    /// over the frames; training waits), `paused`, `exporting`, `failed`.
     pub training: &'static str,
+    /// The labels the field trains on: `[pixels, frames]` (strokes and where they spread).
+    pub spread: Option<[usize; 2]>,
     /// While exporting: `[done, total]` frames.
     pub exporting: Option<[u32; 2]>,
     pub steps: u32,
@@ -134,6 +137,7 @@ mod tests {
             strokes: 2,
             labelled: 300,
             training: "running",
+            spread: Some([5000, 3]),
             exporting: None,
             steps: 12,
             sps: 0.5,
@@ -161,6 +165,7 @@ mod tests {
         assert_eq!(json["frame"], 5);
         assert_eq!(json["view"][2], 3.0);
         assert_eq!(json["mask"], "coarse");
+        assert_eq!(json["spread"][1], 3);
         assert_eq!(json["refresh_ms"][1], serde_json::Value::Null);
         assert_eq!(json["features"], serde_json::Value::Null);
         assert_eq!(json["save"]["state"], "saved");

@@ -16,6 +16,7 @@ pub mod presets;
 pub mod propagate;
 pub mod reference;
 pub mod refine;
+pub mod support_plane;
 pub mod view_seeds;
 
 pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LossWeights, SemanticInput};

@@ -22,7 +22,8 @@ use crate::field::normals::depth_normals;
 use crate::field::pause::{NoPause, Pause, run_to_end};
 use crate::field::point_walk::{PointLabeller, PointWalkOptions, has_sparse_depth};
 use crate::field::refine::Guide;
-use crate::field::view_seeds::{View, unreconstructed_class};
+use crate::field::support_plane::largest_plane;
+use crate::field::view_seeds::{View, region_class};
 use std::collections::HashMap;
 
 use crate::labels::{LabelSet, UNLABELLED, rasterize_frame};
@@ -67,6 +68,10 @@ pub struct PropagationOptions {
     /// reconstruction missed, from its pixels far from every point (`field::view_seeds`).
     /// Captures with dense depth are not affected.
     pub across_views: bool,
+    /// On a frame with dense depth and strokes of two or more classes, find the largest plane
+    /// in its depth (the floor or table the objects stand on, `field::support_plane`); where
+    /// the strokes on it agree on one class, the whole plane starts the walk in that class.
+    pub support_plane: bool,
 }
 
 impl Default for PropagationOptions {
@@ -81,6 +86,7 @@ impl Default for PropagationOptions {
             min_margin: 0.5,
             normal_sigma: 0.15,
             across_views: true,
+            support_plane: false,
         }
     }
 }
@@ -217,6 +223,8 @@ pub struct PropagationCache {
     /// Per drawn frame of such a capture: its strokes and their walk inside the frame alone,
     /// which seeds the walk over the points.
     drawn: HashMap<u32, (Vec<u16>, Vec<u16>)>,
+    /// Per drawn frame with dense depth, its support plane (`None`: no plane found).
+    planes: HashMap<u32, Option<Vec<bool>>>,
 }
 
 impl PropagationCache {
@@ -243,6 +251,7 @@ impl PropagationCache {
         if self.settings != Some((classes, *options)) {
             self.frames.clear();
             self.drawn.clear();
+            self.planes.clear();
             self.settings = Some((classes, *options));
         }
         let seeds = frame_seeds(scene, labels, classes, options, self, pause).await;
@@ -266,7 +275,10 @@ impl PropagationCache {
                     }
                     Some(start)
                 }
-                _ => strokes.clone(),
+                _ => match &strokes {
+                    Some(drawn) if options.support_plane => Some(self.on_support_plane(scene, frame, drawn, classes)),
+                    _ => strokes.clone(),
+                },
             };
             let walked = match (walked, Guide::of_frame(scene, frame as usize)) {
                 (Some(start), Some(guide)) => Some(match self.frames.get(&frame).filter(|(seen, _)| *seen == start) {
@@ -300,6 +312,48 @@ impl PropagationCache {
         }
         maps
     }
+}
+
+impl PropagationCache {
+    /// A drawn frame's strokes with its support plane in the class the strokes on the plane
+    /// agree on (`PropagationOptions::support_plane`); the strokes as they are when the frame
+    /// has no dense depth, no plane, strokes of one class, or strokes that disagree on the plane.
+    fn on_support_plane(&mut self, scene: &Scene, frame: u32, drawn: &[u16], classes: usize) -> Vec<u16> {
+        let mut start = drawn.to_vec();
+        let mut present = drawn.iter().filter(|&&c| (c as usize) < classes);
+        let Some(&first) = present.next() else {
+            return start;
+        };
+        if present.all(|&c| c == first) {
+            return start;
+        }
+        let plane = self
+            .planes
+            .entry(frame)
+            .or_insert_with(|| support_plane_of(scene, frame as usize));
+        let Some(plane) = plane.as_deref() else {
+            return start;
+        };
+        if let Some(class) = region_class(&[(drawn, plane)], classes) {
+            for (s, &on) in start.iter_mut().zip(plane) {
+                if on && *s == UNLABELLED {
+                    *s = class;
+                }
+            }
+        }
+        start
+    }
+}
+
+/// The largest plane in frame `frame`'s depth, when the depth is dense (`field::support_plane`).
+fn support_plane_of(scene: &Scene, frame: usize) -> Option<Vec<bool>> {
+    let depth = scene.frames.get(frame)?.depth.as_ref()?;
+    let readings = depth.pixels().filter(|d| d.0[0] > 0).count();
+    if readings * 2 <= depth.len() || depth.dimensions() != (scene.width, scene.height) {
+        return None;
+    }
+    let normals = depth_normals(depth, &scene.intrinsics);
+    largest_plane(depth, &scene.intrinsics, &normals)
 }
 
 /// What labels across views need of a capture with sparse depth, built once per scene: the
@@ -439,7 +493,7 @@ async fn frame_seeds(
         .iter()
         .map(|(f, map)| (map.as_slice(), far[*f as usize].as_slice()))
         .collect();
-    let unreconstructed = unreconstructed_class(&drawn, classes);
+    let unreconstructed = region_class(&drawn, classes);
     for (f, view) in views.iter().enumerate() {
         let mut carried = view.labels(&point_classes);
         let carried = match unreconstructed {

@@ -16,11 +16,11 @@ use crate::scene::Scene;
 /// A pixel is far from the points when no projected point lies within this share of the image
 /// diagonal.
 pub const FAR_FROM_POINTS: f64 = 0.03;
-/// The class the strokes give the far pixels must hold at least this share of the stroked far
-/// pixels to be trusted with the far pixels of every frame...
-const UNRECONSTRUCTED_SHARE: f64 = 0.75;
-/// ...and be drawn on at least this many far pixels.
-const UNRECONSTRUCTED_PIXELS: usize = 20;
+/// The class the strokes give a region (pixels far from every point, a support plane) must hold
+/// at least this share of the region's stroked pixels to be trusted with all of it...
+const REGION_SHARE: f64 = 0.75;
+/// ...and be drawn on at least this many of its pixels.
+const REGION_PIXELS: usize = 20;
 
 /// A camera's view of the points: where each lands in one frame.
 pub struct View {
@@ -83,21 +83,21 @@ impl View {
     }
 }
 
-/// The class the strokes give the pixels far from every point, when one class clearly holds
-/// them: `strokes` are the drawn frames' rasterized strokes, `far` each drawn frame's
-/// [`View::far_from_points`].
-pub fn unreconstructed_class(strokes: &[(&[u16], &[bool])], classes: usize) -> Option<u16> {
+/// The class the strokes give a region of pixels, when one class clearly holds it: `strokes`
+/// are frames' rasterized strokes, each with its region (the pixels far from every point,
+/// [`View::far_from_points`]; a frame's support plane, `field::support_plane`).
+pub fn region_class(strokes: &[(&[u16], &[bool])], classes: usize) -> Option<u16> {
     let mut counts = vec![0usize; classes];
-    for (map, far) in strokes {
-        for (&c, &far) in map.iter().zip(far.iter()) {
-            if far && (c as usize) < classes {
+    for (map, region) in strokes {
+        for (&c, &inside) in map.iter().zip(region.iter()) {
+            if inside && (c as usize) < classes {
                 counts[c as usize] += 1;
             }
         }
     }
     let total: usize = counts.iter().sum();
     let (best, &count) = counts.iter().enumerate().max_by_key(|(_, n)| **n)?;
-    (count >= UNRECONSTRUCTED_PIXELS && count as f64 >= UNRECONSTRUCTED_SHARE * total as f64).then_some(best as u16)
+    (count >= REGION_PIXELS && count as f64 >= REGION_SHARE * total as f64).then_some(best as u16)
 }
 
 /// Euclidean distance from each pixel to the nearest `true` pixel (infinite when there is
@@ -193,12 +193,12 @@ mod tests {
         let map = [0u16, 0, 0, 1, 1, UNLABELLED];
         let far = [true, true, true, true, false, true];
         // 3 of 4 far stroke pixels are class 0: not the 75 % asked for at 20 pixels...
-        assert_eq!(unreconstructed_class(&[(&map, &far)], 2), None);
+        assert_eq!(region_class(&[(&map, &far)], 2), None);
         // ...but 30 of 31 are.
         let map: Vec<u16> = std::iter::repeat_n(0, 30).chain([1]).collect();
         let far = vec![true; 31];
-        assert_eq!(unreconstructed_class(&[(&map, &far)], 2), Some(0));
+        assert_eq!(region_class(&[(&map, &far)], 2), Some(0));
         // A class the model does not have is not counted.
-        assert_eq!(unreconstructed_class(&[(&map, &far)], 0), None);
+        assert_eq!(region_class(&[(&map, &far)], 0), None);
     }
 }

@@ -15,8 +15,8 @@ import { tmpdir } from "node:os";
 import { join } from "node:path";
 import { chromium } from "playwright-core";
 import {
-  CHROMIUM_ARGS, Checks, assert, clearSaves, decodePng, openPage, readZip, saturatedColours, settledStatus,
-  show, status, waitForStatus,
+  CHROMIUM_ARGS, Checks, assert, clearSaves, decodePng, drawFrameStroke, goToFrame, openPage, planFrameStrokes,
+  readZip, saturatedColours, settledStatus, show, status, waitForStatus,
 } from "./lib.mjs";
 
 const url = process.env.E2E_URL;
@@ -64,77 +64,14 @@ const classes = sceneJson.classes;
 const gt = sceneJson.frames.map((f) => decodePng(demo.get(f.gt)));
 const [W, H] = [sceneJson.width, sceneJson.height];
 
-/// Chessboard-free distance (in pixels, 4-neighbour) from each pixel to the nearest pixel of
-/// another class, void or the image edge: where a careful annotator can put the brush.
-function distanceToBoundary(ids) {
-  const d = new Int32Array(W * H).fill(1 << 20);
-  const queue = [];
-  for (let y = 0; y < H; y++) {
-    for (let x = 0; x < W; x++) {
-      const i = y * W + x, c = ids[i];
-      const edge = x === 0 || y === 0 || x === W - 1 || y === H - 1;
-      const differs = edge || ids[i - 1] !== c || ids[i + 1] !== c || ids[i - W] !== c || ids[i + W] !== c;
-      if (c === VOID || differs) { d[i] = 0; queue.push(i); }
-    }
-  }
-  for (let q = 0; q < queue.length; q++) {
-    const i = queue[q], x = i % W;
-    for (const j of [x > 0 ? i - 1 : -1, x < W - 1 ? i + 1 : -1, i - W, i + W]) {
-      if (j >= 0 && j < W * H && d[j] > d[i] + 1) { d[j] = d[i] + 1; queue.push(j); }
-    }
-  }
-  return d;
-}
-
-/// One horizontal stroke per class visible on `frame`, through the class's most interior pixel
-/// and staying a brush radius inside it: [{class, points: [[x, y], ...]}] in frame pixels.
+/// One stroke per class visible on `frame` (see lib.mjs).
 function planStrokes(frame) {
-  const ids = gt[frame].data;
-  const d = distanceToBoundary(ids);
-  const best = new Map();
-  for (let i = 0; i < W * H; i++) {
-    const c = ids[i];
-    if (c !== VOID && (!best.has(c) || d[i] > d[best.get(c)])) best.set(c, i);
-  }
-  const strokes = [];
-  for (const [c, i] of [...best.entries()].sort((a, b) => a[0] - b[0])) {
-    const room = d[i] - BRUSH_RADIUS - 1;
-    if (room < 1) continue;
-    const [x, y] = [i % W + 0.5, Math.floor(i / W) + 0.5];
-    const half = Math.min(room, 14);
-    // Only as far as the class continues along the row.
-    let left = 0, right = 0;
-    while (left < half && d[i - left - 1] > BRUSH_RADIUS && ids[i - left - 1] === c) left++;
-    while (right < half && d[i + right + 1] > BRUSH_RADIUS && ids[i + right + 1] === c) right++;
-    strokes.push({ class: c, points: [[x - left, y], [x, y], [x + right, y]] });
-  }
-  return strokes;
+  return planFrameStrokes(gt[frame].data, W, H, BRUSH_RADIUS);
 }
 
-function viewRect(statusText) {
-  const [x, y, w, h] = statusText.view;
-  return { x, y, w, h };
-}
-
-async function goToFrame(page, frame) {
-  let s = await status(page);
-  const current = s.frame;
-  const key = frame > current ? "ArrowRight" : "ArrowLeft";
-  for (let i = 0; i < Math.abs(frame - current); i++) await page.keyboard.press(key);
-  await waitForStatus(page, (t) => t.frame === frame, `frame ${frame}`, 60_000);
-}
-
-/// Draws `stroke` with the mouse: select the class by its number key, press, move, release.
-async function drawStroke(page, stroke) {
-  await page.keyboard.press(String(stroke.class + 1));
-  await waitForStatus(page, (t) => t.class === stroke.class, `class ${stroke.class}`, 30_000);
-  const v = viewRect(await status(page));
-  const toScreen = ([x, y]) => [v.x + (x / W) * v.w, v.y + (y / H) * v.h];
-  const [first, ...rest] = stroke.points.map(toScreen);
-  await page.mouse.move(...first);
-  await page.mouse.down();
-  for (const p of rest) await page.mouse.move(...p);
-  await page.mouse.up();
+/// Draws `stroke` (frame pixels) with the mouse.
+function drawStroke(page, stroke) {
+  return drawFrameStroke(page, stroke, W, H);
 }
 
 function labelledOf(s) {

@@ -204,3 +204,75 @@ export function clearSaves(page) {
     };
   }));
 }
+
+const VOID_CLASS = 255;
+
+/// Chessboard-free distance (in pixels, 4-neighbour) from each pixel of a `w` x `h` class map to
+/// the nearest pixel of another class, void or the image edge: where a careful annotator can
+/// put the brush.
+function distanceToBoundary(ids, w, h) {
+  const d = new Int32Array(w * h).fill(1 << 20);
+  const queue = [];
+  for (let y = 0; y < h; y++) {
+    for (let x = 0; x < w; x++) {
+      const i = y * w + x, c = ids[i];
+      const edge = x === 0 || y === 0 || x === w - 1 || y === h - 1;
+      const differs = edge || ids[i - 1] !== c || ids[i + 1] !== c || ids[i - w] !== c || ids[i + w] !== c;
+      if (c === VOID_CLASS || differs) { d[i] = 0; queue.push(i); }
+    }
+  }
+  for (let q = 0; q < queue.length; q++) {
+    const i = queue[q], x = i % w;
+    for (const j of [x > 0 ? i - 1 : -1, x < w - 1 ? i + 1 : -1, i - w, i + w]) {
+      if (j >= 0 && j < w * h && d[j] > d[i] + 1) { d[j] = d[i] + 1; queue.push(j); }
+    }
+  }
+  return d;
+}
+
+/// One horizontal stroke per class of the ground-truth class map `ids` (`w` x `h`), through the
+/// class's most interior pixel and staying `brushRadius` inside it:
+/// [{class, points: [[x, y], ...]}] in frame pixels.
+export function planFrameStrokes(ids, w, h, brushRadius) {
+  const d = distanceToBoundary(ids, w, h);
+  const best = new Map();
+  for (let i = 0; i < w * h; i++) {
+    const c = ids[i];
+    if (c !== VOID_CLASS && (!best.has(c) || d[i] > d[best.get(c)])) best.set(c, i);
+  }
+  const strokes = [];
+  for (const [c, i] of [...best.entries()].sort((a, b) => a[0] - b[0])) {
+    const room = d[i] - brushRadius - 1;
+    if (room < 1) continue;
+    const [x, y] = [i % w + 0.5, Math.floor(i / w) + 0.5];
+    const half = Math.min(room, 14);
+    // Only as far as the class continues along the row.
+    let left = 0, right = 0;
+    while (left < half && d[i - left - 1] > brushRadius && ids[i - left - 1] === c) left++;
+    while (right < half && d[i + right + 1] > brushRadius && ids[i + right + 1] === c) right++;
+    strokes.push({ class: c, points: [[x - left, y], [x, y], [x + right, y]] });
+  }
+  return strokes;
+}
+
+/// Steps the page to `frame` with the arrow keys.
+export async function goToFrame(page, frame) {
+  const current = (await status(page)).frame;
+  const key = frame > current ? "ArrowRight" : "ArrowLeft";
+  for (let i = 0; i < Math.abs(frame - current); i++) await page.keyboard.press(key);
+  await waitForStatus(page, (t) => t.frame === frame, `frame ${frame}`, 60_000);
+}
+
+/// Draws `stroke` (points in pixels of a `w` x `h` frame) with the mouse: select the class by
+/// its number key, press, move, release.
+export async function drawFrameStroke(page, stroke, w, h) {
+  await page.keyboard.press(String(stroke.class + 1));
+  await waitForStatus(page, (t) => t.class === stroke.class, `class ${stroke.class}`, 30_000);
+  const [x0, y0, vw, vh] = (await status(page)).view;
+  const toScreen = ([x, y]) => [x0 + (x / w) * vw, y0 + (y / h) * vh];
+  const [first, ...rest] = stroke.points.map(toScreen);
+  await page.mouse.move(...first);
+  await page.mouse.down();
+  for (const p of rest) await page.mouse.move(...p);
+  await page.mouse.up();
+}

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Browser end-to-end test: builds the web app, serves it on a free localhost port, and runs
-# smoke.mjs, annotate.mjs and durable.mjs in headless Chromium (WebGPU on SwiftShader). Installs Chromium (apt) and the node
+# smoke.mjs, annotate.mjs, durable.mjs and (with ../shared/data beside the repository)
+# spread.mjs in headless Chromium (WebGPU on SwiftShader). Installs Chromium (apt) and the node
 # modules (npm ci) when they are missing. Screenshots go to $E2E_OUT (default /tmp/e2e).
 set -euo pipefail
 HERE="$(cd "$(dirname "$0")" && pwd)"
@@ -27,12 +28,23 @@ fi
 scripts/build-web.sh
 cargo build --release --quiet
 
+# A photo capture with sparse depth for spread.mjs, packed small, when the shared data is there.
+SPARSE_CAPTURE="$ROOT/../shared/data/alexander-colmap"
+SPARSE=""
+if [ -d "$SPARSE_CAPTURE" ]; then
+  SPARSE="$ROOT/www/e2e-sparse.scene.zip"
+  target/release/scribblefield pack "$SPARSE_CAPTURE" -o "$SPARSE" --max-size 120 --features baseline \
+    --feature-stride 2 >/dev/null
+else
+  echo "(no $SPARSE_CAPTURE: skipping spread.mjs)"
+fi
+
 # A free port: bind port 0, note what the kernel chose, release it for the server.
 PORT=$(node -e 'const s=require("net").createServer().listen(0,"127.0.0.1",()=>{console.log(s.address().port);s.close()})')
 LOG=$(mktemp)
 target/release/scribblefield serve www --port "$PORT" >"$LOG" 2>&1 &
 SERVER=$!
-trap 'kill "$SERVER" 2>/dev/null || true; wait "$SERVER" 2>/dev/null || true; rm -f "$LOG"' EXIT
+trap 'kill "$SERVER" 2>/dev/null || true; wait "$SERVER" 2>/dev/null || true; rm -f "$LOG" ${SPARSE:+"$SPARSE"}' EXIT
 
 URL="http://127.0.0.1:$PORT/"
 for _ in $(seq 1 100); do
@@ -52,4 +64,7 @@ STATUS=0
 E2E_URL="$URL" CHROMIUM="$CHROMIUM" node "$HERE/smoke.mjs" || STATUS=1
 E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_DEMO="$ROOT/www/demo.scene.zip" node "$HERE/annotate.mjs" || STATUS=1
 E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_DEMO="$ROOT/www/demo.scene.zip" node "$HERE/durable.mjs" || STATUS=1
+if [ -n "$SPARSE" ]; then
+  E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_SPARSE="$SPARSE" node "$HERE/spread.mjs" || STATUS=1
+fi
 exit $STATUS

@@ -46,6 +46,7 @@ impl Annotator {
             strokes: doc.summary.strokes,
             labelled: doc.summary.labelled_pixels,
             training: "none",
+            spread: None,
             exporting: None,
             steps: 0,
             sps: 0.0,
@@ -68,12 +69,13 @@ impl Annotator {
             let p = &reports.progress;
             s.training = match &reports.phase {
                 Phase::Starting => "starting",
-                Phase::Running if t.paused() => "paused",
                 Phase::Running if reports.spreading => "spreading",
+                Phase::Running if t.paused() => "paused",
                 Phase::Running => "running",
                 Phase::Exporting { .. } => "exporting",
                 Phase::Failed(_) => "failed",
             };
+            s.spread = reports.spread.map(|s| [s.pixels, s.frames]);
             if let Phase::Exporting { done, total } = reports.phase {
                 s.exporting = Some([done, total]);
             }

@@ -48,6 +48,9 @@ pub enum TrainEvent {
     /// large capture with sparse depth it takes seconds, in slices that leave the page drawing,
     /// and the field does not train meanwhile. Sent only when spreading outlasts one slice.
     Spreading(bool),
+    /// What the field now trains on: labelled pixels (strokes and where they spread) and the
+    /// frames holding them, after every change of labels.
+    Spread(Spread),
     /// The wall-clock profile (`#profile` in the address), once measured.
     Profile(String),
 }
@@ -65,6 +68,13 @@ pub enum Phase {
     },
     /// Stopped for good: lost device, out of memory, a bug.
     Failed(TrainError),
+}
+
+/// The labels the field trains on ([`TrainEvent::Spread`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Spread {
+    pub pixels: usize,
+    pub frames: usize,
 }
 
 /// Numbers from the latest batch of steps.

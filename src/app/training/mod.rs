@@ -15,7 +15,7 @@ use std::rc::Rc;
 
 use futures_channel::mpsc::{UnboundedReceiver, UnboundedSender, unbounded};
 
-pub use self::messages::{Phase, Progress, RefreshTimes, Rendered, TrainCommand, TrainError, TrainEvent};
+pub use self::messages::{Phase, Progress, RefreshTimes, Rendered, Spread, TrainCommand, TrainError, TrainEvent};
 use super::browser::now_ms;
 use crate::field::FieldConfig;
 use crate::field::refine::RefineOptions;
@@ -103,6 +103,8 @@ pub struct Reports {
     pub refresh: Option<RefreshTimes>,
     /// The latest labels are being spread over the frames ([`TrainEvent::Spreading`]).
     pub spreading: bool,
+    /// The labels the field trains on, once any were given.
+    pub spread: Option<Spread>,
 }
 
 /// What [`Training::poll`] hands the page to act on.
@@ -148,6 +150,7 @@ impl Training {
                 render_ms: 0.0,
                 refresh: None,
                 spreading: false,
+                spread: None,
             },
             paused: false,
             visible_frame,
@@ -179,6 +182,7 @@ impl Training {
                 TrainEvent::RenderTime(ms) => self.reports.render_ms = ms,
                 TrainEvent::Refresh(r) => self.reports.refresh = Some(r),
                 TrainEvent::Spreading(on) => self.reports.spreading = on,
+                TrainEvent::Spread(spread) => self.reports.spread = Some(spread),
                 TrainEvent::Exported(zip) => delivered.exported = Some(zip),
                 TrainEvent::Profile(text) => {
                     web_sys::console::log_1(&format!("scribblefield profile: {text}").into());

@@ -12,7 +12,7 @@ use image::GrayImage;
 
 use super::super::browser::{now_ms, sleep_ms};
 use super::device::{GpuFaults, RateMeter, gpu_done};
-use super::messages::{Phase, Progress, RefreshTimes, Rendered, TrainCommand, TrainError, TrainEvent};
+use super::messages::{Phase, Progress, RefreshTimes, Rendered, Spread, TrainCommand, TrainError, TrainEvent};
 use super::scene::upscale_mask;
 use super::{TrainingOptions, TrainingSetup};
 use crate::export::MaskSet;
@@ -321,6 +321,10 @@ impl TrainingTask {
                 self.report(TrainEvent::Spreading(false));
             }
             spread.map_err(TrainError::Labels)?;
+            self.report(TrainEvent::Spread(Spread {
+                pixels: trainer.labelled_pixels(),
+                frames: trainer.labelled_frames(),
+            }));
             self.trained_version = version;
             self.labels_refresh = true;
             self.trained_since_labels = false;
