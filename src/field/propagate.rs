@@ -70,7 +70,8 @@ pub struct PropagationOptions {
     pub across_views: bool,
     /// On a frame with dense depth and strokes of two or more classes, find the largest plane
     /// in its depth (the floor or table the objects stand on, `field::support_plane`); where
-    /// the strokes on it agree on one class, the whole plane starts the walk in that class.
+    /// the strokes on it agree on one class, the plane's pixels the walk leaves unlabelled take
+    /// that class.
     pub support_plane: bool,
 }
 
@@ -86,7 +87,7 @@ impl Default for PropagationOptions {
             min_margin: 0.5,
             normal_sigma: 0.15,
             across_views: true,
-            support_plane: false,
+            support_plane: true,
         }
     }
 }
@@ -275,10 +276,11 @@ impl PropagationCache {
                     }
                     Some(start)
                 }
-                _ => match &strokes {
-                    Some(drawn) if options.support_plane => Some(self.on_support_plane(scene, frame, drawn, classes)),
-                    _ => strokes.clone(),
-                },
+                _ => strokes.clone(),
+            };
+            let plane = match &strokes {
+                Some(drawn) if options.support_plane => self.support_plane_labels(scene, frame, drawn, classes),
+                _ => None,
             };
             let walked = match (walked, Guide::of_frame(scene, frame as usize)) {
                 (Some(start), Some(guide)) => Some(match self.frames.get(&frame).filter(|(seen, _)| *seen == start) {
@@ -290,6 +292,20 @@ impl PropagationCache {
                     }
                 }),
                 (start, _) => start,
+            };
+            // What the walk leaves unlabelled on the frame's support plane takes the plane's
+            // class: the walk fades before it covers a floor, and seeding the walk with the
+            // plane instead took labels from the objects' edges (docs/quality.md).
+            let walked = match (walked, plane) {
+                (Some(mut map), Some(plane)) => {
+                    for (m, p) in map.iter_mut().zip(plane) {
+                        if *m == UNLABELLED {
+                            *m = p;
+                        }
+                    }
+                    Some(map)
+                }
+                (walked, _) => walked,
             };
             // Only what the user drew or what reaches two classes walks. The points of a frame
             // may all be one object's, and a walk from those alone would paint the whole frame
@@ -312,36 +328,23 @@ impl PropagationCache {
         }
         maps
     }
-}
 
-impl PropagationCache {
-    /// A drawn frame's strokes with its support plane in the class the strokes on the plane
-    /// agree on (`PropagationOptions::support_plane`); the strokes as they are when the frame
-    /// has no dense depth, no plane, strokes of one class, or strokes that disagree on the plane.
-    fn on_support_plane(&mut self, scene: &Scene, frame: u32, drawn: &[u16], classes: usize) -> Vec<u16> {
-        let mut start = drawn.to_vec();
+    /// The class the strokes on a drawn frame's support plane agree on, over the plane's pixels
+    /// (`UNLABELLED` elsewhere; `PropagationOptions::support_plane`). `None` when the frame has
+    /// no dense depth, no plane, strokes of one class, or strokes that disagree on the plane.
+    fn support_plane_labels(&mut self, scene: &Scene, frame: u32, drawn: &[u16], classes: usize) -> Option<Vec<u16>> {
         let mut present = drawn.iter().filter(|&&c| (c as usize) < classes);
-        let Some(&first) = present.next() else {
-            return start;
-        };
+        let first = *present.next()?;
         if present.all(|&c| c == first) {
-            return start;
+            return None;
         }
         let plane = self
             .planes
             .entry(frame)
-            .or_insert_with(|| support_plane_of(scene, frame as usize));
-        let Some(plane) = plane.as_deref() else {
-            return start;
-        };
-        if let Some(class) = region_class(&[(drawn, plane)], classes) {
-            for (s, &on) in start.iter_mut().zip(plane) {
-                if on && *s == UNLABELLED {
-                    *s = class;
-                }
-            }
-        }
-        start
+            .or_insert_with(|| support_plane_of(scene, frame as usize))
+            .as_deref()?;
+        let class = region_class(&[(drawn, plane)], classes)?;
+        Some(plane.iter().map(|&on| if on { class } else { UNLABELLED }).collect())
     }
 }
 

@@ -219,3 +219,51 @@ fn lab_of_white_black_and_red() {
     assert!(close(srgb_to_lab([0, 0, 0]), [0.0, 0.0, 0.0]));
     assert!(close(srgb_to_lab([255, 0, 0]), [53.24, 80.09, 67.20]));
 }
+
+#[test]
+fn the_plane_the_objects_stand_on_takes_the_class_its_strokes_give_where_the_walk_fades() {
+    use crate::labels::synthetic::{ScribbleOptions, scribble_frames};
+    use crate::scene::demo::{DemoOptions, demo_scene};
+    let scene = demo_scene(&DemoOptions {
+        width: 80,
+        height: 60,
+        frames: 24,
+        ..DemoOptions::default()
+    })
+    .unwrap();
+    let classes = scene.classes.len();
+    let labels = scribble_frames(&scene, &[0], &ScribbleOptions::default());
+    let count = |options: &PropagationOptions| {
+        let maps = propagate_labels(&scene, &labels, classes, options);
+        let gt = scene.frames[0].gt.as_ref().unwrap();
+        let (mut background, mut right, mut labelled) = (0, 0, 0);
+        for (&label, truth) in maps[0].1.iter().zip(gt.pixels()) {
+            if label != UNLABELLED && truth.0[0] != 255 {
+                labelled += 1;
+                right += usize::from(label == u16::from(truth.0[0]));
+                background += usize::from(label == 0);
+            }
+        }
+        (background, right as f64 / labelled as f64)
+    };
+    // Walks that fade soon leave most of the floor to the plane.
+    let on = PropagationOptions {
+        support_plane: true,
+        reach: 0.1,
+        ..PropagationOptions::default()
+    };
+    let off = PropagationOptions {
+        support_plane: false,
+        ..on
+    };
+    let ((with_plane, right_with), (without, right_without)) = (count(&on), count(&off));
+    // The demo's floor is background: the strokes on it say so, and all of it is labelled.
+    assert!(
+        with_plane > without + 200,
+        "{with_plane} against {without} background labels"
+    );
+    assert!(
+        right_with > 0.98 && right_without > 0.98,
+        "{right_with}, {right_without}"
+    );
+}
