@@ -11,6 +11,7 @@ pub mod config;
 pub mod normals;
 pub mod params;
 pub mod pause;
+pub mod pixel_walk;
 pub mod point_walk;
 pub mod presets;
 pub mod propagate;

@@ -12,7 +12,7 @@
 use glam::DVec3;
 
 use super::pause::{NoPause, Pause, run_to_end};
-use super::propagate::{conjugate_gradient, srgb_to_lab};
+use super::pixel_walk::{conjugate_gradient, srgb_to_lab};
 use crate::labels::UNLABELLED;
 use crate::scene::Scene;
 

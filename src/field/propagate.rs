@@ -20,6 +20,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::field::normals::depth_normals;
 use crate::field::pause::{NoPause, Pause, run_to_end};
+use crate::field::pixel_walk::PixelGraph;
 use crate::field::point_walk::{PointLabeller, PointWalkOptions, has_sparse_depth};
 use crate::field::refine::Guide;
 use crate::field::support_plane::largest_plane;
@@ -130,14 +131,9 @@ impl PropagationOptions {
     }
 }
 
-/// Smallest step weight: keeps every pixel connected to the strokes, so each system has one
-/// solution, while a pixel behind a strong edge still ends up uncertain.
-const MIN_WEIGHT: f32 = 1e-6;
 /// On a capture with sparse depth, the probability and the lead over the next class at which a
 /// drawn frame's walk labels a pixel whose points then seed the walk across views.
 const SEED_CERTAINTY: f32 = 0.7;
-/// Conjugate-gradient stopping point: residual relative to the right-hand side.
-const TOLERANCE: f64 = 1e-4;
 
 /// The label map a frame trains on: the strokes, plus (when `options` are enabled and the strokes
 /// hold at least two classes) the pixels the walk assigns with confidence. Class ids at or above
@@ -171,7 +167,7 @@ async fn walk_frame(
     if !options.enabled || present.len() < 2 || seeds.len() != pixel_count(guide) {
         return seeds;
     }
-    let graph = Graph::new(guide, camera, options);
+    let graph = PixelGraph::new(guide, camera, options);
     let mut probabilities: Vec<Vec<f32>> = Vec::with_capacity(present.len());
     for &class in &present {
         probabilities.push(graph.walk(&seeds, class, pause).await);
@@ -553,223 +549,6 @@ fn carried_is_empty(carried: &Carried) -> bool {
 
 fn pixel_count(guide: Guide<'_>) -> usize {
     guide.rgb.width() as usize * guide.rgb.height() as usize
-}
-
-/// The pixel grid with a step weight on each 4-neighbour edge.
-struct Graph {
-    width: usize,
-    height: usize,
-    /// Weight of the edge from pixel i to i + 1 (0 in the last column).
-    right: Vec<f32>,
-    /// Weight of the edge from pixel i to i + width (0 in the last row).
-    down: Vec<f32>,
-    /// Weight of each pixel's edge to a sink that ends the walk (`PropagationOptions::reach`).
-    absorption: f64,
-}
-
-impl Graph {
-    fn new(guide: Guide<'_>, camera: Option<&Intrinsics>, options: &PropagationOptions) -> Graph {
-        let (width, height) = (guide.rgb.width() as usize, guide.rgb.height() as usize);
-        let lab: Vec<[f32; 3]> = guide.rgb.pixels().map(|p| srgb_to_lab(p.0)).collect();
-        let log_depth: Vec<Option<f32>> = match guide.depth {
-            Some(d) if d.len() == width * height => d
-                .pixels()
-                .map(|d| (d.0[0] > 0).then(|| f32::from(d.0[0]).ln()))
-                .collect(),
-            _ => vec![None; width * height],
-        };
-        let colour_scale = 0.5 / (options.colour_sigma * options.colour_sigma);
-        let depth_scale = 0.5 / (options.depth_sigma * options.depth_sigma);
-        let dense_depth = log_depth.iter().filter(|d| d.is_some()).count() * 2 > log_depth.len();
-        let normals = match (guide.depth, camera) {
-            (Some(depth), Some(camera)) if options.normal_sigma > 0.0 && dense_depth => depth_normals(depth, camera),
-            _ => vec![None; width * height],
-        };
-        let normal_scale = if options.normal_sigma > 0.0 {
-            1.0 / (options.normal_sigma * options.normal_sigma)
-        } else {
-            0.0
-        };
-        let hole_factor = if dense_depth { options.depth_hole_factor } else { 1.0 };
-        let weight = |a: usize, b: usize| {
-            let dc: f32 = (0..3).map(|k| (lab[a][k] - lab[b][k]).powi(2)).sum();
-            let (dd, factor) = match (log_depth[a], log_depth[b]) {
-                (Some(x), Some(y)) => ((x - y).powi(2), 1.0),
-                (None, None) => (0.0, 1.0),
-                _ => (0.0, hole_factor),
-            };
-            let turn = match (normals[a], normals[b]) {
-                (Some(n), Some(m)) => 1.0 - (n[0] * m[0] + n[1] * m[1] + n[2] * m[2]),
-                _ => 0.0,
-            };
-            ((-(dc * colour_scale + dd * depth_scale + turn * normal_scale)).exp() * factor).max(MIN_WEIGHT)
-        };
-        let mut right = vec![0f32; width * height];
-        let mut down = vec![0f32; width * height];
-        for y in 0..height {
-            for x in 0..width {
-                let i = y * width + x;
-                if x + 1 < width {
-                    right[i] = weight(i, i + 1);
-                }
-                if y + 1 < height {
-                    down[i] = weight(i, i + width);
-                }
-            }
-        }
-        // A walk that ends with probability about a/4 per step spreads over about 1/sqrt(a)
-        // pixels of a uniform region.
-        let reach_pixels = f64::from(options.reach) * ((width * width + height * height) as f64).sqrt();
-        Graph {
-            width,
-            height,
-            right,
-            down,
-            absorption: 1.0 / (reach_pixels * reach_pixels).max(1.0),
-        }
-    }
-
-    /// Calls `f(neighbour, weight)` for each 4-neighbour of `i`.
-    fn for_neighbours(&self, i: usize, mut f: impl FnMut(usize, f32)) {
-        let (x, y) = (i % self.width, i / self.width);
-        if x + 1 < self.width {
-            f(i + 1, self.right[i]);
-        }
-        if x > 0 {
-            f(i - 1, self.right[i - 1]);
-        }
-        if y + 1 < self.height {
-            f(i + self.width, self.down[i]);
-        }
-        if y > 0 {
-            f(i - self.width, self.down[i - self.width]);
-        }
-    }
-
-    /// The probability that a walk from each pixel reaches a stroke of `class` before a stroke of
-    /// another class and before it ends: strokes are fixed at 1 or 0, and every other pixel solves
-    /// `(degree + absorption)·x_i − Σ w_ij·x_j = 0`, here by Jacobi-preconditioned conjugate gradients over the
-    /// unlabelled pixels.
-    async fn walk(&self, seeds: &[u16], class: u16, pause: &mut impl Pause) -> Vec<f32> {
-        let n = seeds.len();
-        let free: Vec<usize> = (0..n).filter(|&i| seeds[i] == UNLABELLED).collect();
-        let mut slot = vec![u32::MAX; n];
-        for (k, &i) in free.iter().enumerate() {
-            slot[i] = k as u32;
-        }
-        // The system over the free pixels in one flat list (each free pixel's free neighbours,
-        // by slot), so each iteration reads memory in order.
-        let mut degree = vec![self.absorption; free.len()];
-        let mut rhs = vec![0f64; free.len()];
-        let mut starts = Vec::with_capacity(free.len() + 1);
-        let mut links: Vec<(u32, f32)> = Vec::with_capacity(4 * free.len());
-        for (k, &i) in free.iter().enumerate() {
-            starts.push(links.len() as u32);
-            self.for_neighbours(i, |j, w| {
-                degree[k] += f64::from(w);
-                if seeds[j] == class {
-                    rhs[k] += f64::from(w);
-                }
-                if slot[j] != u32::MAX {
-                    links.push((slot[j], w));
-                }
-            });
-        }
-        starts.push(links.len() as u32);
-        let apply = |x: &[f64], out: &mut [f64]| {
-            for (k, out) in out.iter_mut().enumerate() {
-                let mut sum = degree[k] * x[k];
-                for &(j, w) in &links[starts[k] as usize..starts[k + 1] as usize] {
-                    sum -= f64::from(w) * x[j as usize];
-                }
-                *out = sum;
-            }
-        };
-        let x = conjugate_gradient(apply, &rhs, &degree, 4 * (self.width + self.height) + 200, pause).await;
-        let mut p: Vec<f32> = seeds.iter().map(|&s| if s == class { 1.0 } else { 0.0 }).collect();
-        for (k, &i) in free.iter().enumerate() {
-            p[i] = x[k].clamp(0.0, 1.0) as f32;
-        }
-        p
-    }
-}
-
-/// Solves `A x = b` for a symmetric positive definite `A` given as `apply(x, out)`, with the
-/// Jacobi preconditioner `diagonal`, from x = 0, for at most `max_iterations` iterations, pausing
-/// before each.
-pub(crate) async fn conjugate_gradient(
-    apply: impl Fn(&[f64], &mut [f64]),
-    b: &[f64],
-    diagonal: &[f64],
-    max_iterations: usize,
-    pause: &mut impl Pause,
-) -> Vec<f64> {
-    let n = b.len();
-    let mut x = vec![0f64; n];
-    let mut r = b.to_vec();
-    let b_norm = b.iter().map(|v| v * v).sum::<f64>().sqrt();
-    if b_norm == 0.0 {
-        return x;
-    }
-    let precondition = |r: &[f64], z: &mut [f64]| {
-        for ((z, r), d) in z.iter_mut().zip(r).zip(diagonal) {
-            *z = r / d.max(1e-30);
-        }
-    };
-    let mut z = vec![0f64; n];
-    precondition(&r, &mut z);
-    let mut p = z.clone();
-    let mut rz: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
-    let mut ap = vec![0f64; n];
-    for _ in 0..max_iterations {
-        pause.pause().await;
-        apply(&p, &mut ap);
-        let pap: f64 = p.iter().zip(&ap).map(|(a, b)| a * b).sum();
-        if pap <= 0.0 {
-            break;
-        }
-        let alpha = rz / pap;
-        for k in 0..n {
-            x[k] += alpha * p[k];
-            r[k] -= alpha * ap[k];
-        }
-        if r.iter().map(|v| v * v).sum::<f64>().sqrt() <= TOLERANCE * b_norm {
-            break;
-        }
-        precondition(&r, &mut z);
-        let rz_next: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
-        let beta = rz_next / rz;
-        rz = rz_next;
-        for k in 0..n {
-            p[k] = z[k] + beta * p[k];
-        }
-    }
-    x
-}
-
-/// CIE L*a*b* (D65) of an 8-bit sRGB pixel.
-pub(crate) fn srgb_to_lab(rgb: [u8; 3]) -> [f32; 3] {
-    let linear = |c: u8| {
-        let c = f32::from(c) / 255.0;
-        if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    };
-    let (r, g, b) = (linear(rgb[0]), linear(rgb[1]), linear(rgb[2]));
-    let x = (0.4124 * r + 0.3576 * g + 0.1805 * b) / 0.95047;
-    let y = 0.2126 * r + 0.7152 * g + 0.0722 * b;
-    let z = (0.0193 * r + 0.1192 * g + 0.9505 * b) / 1.08883;
-    let f = |t: f32| {
-        if t > 216.0 / 24389.0 {
-            t.cbrt()
-        } else {
-            (24389.0 / 27.0 * t + 16.0) / 116.0
-        }
-    };
-    let (fx, fy, fz) = (f(x), f(y), f(z));
-    [116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)]
 }
 
 #[cfg(test)]
