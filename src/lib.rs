@@ -5,7 +5,6 @@ pub mod colors;
 pub mod dense;
 pub mod eval;
 pub mod export;
-#[cfg(not(target_arch = "wasm32"))]
 pub mod features;
 pub mod field;
 #[cfg(not(target_arch = "wasm32"))]
@@ -15,6 +14,7 @@ pub mod gpu;
 pub mod labels;
 #[cfg(test)]
 mod module_layers;
+pub mod pause;
 pub mod percent;
 pub mod rng;
 pub mod scene;

@@ -12,8 +12,9 @@ use std::path::{Path, PathBuf};
 /// Lowest first. A module may use modules of strictly lower layers only.
 const LAYERS: &[&[&str]] = &[
     // Basics that know nothing of the pipeline: the random source, the CPU optimizer, the CPU
-    // dense layer, percent-encoding, the class palette, the WebGPU plumbing.
-    &["rng", "adam", "dense", "percent", "colors", "gpu"],
+    // dense layer, percent-encoding, pausing long work (`pause`), the class palette, the WebGPU
+    // plumbing.
+    &["rng", "adam", "dense", "percent", "colors", "pause", "gpu"],
     // Frames, cameras, ground truth, the labels a scene carries, the archive and importers.
     &["scene"],
     // Annotating: brush, history, share links, autosave, synthetic scribbles, canvas zoom.

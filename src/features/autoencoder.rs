@@ -9,6 +9,7 @@
 //! gradients are summed in thread order, so a fit is deterministic for a given thread count.
 use crate::adam::{Adam, AdamHyper};
 use crate::dense::DenseLayer;
+use crate::pause::{NoPause, Pause, run_to_end};
 use crate::rng::SplitMix64;
 
 #[derive(Clone, Debug, PartialEq)]
@@ -154,7 +155,19 @@ impl Autoencoder {
         rows: &[f32],
         dim: usize,
         cfg: &AutoencoderConfig,
+        progress: impl FnMut(u32, u32, f64),
+    ) -> (Autoencoder, FitReport) {
+        run_to_end(Autoencoder::fit_pausing(rows, dim, cfg, progress, &mut NoPause))
+    }
+
+    /// [`Autoencoder::fit`] that calls `pause` after every step, so the page, which fits on the
+    /// thread that also draws, can give the thread back (`crate::pause`).
+    pub async fn fit_pausing(
+        rows: &[f32],
+        dim: usize,
+        cfg: &AutoencoderConfig,
         mut progress: impl FnMut(u32, u32, f64),
+        pause: &mut impl Pause,
     ) -> (Autoencoder, FitReport) {
         assert!(
             dim > 0 && rows.len().is_multiple_of(dim) && rows.len() >= dim,
@@ -194,17 +207,22 @@ impl Autoencoder {
             }
             ae.standardize(&mut batch);
             let per_thread = cfg.batch.div_ceil(threads);
-            let partials: Vec<(Vec<f32>, f64)> = std::thread::scope(|s| {
-                let ae = &ae;
-                let handles: Vec<_> = batch
-                    .chunks(per_thread * dim)
-                    .map(|part| s.spawn(move || ae.gradient(part, total)))
-                    .collect();
-                handles
-                    .into_iter()
-                    .map(|h| h.join().expect("autoencoder thread panicked"))
-                    .collect()
-            });
+            // One thread computes in place: wasm (the page) cannot start threads at all.
+            let partials: Vec<(Vec<f32>, f64)> = if threads == 1 {
+                vec![ae.gradient(&batch, total)]
+            } else {
+                std::thread::scope(|s| {
+                    let ae = &ae;
+                    let handles: Vec<_> = batch
+                        .chunks(per_thread * dim)
+                        .map(|part| s.spawn(move || ae.gradient(part, total)))
+                        .collect();
+                    handles
+                        .into_iter()
+                        .map(|h| h.join().expect("autoencoder thread panicked"))
+                        .collect()
+                })
+            };
             let mut grad = vec![0.0f32; total];
             let mut loss = 0.0;
             for (g, l) in &partials {
@@ -221,6 +239,7 @@ impl Autoencoder {
             if (step + 1) % 100 == 0 || step + 1 == cfg.steps {
                 progress(step + 1, cfg.steps, loss / cfg.batch as f64);
             }
+            pause.pause().await;
         }
         let report = ae.evaluate(rows, dim, &mut rng);
         (ae, report)

@@ -4,6 +4,7 @@ use half::f16;
 
 use super::autoencoder::{Autoencoder, AutoencoderConfig, FitReport};
 use super::{FeatureError, FeatureMap};
+use crate::pause::{NoPause, Pause, run_to_end};
 use crate::rng::SplitMix64;
 use crate::scene::{FeatureCodes, Pca};
 
@@ -50,10 +51,23 @@ pub struct Baked {
 /// grid and dimension). `extractor` describes where the maps came from, for the archive.
 pub fn bake(
     frames: usize,
+    map_of: impl FnMut(usize) -> Result<FeatureMap, FeatureError>,
+    extractor: &str,
+    opts: &BakeOptions,
+    progress: impl FnMut(BakeProgress),
+) -> Result<Baked, FeatureError> {
+    run_to_end(bake_pausing(frames, map_of, extractor, opts, progress, &mut NoPause))
+}
+
+/// [`bake`] that calls `pause` after each frame's map and each autoencoder step, for the page,
+/// which bakes on the thread that also draws (`crate::pause`).
+pub async fn bake_pausing(
+    frames: usize,
     mut map_of: impl FnMut(usize) -> Result<FeatureMap, FeatureError>,
     extractor: &str,
     opts: &BakeOptions,
     mut progress: impl FnMut(BakeProgress),
+    pause: &mut impl Pause,
 ) -> Result<Baked, FeatureError> {
     let mut maps = Vec::with_capacity(frames);
     for i in 0..frames {
@@ -75,6 +89,7 @@ pub fn bake(
             done: i + 1,
             total: frames,
         });
+        pause.pause().await;
     }
     let Some(first) = maps.first() else {
         return Err(FeatureError::invalid("scene", "no frames to extract features from"));
@@ -89,9 +104,14 @@ pub fn bake(
         let (f, cell) = (c / cells_per_frame, c % cells_per_frame);
         fit_rows.extend_from_slice(&maps[f].data[cell * dim..(cell + 1) * dim]);
     }
-    let (ae, fit) = Autoencoder::fit(&fit_rows, dim, &opts.autoencoder, |step, steps, loss| {
-        progress(BakeProgress::Fitting { step, steps, loss })
-    });
+    let (ae, fit) = Autoencoder::fit_pausing(
+        &fit_rows,
+        dim,
+        &opts.autoencoder,
+        |step, steps, loss| progress(BakeProgress::Fitting { step, steps, loss }),
+        pause,
+    )
+    .await;
     drop(fit_rows);
     progress(BakeProgress::Encoding);
 

@@ -7,7 +7,10 @@ use std::path::{Path, PathBuf};
 
 use super::bounds::from_depth;
 use super::classes::{class_infos, numbered};
-use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, files_by_stem, frame_order, load_frames, scene_of, select};
+use super::files::CapturePath;
+use super::frames::{
+    DEPTH_SCALE, FrameFiles, InvalidDepth, Progress, files_by_stem, frame_order, load_frames, scene_of, select,
+};
 use super::images::load_mask;
 use super::resize::{resize_nearest, same_aspect};
 use super::text::{read_bbox, read_class_names, read_intrinsics, read_pose};
@@ -30,10 +33,10 @@ const IMAGE_EXTS: &[&str] = &["png", "jpg", "jpeg"];
 
 /// Whether `dir` has autolabel's camera files (poses or intrinsics) beside its rgb/ folder.
 pub(super) fn has_camera_files(dir: &Path) -> bool {
-    dir.join(POSE_DIR).is_dir() || dir.join(INTRINSICS_FILE).is_file()
+    dir.join(POSE_DIR).is_capture_dir() || dir.join(INTRINSICS_FILE).is_capture_file()
 }
 
-pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Built> {
+pub(super) async fn import(dir: &Path, opts: &ImportOptions, progress: &mut Progress<'_>) -> Result<Built> {
     let mut warnings = Vec::new();
     let rgb = files_by_stem(&dir.join(RGB_DIR), IMAGE_EXTS, "")?;
     let depth = files_by_stem(
@@ -49,7 +52,7 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
     let gt = optional_files(dir, GT_DIR)?;
     let semantic = optional_files(dir, SEMANTIC_DIR)?;
     let intrinsics_path = dir.join(INTRINSICS_FILE);
-    if !intrinsics_path.is_file() {
+    if !intrinsics_path.is_capture_file() {
         return Err(SceneError::missing(shown(&intrinsics_path), "the 3x3 camera matrix K"));
     }
 
@@ -107,7 +110,7 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
     let (k, skew) = read_intrinsics(&intrinsics_path)?;
     warnings.extend(skew);
 
-    let loaded = load_frames(files, opts, InvalidDepth::ZeroOnly, progress)?;
+    let loaded = load_frames(files, opts, InvalidDepth::ZeroOnly, progress).await?;
     notes.extend(loaded.notes);
     let report = loaded.report;
     let intrinsics = k.scaled(loaded.native, loaded.size);
@@ -119,7 +122,7 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
     let labels = scribble_labels(&masks, loaded.size, &classes, keep.len(), dir)?;
 
     let bbox_path = dir.join(BBOX_FILE);
-    let bounds = if bbox_path.is_file() {
+    let bounds = if bbox_path.is_capture_file() {
         read_bbox(&bbox_path)?
     } else {
         warnings.push(format!(
@@ -150,7 +153,7 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
 
 fn required_dir(dir: &Path, name: &str, what: &str) -> Result<PathBuf> {
     let path = dir.join(name);
-    if path.is_dir() {
+    if path.is_capture_dir() {
         Ok(path)
     } else {
         Err(SceneError::missing(format!("{}/", shown(&path)), what))
@@ -159,7 +162,7 @@ fn required_dir(dir: &Path, name: &str, what: &str) -> Result<PathBuf> {
 
 fn optional_files(dir: &Path, name: &str) -> Result<BTreeMap<String, PathBuf>> {
     let path = dir.join(name);
-    if path.is_dir() {
+    if path.is_capture_dir() {
         files_by_stem(&path, &["png"], "")
     } else {
         Ok(BTreeMap::new())
@@ -238,7 +241,7 @@ fn class_names(dir: &Path, frames: &[Frame], masks: &Masks, warnings: &mut Vec<S
         .filter(|&&v| v != GT_VOID)
         .max();
     let scribble_max = masks.values().flatten().filter(|&&v| v != UNLABELLED).max();
-    let names = if path.is_file() {
+    let names = if path.is_capture_file() {
         read_class_names(&path)?
     } else {
         let count = gt_max

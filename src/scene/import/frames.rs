@@ -1,13 +1,17 @@
 //! The part every importer shares once it knows which files make up each frame: choosing the
 //! frames to keep, decoding them, checking their sizes agree, and downscaling consistently.
 use std::collections::BTreeMap;
+use std::future::Future;
 use std::path::{Path, PathBuf};
+use std::pin::Pin;
 
 use image::{GrayImage, RgbImage};
 
+use super::files::CapturePath;
 use super::images::{load_depth, load_gt, load_rgb};
 use super::resize::{resize_nearest, resize_rgb, same_aspect, target_size};
 use super::{Background, ImportOptions};
+use crate::pause::Pause;
 use crate::scene::archive::limits;
 use crate::scene::camera::{Bounds, Intrinsics, Pose};
 use crate::scene::error::{Result, SceneError};
@@ -27,10 +31,9 @@ pub(super) struct FrameFiles {
 /// The files directly in `dir` whose extension is one of `exts` (lower case; matched ignoring
 /// case), keyed by the rest of the name. Two files for the same frame are an error.
 pub(super) fn files_by_stem(dir: &Path, exts: &[&str], suffix: &str) -> Result<BTreeMap<String, PathBuf>> {
-    let entries = std::fs::read_dir(dir).map_err(|e| SceneError::io(dir, e))?;
+    let entries = super::files::read_dir(dir).map_err(|e| SceneError::io(dir, e))?;
     let mut out = BTreeMap::new();
-    for entry in entries {
-        let path = entry.map_err(|e| SceneError::io(dir, e))?.path();
+    for path in entries {
         let Some(file_name) = path.file_name().and_then(|n| n.to_str()) else {
             continue;
         };
@@ -40,7 +43,7 @@ pub(super) fn files_by_stem(dir: &Path, exts: &[&str], suffix: &str) -> Result<B
         let Some(stem) = stem.strip_suffix(suffix) else {
             continue;
         };
-        if stem.is_empty() || !exts.contains(&ext.to_ascii_lowercase().as_str()) || !path.is_file() {
+        if stem.is_empty() || !exts.contains(&ext.to_ascii_lowercase().as_str()) || !path.is_capture_file() {
             continue;
         }
         if let Some(other) = out.insert(stem.to_string(), path.clone()) {
@@ -63,6 +66,39 @@ pub(super) fn frame_order<'a>(names: impl IntoIterator<Item = &'a String>) -> Ve
         names.sort();
     }
     names
+}
+
+/// Where an import reports its frames and gives its thread back between them (`crate::pause`):
+/// the page packs a capture on the thread that also draws, and one frame's decoding is the unit
+/// of work it can stop after.
+pub(super) struct Progress<'a> {
+    pub report: &'a mut dyn FnMut(usize, usize),
+    pub pause: &'a mut dyn PauseBoxed,
+}
+
+impl Progress<'_> {
+    /// Says how far the import is, without pausing.
+    pub fn show(&mut self, done: usize, total: usize) {
+        (self.report)(done, total)
+    }
+
+    /// Says a frame is done, then lets the caller's pause decide whether to give the thread back.
+    pub async fn frame_done(&mut self, done: usize, total: usize) {
+        (self.report)(done, total);
+        self.pause.pause_boxed().await
+    }
+}
+
+/// [`Pause`] behind a pointer: the importers take one pause of any kind without each becoming
+/// generic over it (a boxed future per frame costs nothing next to decoding the frame).
+pub(super) trait PauseBoxed {
+    fn pause_boxed(&mut self) -> Pin<Box<dyn Future<Output = ()> + '_>>;
+}
+
+impl<P: Pause> PauseBoxed for P {
+    fn pause_boxed(&mut self) -> Pin<Box<dyn Future<Output = ()> + '_>> {
+        Box::pin(self.pause())
+    }
 }
 
 /// How a layout marks missing depth besides 0.
@@ -181,13 +217,13 @@ fn listed(names: &[String]) -> String {
 /// truth of a different size than the colour image are resampled onto it (nearest) when the
 /// aspect ratios agree, since some RGB-D sensors record depth at a lower resolution of the same
 /// field of view; a different aspect ratio means the images do not cover the same view: error.
-pub(super) fn load_frames(
+pub(super) async fn load_frames(
     files: Vec<FrameFiles>,
     opts: &ImportOptions,
     invalid: InvalidDepth,
-    progress: &mut dyn FnMut(usize, usize),
+    progress: &mut Progress<'_>,
 ) -> Result<Loaded> {
-    load_frames_prepared(files, opts, invalid, &AsStored, progress)
+    load_frames_prepared(files, opts, invalid, &AsStored, progress).await
 }
 
 /// What an importer does to a frame's images at their native size, before they are downscaled:
@@ -218,15 +254,15 @@ impl Prepare for AsStored {
 }
 
 /// `load_frames` with `prepare` applied to each frame's colour and ground truth.
-pub(super) fn load_frames_prepared(
+pub(super) async fn load_frames_prepared(
     files: Vec<FrameFiles>,
     opts: &ImportOptions,
     invalid: InvalidDepth,
     prepare: &dyn Prepare,
-    progress: &mut dyn FnMut(usize, usize),
+    progress: &mut Progress<'_>,
 ) -> Result<Loaded> {
     let total = files.len();
-    progress(0, total);
+    progress.show(0, total);
     let mut frames = Vec::with_capacity(total);
     let mut sizes: Option<((u32, u32), (u32, u32))> = None;
     let mut notes = Vec::new();
@@ -294,7 +330,7 @@ pub(super) fn load_frames_prepared(
             gt,
             source: Some(f.name),
         });
-        progress(i + 1, total);
+        progress.frame_done(i + 1, total).await;
     }
     let (native, size) = sizes.ok_or_else(|| SceneError::invalid("capture", "no frames to import"))?;
     if resampled_depth {

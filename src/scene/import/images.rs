@@ -19,7 +19,7 @@ fn name(path: &Path) -> String {
 
 /// Decodes any supported image, refusing absurd sizes before allocating.
 pub(super) fn decode(path: &Path) -> Result<DynamicImage> {
-    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    let bytes = super::files::read(path).map_err(|e| SceneError::io(path, e))?;
     if bytes.is_empty() {
         return Err(SceneError::invalid(name(path), "image file is empty"));
     }
@@ -56,8 +56,10 @@ fn check_jpeg_complete(bytes: &[u8], path: &Path) -> Result<()> {
 
 /// Width and height from the image header, without decoding the pixels.
 pub(super) fn dimensions(path: &Path) -> Result<(u32, u32)> {
-    let reader = ImageReader::open(path).map_err(|e| SceneError::io(path, e))?;
-    let reader = reader.with_guessed_format().map_err(|e| SceneError::io(path, e))?;
+    let bytes = super::files::read(path).map_err(|e| SceneError::io(path, e))?;
+    let reader = ImageReader::new(std::io::Cursor::new(&bytes[..]))
+        .with_guessed_format()
+        .map_err(|e| SceneError::io(path, e))?;
     reader.into_dimensions().map_err(|source| SceneError::Image {
         file: name(path),
         source,

@@ -4,16 +4,20 @@
 //! resizing, frame selection and bounds estimation.
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+use std::rc::Rc;
 
+use crate::pause::{NoPause, Pause, run_to_end};
 use crate::scene::Scene;
 use crate::scene::error::{Result, SceneError};
 use crate::scene::manifest::Provenance;
+use files::CapturePath;
 
 mod alpha;
 mod autolabel;
 mod bounds;
 mod classes;
 mod colmap;
+mod files;
 mod frames;
 mod images;
 mod nerf_splits;
@@ -25,6 +29,8 @@ mod seven_scenes;
 mod text;
 mod transforms;
 
+pub use files::{CaptureFiles, MAX_CAPTURE_BYTES, MemoryFiles, reading_from};
+use frames::Progress;
 pub use options::{Background, Split};
 
 /// What to keep of a capture.
@@ -118,7 +124,7 @@ pub struct Imported {
 
 /// Names the capture layout at `input` (a folder, or a `.json` file for transforms).
 pub fn detect_layout(input: &Path) -> Result<Layout> {
-    let meta = std::fs::metadata(input).map_err(|e| match e.kind() {
+    let meta = files::metadata(input).map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => SceneError::missing(input.display().to_string(), "the capture to import"),
         _ => SceneError::io(input, e),
     })?;
@@ -131,7 +137,7 @@ pub fn detect_layout(input: &Path) -> Result<Layout> {
             "is a file; expected a capture folder or a transforms.json",
         ));
     }
-    let has_rgb_dir = input.join(autolabel::RGB_DIR).is_dir();
+    let has_rgb_dir = input.join(autolabel::RGB_DIR).is_capture_dir();
     // A full autolabel scene wins over a transforms.json exported next to it, since only the
     // autolabel files carry depth; a bare rgb/ folder next to a transforms.json is just images.
     if has_rgb_dir && autolabel::has_camera_files(input) {
@@ -144,7 +150,7 @@ pub fn detect_layout(input: &Path) -> Result<Layout> {
     if scannet::looks_like(input) {
         return Ok(Layout::ScanNet);
     }
-    if input.join(transforms::FILE).is_file() {
+    if input.join(transforms::FILE).is_capture_file() {
         return Ok(Layout::Transforms);
     }
     if nerf_splits::looks_like(input) {
@@ -169,18 +175,55 @@ pub fn detect_layout(input: &Path) -> Result<Layout> {
 
 /// Imports the capture at `input`, calling `progress(done, total)` as frames load.
 pub fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Imported> {
+    run_to_end(import_pausing(input, opts, progress, &mut NoPause))
+}
+
+/// [`import`] that calls `pause` after each frame, so a caller on a thread that must stay
+/// responsive (the page) can give it back; where the files are read from is set by
+/// [`reading_from`] (the disk otherwise).
+pub async fn import_pausing<P: Pause>(
+    input: &Path,
+    opts: &ImportOptions,
+    progress: &mut dyn FnMut(usize, usize),
+    pause: &mut P,
+) -> Result<Imported> {
     let layout = detect_layout(input)?;
     options::check_for_layout(opts, layout, input)?;
+    let progress = &mut Progress {
+        report: progress,
+        pause,
+    };
     let built = match layout {
-        Layout::Autolabel => autolabel::import(input, opts, progress)?,
-        Layout::SevenScenes => seven_scenes::import(input, opts, progress)?,
-        Layout::Transforms => transforms::import(input, opts, progress)?,
-        Layout::Colmap => colmap::import(input, opts, progress)?,
-        Layout::NerfSplits => nerf_splits::import(input, opts, progress)?,
-        Layout::ScanNet => scannet::import(input, opts, progress)?,
+        Layout::Autolabel => autolabel::import(input, opts, progress).await?,
+        Layout::SevenScenes => seven_scenes::import(input, opts, progress).await?,
+        Layout::Transforms => transforms::import(input, opts, progress).await?,
+        Layout::Colmap => colmap::import(input, opts, progress).await?,
+        Layout::NerfSplits => nerf_splits::import(input, opts, progress).await?,
+        Layout::ScanNet => scannet::import(input, opts, progress).await?,
     };
     check_scene(&built.scene, input)?;
     Ok(built.finish(input))
+}
+
+/// Imports a capture held in memory (a folder the page was handed, or a zip of one): the same
+/// importers, reading `files` instead of the disk, from its root folder.
+pub async fn import_files<P: Pause>(
+    files: Rc<MemoryFiles>,
+    opts: &ImportOptions,
+    progress: &mut dyn FnMut(usize, usize),
+    pause: &mut P,
+) -> Result<Imported> {
+    let root = files.root().ok_or_else(|| {
+        SceneError::invalid(
+            "the files given",
+            if files.is_empty() {
+                "no files (an empty folder?)"
+            } else {
+                "not one capture folder: the files lie in several folders"
+            },
+        )
+    })?;
+    reading_from(files, import_pausing(&root, opts, progress, pause)).await
 }
 
 /// What every importer returns before provenance is filled in.

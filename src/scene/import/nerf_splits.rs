@@ -5,6 +5,8 @@
 //! are one capture of one camera, so they pack into one scene, in the order train, val, test.
 use std::path::Path;
 
+use super::files::CapturePath;
+use super::frames::Progress;
 use super::options::Split;
 use super::transforms::{Listing, build, camera_difference, list};
 use super::{Built, ImportOptions, Layout, shown};
@@ -12,10 +14,10 @@ use crate::scene::error::{Result, SceneError};
 
 /// Whether `dir` holds at least one split file.
 pub(super) fn looks_like(dir: &Path) -> bool {
-    Split::ALL.iter().any(|s| dir.join(s.file_name()).is_file())
+    Split::ALL.iter().any(|s| dir.join(s.file_name()).is_capture_file())
 }
 
-pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Built> {
+pub(super) async fn import(dir: &Path, opts: &ImportOptions, progress: &mut Progress<'_>) -> Result<Built> {
     let splits = chosen_splits(dir, &opts.splits)?;
     if splits.is_empty() {
         // Detection saw a split file; it is gone now.
@@ -62,7 +64,7 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
         merged.warnings.extend(l.warnings);
         merged.entries.extend(l.entries);
     }
-    let mut built = build(merged, opts, Layout::NerfSplits, progress)?;
+    let mut built = build(merged, opts, Layout::NerfSplits, progress).await?;
     built.report.insert(0, line);
     Ok(built)
 }
@@ -72,7 +74,7 @@ fn chosen_splits(dir: &Path, asked: &[Split]) -> Result<Vec<Split>> {
     if asked.is_empty() {
         return Ok(Split::ALL
             .into_iter()
-            .filter(|s| dir.join(s.file_name()).is_file())
+            .filter(|s| dir.join(s.file_name()).is_capture_file())
             .collect());
     }
     let mut splits = asked.to_vec();
@@ -80,7 +82,7 @@ fn chosen_splits(dir: &Path, asked: &[Split]) -> Result<Vec<Split>> {
     splits.dedup();
     for s in &splits {
         let path = dir.join(s.file_name());
-        if !path.is_file() {
+        if !path.is_capture_file() {
             return Err(SceneError::missing(
                 shown(&path),
                 format!("the {} split asked for with --split", s.name()),

@@ -7,7 +7,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::bounds::{FROM_DEPTH_NOTE, from_required_depth};
-use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, files_by_stem, frame_order, load_frames, scene_of, select};
+use super::files::CapturePath;
+use super::frames::{
+    DEPTH_SCALE, FrameFiles, InvalidDepth, Progress, files_by_stem, frame_order, load_frames, scene_of, select,
+};
 use super::images::load_depth;
 use super::register::register_depth;
 use super::text::{parse_numbers, pose_from_numbers, read_intrinsics, read_text};
@@ -25,10 +28,10 @@ const COLOR_EXTS: &[&str] = &["jpg", "jpeg", "png"];
 
 /// Whether `dir` is a SensReader export: colour frames and the intrinsics folder.
 pub(super) fn looks_like(dir: &Path) -> bool {
-    dir.join(COLOR_DIR).is_dir() && dir.join(INTRINSIC_DIR).is_dir()
+    dir.join(COLOR_DIR).is_capture_dir() && dir.join(INTRINSIC_DIR).is_capture_dir()
 }
 
-pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Built> {
+pub(super) async fn import(dir: &Path, opts: &ImportOptions, progress: &mut Progress<'_>) -> Result<Built> {
     let color = frames_in(dir, COLOR_DIR, COLOR_EXTS)?;
     let depth = frames_in(dir, DEPTH_DIR, &["png"])?;
     let pose = frames_in(dir, POSE_DIR, &["txt"])?;
@@ -95,9 +98,13 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
         })
         .collect();
     let count = files.len();
-    let mut loaded = load_frames(files, opts, InvalidDepth::ZeroOnly, &mut |done, total| {
-        progress(done, 2 * total)
-    })?;
+    // Colour first, then depth: the bar covers both passes.
+    let report = &mut progress.report;
+    let mut colour = Progress {
+        report: &mut |done, total| report(done, 2 * total),
+        pause: &mut *progress.pause,
+    };
+    let mut loaded = load_frames(files, opts, InvalidDepth::ZeroOnly, &mut colour).await?;
     notes.extend(loaded.notes);
     let report = loaded.report;
     let intrinsics = kc.scaled(loaded.native, loaded.size);
@@ -127,7 +134,7 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
             Some(_) => {}
         }
         loaded.frames[j].depth = Some(register_depth(&d, &kd, &intrinsics, loaded.size));
-        progress(count + j + 1, 2 * count);
+        progress.frame_done(count + j + 1, 2 * count).await;
     }
     if let Some((w, h)) = depth_size {
         notes.push(format!(
@@ -152,7 +159,7 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
 /// The frames in `dir/sub`, by number; a missing folder is named.
 fn frames_in(dir: &Path, sub: &str, exts: &[&str]) -> Result<BTreeMap<String, PathBuf>> {
     let folder = dir.join(sub);
-    if !folder.is_dir() {
+    if !folder.is_capture_dir() {
         return Err(SceneError::missing(
             shown(&folder),
             format!("the {sub}/ folder of a ScanNet export (color/, depth/, pose/, intrinsic/)"),
@@ -193,7 +200,7 @@ fn check_matched(
 /// One of the two intrinsics files, which must be there.
 fn intrinsics(dir: &Path, file: &str, what: &str) -> Result<(Intrinsics, Vec<String>)> {
     let path = dir.join(file);
-    if !path.is_file() {
+    if !path.is_capture_file() {
         return Err(SceneError::missing(shown(&path), format!("{what} (a 4x4 or 3x3 K)")));
     }
     let (k, skew) = read_intrinsics(&path)?;

@@ -5,7 +5,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::bounds::{FROM_DEPTH_NOTE, from_required_depth};
-use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, files_by_stem, frame_order, load_frames, scene_of, select};
+use super::files::CapturePath;
+use super::frames::{
+    DEPTH_SCALE, FrameFiles, InvalidDepth, Progress, files_by_stem, frame_order, load_frames, scene_of, select,
+};
 use super::text::{read_intrinsics, read_pose};
 use super::{Built, ImportOptions, Layout, shown};
 use crate::scene::camera::Intrinsics;
@@ -30,7 +33,7 @@ pub(super) fn looks_like(dir: &Path) -> Result<bool> {
     Ok(!files_by_stem(dir, &["jpg", "jpeg", "png"], COLOR)?.is_empty())
 }
 
-pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Built> {
+pub(super) async fn import(dir: &Path, opts: &ImportOptions, progress: &mut Progress<'_>) -> Result<Built> {
     let mut warnings = Vec::new();
     let color = files_by_stem(dir, &["jpg", "jpeg", "png"], COLOR)?;
     let depth = files_by_stem(dir, &["png"], DEPTH)?;
@@ -64,7 +67,7 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
     }
 
     let intrinsics_path = dir.join(INTRINSICS_FILE);
-    let k = if intrinsics_path.is_file() {
+    let k = if intrinsics_path.is_capture_file() {
         let (k, skew) = read_intrinsics(&intrinsics_path)?;
         warnings.extend(skew);
         Some(k)
@@ -72,7 +75,7 @@ pub(super) fn import(dir: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(
         None
     };
 
-    let loaded = load_frames(files, opts, InvalidDepth::ZeroAndMax, progress)?;
+    let loaded = load_frames(files, opts, InvalidDepth::ZeroAndMax, progress).await?;
     notes.extend(loaded.notes);
     let report = loaded.report;
     let k = match k {

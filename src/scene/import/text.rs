@@ -12,14 +12,14 @@ pub(super) const MAX_TEXT_BYTES: u64 = 1 << 20;
 const K_TOLERANCE: f64 = 1e-6;
 
 pub(super) fn read_text(path: &Path) -> Result<String> {
-    let meta = std::fs::metadata(path).map_err(|e| SceneError::io(path, e))?;
+    let meta = super::files::metadata(path).map_err(|e| SceneError::io(path, e))?;
     if meta.len() > MAX_TEXT_BYTES {
         return Err(SceneError::invalid(
             path.display().to_string(),
             format!("{} bytes is far too large for this text file", meta.len()),
         ));
     }
-    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    let bytes = super::files::read(path).map_err(|e| SceneError::io(path, e))?;
     String::from_utf8(bytes).map_err(|_| SceneError::invalid(path.display().to_string(), "not a text file (not UTF-8)"))
 }
 

@@ -9,7 +9,10 @@ use serde::Deserialize;
 use super::alpha::{AlphaGt, alpha_gt_report};
 use super::bounds::{FROM_DEPTH_NOTE, from_cameras, from_depth};
 use super::classes::class_infos;
-use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, load_frames, load_frames_prepared, scene_of, select};
+use super::files::CapturePath;
+use super::frames::{
+    DEPTH_SCALE, FrameFiles, InvalidDepth, Progress, load_frames, load_frames_prepared, scene_of, select,
+};
 use super::images::dimensions;
 use super::text::pose_from_numbers;
 use super::{Built, ImportOptions, Layout, capture_path, shown};
@@ -88,13 +91,13 @@ pub(super) struct Listing {
     pub warnings: Vec<String>,
 }
 
-pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Built> {
-    let json_path = if input.is_dir() {
+pub(super) async fn import(input: &Path, opts: &ImportOptions, progress: &mut Progress<'_>) -> Result<Built> {
+    let json_path = if input.is_capture_dir() {
         input.join(FILE)
     } else {
         input.to_path_buf()
     };
-    build(list(&json_path, opts)?, opts, Layout::Transforms, progress)
+    build(list(&json_path, opts)?, opts, Layout::Transforms, progress).await
 }
 
 /// Reads the transforms file at `json_path`: its camera, and its frames whose image exists
@@ -103,7 +106,7 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
 pub(super) fn list(json_path: &Path, opts: &ImportOptions) -> Result<Listing> {
     let file = shown(json_path);
     let base = json_path.parent().unwrap_or(Path::new("."));
-    let meta = std::fs::metadata(json_path).map_err(|e| match e.kind() {
+    let meta = super::files::metadata(json_path).map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => SceneError::missing(&file, "the transforms file"),
         _ => SceneError::io(json_path, e),
     })?;
@@ -113,7 +116,7 @@ pub(super) fn list(json_path: &Path, opts: &ImportOptions) -> Result<Listing> {
             format!("{} bytes is too large for a transforms file", meta.len()),
         ));
     }
-    let bytes = std::fs::read(json_path).map_err(|e| SceneError::io(json_path, e))?;
+    let bytes = super::files::read(json_path).map_err(|e| SceneError::io(json_path, e))?;
     let (parsed, camera, mut warnings) = parse(&bytes, &file)?;
 
     let mut entries = Vec::new();
@@ -177,11 +180,11 @@ pub(super) fn list(json_path: &Path, opts: &ImportOptions) -> Result<Listing> {
 
 /// The scene of a listing (one transforms file, or several sharing one camera, whose `file`
 /// names where the camera was read), with `--every`, `--max-frames`, `--alpha-gt` applied.
-pub(super) fn build(
+pub(super) async fn build(
     listing: Listing,
     opts: &ImportOptions,
     layout: Layout,
-    progress: &mut dyn FnMut(usize, usize),
+    progress: &mut Progress<'_>,
 ) -> Result<Built> {
     let Listing {
         file,
@@ -220,7 +223,7 @@ pub(super) fn build(
         let entry = &entries[j];
         let gl = pose_from_numbers(&entry.matrix, &format!("{}: transform_matrix", entry.at))?;
         if let Some(p) = &entry.depth
-            && !p.is_file()
+            && !p.is_capture_file()
         {
             return Err(SceneError::missing(shown(p), format!("depth of {}", entry.at)));
         }
@@ -236,9 +239,9 @@ pub(super) fn build(
     }
 
     let loaded = if opts.alpha_gt {
-        load_frames_prepared(files, opts, InvalidDepth::ZeroOnly, &AlphaGt, progress)?
+        load_frames_prepared(files, opts, InvalidDepth::ZeroOnly, &AlphaGt, progress).await?
     } else {
-        load_frames(files, opts, InvalidDepth::ZeroOnly, progress)?
+        load_frames(files, opts, InvalidDepth::ZeroOnly, progress).await?
     };
     notes.extend(loaded.notes);
     let mut report = loaded.report;
@@ -322,7 +325,7 @@ pub(super) fn check_text(bytes: &[u8], base: &Path, opts: &ImportOptions) -> Res
 /// The image a `file_path` names (already joined to the capture folder): as given, or with an
 /// image extension appended.
 fn resolve_image(direct: PathBuf) -> Option<PathBuf> {
-    if direct.is_file() {
+    if direct.is_capture_file() {
         return Some(direct);
     }
     IMAGE_EXTS
@@ -333,7 +336,7 @@ fn resolve_image(direct: PathBuf) -> Option<PathBuf> {
             p.push(ext);
             PathBuf::from(p)
         })
-        .find(|p| p.is_file())
+        .find(|p| p.is_capture_file())
 }
 
 type CameraField = fn(&mut Camera) -> &mut Option<f64>;

@@ -13,7 +13,10 @@ use self::model::{Image, Lens, Model, Point3D};
 use self::undistort::{undistort_nearest, undistort_pixel, undistort_rgb};
 use super::bounds::{from_cameras, from_points};
 use super::classes::class_infos;
-use super::frames::{FrameFiles, InvalidDepth, Prepare, check_resamplable, load_frames_prepared, scene_of, select};
+use super::files::CapturePath;
+use super::frames::{
+    FrameFiles, InvalidDepth, Prepare, Progress, check_resamplable, load_frames_prepared, scene_of, select,
+};
 use super::images::decode;
 use super::resize::resize_nearest;
 use super::{Built, ImportOptions, Layout, shown};
@@ -70,17 +73,17 @@ fn model_dir(input: &Path) -> Option<PathBuf> {
 fn has_model_file(dir: &Path, stem: &str) -> bool {
     ["txt", "bin"]
         .iter()
-        .any(|ext| dir.join(format!("{stem}.{ext}")).is_file())
+        .any(|ext| dir.join(format!("{stem}.{ext}")).is_capture_file())
 }
 
 /// Whether `input` is a COLMAP capture: photos in images/ and a model beside them.
 pub(super) fn looks_like(input: &Path) -> bool {
-    input.join(IMAGES_DIR).is_dir() && model_dir(input).is_some()
+    input.join(IMAGES_DIR).is_capture_dir() && model_dir(input).is_some()
 }
 
 /// A model file's bytes; a missing one is named as part of the model.
 fn read_model_file(path: &Path) -> Result<Vec<u8>> {
-    let meta = std::fs::metadata(path).map_err(|e| match e.kind() {
+    let meta = super::files::metadata(path).map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => SceneError::missing(shown(path), "part of the COLMAP model"),
         _ => SceneError::io(path, e),
     })?;
@@ -90,14 +93,14 @@ fn read_model_file(path: &Path) -> Result<Vec<u8>> {
             format!("{} bytes is too large for a COLMAP model file", meta.len()),
         ));
     }
-    std::fs::read(path).map_err(|e| SceneError::io(path, e))
+    super::files::read(path).map_err(|e| SceneError::io(path, e))
 }
 
 /// Reads the model in `dir`: binary when cameras.bin is there (as COLMAP itself prefers), text
 /// otherwise.
 fn read_model(dir: &Path, notes: &mut Vec<String>) -> Result<Model> {
-    let binary = dir.join("cameras.bin").is_file();
-    if binary && dir.join("cameras.txt").is_file() {
+    let binary = dir.join("cameras.bin").is_capture_file();
+    if binary && dir.join("cameras.txt").is_capture_file() {
         notes.push(format!(
             "{}: both .bin and .txt model files; read the .bin ones",
             shown(dir)
@@ -108,7 +111,7 @@ fn read_model(dir: &Path, notes: &mut Vec<String>) -> Result<Model> {
     Ok(model)
 }
 
-pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Built> {
+pub(super) async fn import(input: &Path, opts: &ImportOptions, progress: &mut Progress<'_>) -> Result<Built> {
     let dir = model_dir(input).ok_or_else(|| {
         SceneError::missing(
             shown(&input.join(MODEL_DIRS[0])),
@@ -117,7 +120,7 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
     })?;
     let mut notes = vec![format!("model: {}", shown(&dir))];
     let mut warnings = Vec::new();
-    if dir.ends_with(MODEL_DIRS[0]) && input.join("sparse/1").is_dir() {
+    if dir.ends_with(MODEL_DIRS[0]) && input.join("sparse/1").is_capture_dir() {
         warnings.push("sparse/ holds several models; imported sparse/0 only".into());
     }
     let model = read_model(&dir, &mut notes)?;
@@ -147,7 +150,7 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
     }
     let (present, missing): (Vec<&Image>, Vec<&Image>) = registered
         .into_iter()
-        .partition(|i| image_paths[i.name.as_str()].is_file());
+        .partition(|i| image_paths[i.name.as_str()].is_capture_file());
     if let Some(first) = missing.first() {
         warnings.push(format!(
             "{}: {} registered photos are missing (first: {}, image {}); skipped",
@@ -188,7 +191,7 @@ pub(super) fn import(input: &Path, opts: &ImportOptions, progress: &mut dyn FnMu
         names: kept.iter().map(|i| i.name.clone()).collect(),
         outside: Cell::new(0),
     };
-    let loaded = load_frames_prepared(files, opts, InvalidDepth::ZeroOnly, &prepare, progress)?;
+    let loaded = load_frames_prepared(files, opts, InvalidDepth::ZeroOnly, &prepare, progress).await?;
     notes.extend(loaded.notes);
     let report = loaded.report;
     notes.push(undistortion_note(&model, &kept, &prepare));
@@ -280,14 +283,13 @@ fn photos_under(dir: &Path) -> Result<Vec<String>> {
     let mut out = Vec::new();
     let mut stack = vec![(dir.to_path_buf(), String::new(), 0)];
     while let Some((folder, prefix, depth)) = stack.pop() {
-        let entries = std::fs::read_dir(&folder).map_err(|e| SceneError::io(&folder, e))?;
-        for entry in entries {
-            let path = entry.map_err(|e| SceneError::io(&folder, e))?.path();
+        let entries = super::files::read_dir(&folder).map_err(|e| SceneError::io(&folder, e))?;
+        for path in entries {
             let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
                 continue;
             };
             let rel = format!("{prefix}{name}");
-            if path.is_dir() && depth < MAX_IMAGE_DEPTH {
+            if path.is_capture_dir() && depth < MAX_IMAGE_DEPTH {
                 stack.push((path.clone(), format!("{rel}/"), depth + 1));
             } else if is_photo(name) {
                 out.push(rel);
@@ -312,9 +314,9 @@ fn find_masks(
     warnings: &mut Vec<String>,
 ) -> Result<Option<Vec<PathBuf>>> {
     let dir = match &opts.masks {
-        Some(d) if d.is_dir() => d.clone(),
+        Some(d) if d.is_capture_dir() => d.clone(),
         Some(d) => return Err(SceneError::missing(shown(d), "the mask folder given with --masks")),
-        None if input.join(MASKS_DIR).is_dir() => input.join(MASKS_DIR),
+        None if input.join(MASKS_DIR).is_capture_dir() => input.join(MASKS_DIR),
         None => return Ok(None),
     };
     let found: Vec<Option<PathBuf>> = kept
@@ -323,7 +325,7 @@ fn find_masks(
             let stem = Path::new(&image.name).with_extension("png");
             [dir.join(stem), dir.join(format!("{}.png", image.name))]
                 .into_iter()
-                .find(|p| p.is_file())
+                .find(|p| p.is_capture_file())
         })
         .collect();
     let missing: Vec<&Image> = kept
