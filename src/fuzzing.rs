@@ -8,7 +8,7 @@
 //! input that breaks a limit of docs/limits.md: after a success each function asserts the
 //! limits on what it built, so the fuzzer reports such an input as a crash. Memory and time are
 //! bounded by the fuzzer itself (`-rss_limit_mb`, `-malloc_limit_mb`, `-timeout`).
-use crate::features::safetensors::SafeTensors;
+use crate::safetensors::SafeTensors;
 use crate::features::{NpyLayout, parse_npy_map};
 use crate::labels::share::decode_labels;
 use crate::scene::archive::limits as archive_limits;

@@ -17,6 +17,7 @@ mod module_layers;
 pub mod pause;
 pub mod percent;
 pub mod rng;
+pub mod safetensors;
 pub mod scene;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod serve;

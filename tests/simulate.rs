@@ -204,7 +204,23 @@ fn simulated_user_clicks_wrong_pixels_and_resumes_where_it_stopped() {
     std::fs::write(out.join(simulate::LOCK_FILE), "4000000000").unwrap(); // no such process
     simulate::run(&ctx, &scene, &s, options, &out, &mut |_| {}).unwrap();
 
-    // Other settings are refused, naming the field; --restart starts over.
+    // A folder saved before checkpoints were safetensors files: refused, saying so.
+    let checkpoint = out.join(simulate::TRAINER_FILE);
+    let saved = std::fs::read(&checkpoint).unwrap();
+    std::fs::remove_file(&checkpoint).unwrap();
+    let mut old = b"SFTRAIN1".to_vec();
+    old.extend_from_slice(&[0; 12]);
+    std::fs::write(out.join(simulate::OLD_TRAINER_FILE), &old).unwrap();
+    let err = simulate::run(&ctx, &scene, &s, options, &out, &mut |_| {}).unwrap_err();
+    let m = err.to_string();
+    assert!(
+        m.contains("trainer.bin") && m.contains("old private format") && m.contains("--restart"),
+        "{m}"
+    );
+    std::fs::write(&checkpoint, saved).unwrap();
+
+    // Other settings are refused, naming the field; --restart starts over (and removes the old
+    // checkpoint too).
     let other = SimulateSettings {
         steps_per_round: 30,
         ..s.clone()
@@ -219,6 +235,8 @@ fn simulated_user_clicks_wrong_pixels_and_resumes_where_it_stopped() {
     let state = simulate::run(&ctx, &scene, &other, restart, &out, &mut |_| {}).unwrap();
     assert_eq!((state.rounds, state.clicks, state.steps), (1, 5, 60));
     assert_eq!(read_curve(&out).len(), 2);
+    assert!(!out.join(simulate::OLD_TRAINER_FILE).exists());
+    assert!(out.join(simulate::TRAINER_FILE).is_file());
 }
 
 #[test]

@@ -50,7 +50,7 @@ pub struct SimArgs {
 pub struct SimulateArgs {
     /// Scene archive with ground truth.
     archive: PathBuf,
-    /// Output folder: curve.csv, labels.json, simulate.json (resume state), trainer.bin.
+    /// Output folder: curve.csv, labels.json, simulate.json (resume state), trainer.safetensors.
     #[arg(short, long)]
     output: PathBuf,
     #[command(flatten)]

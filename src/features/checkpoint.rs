@@ -5,7 +5,7 @@ use std::path::Path;
 
 use super::FeatureError;
 use super::pth::Pth;
-use super::safetensors::SafeTensors;
+use crate::safetensors::SafeTensors;
 
 pub enum Checkpoint {
     SafeTensors(SafeTensors),
@@ -54,7 +54,7 @@ impl Checkpoint {
     /// The tensor `name` as `f32`, which must have shape `shape`.
     pub fn f32(&self, name: &str, shape: &[usize]) -> Result<Vec<f32>, FeatureError> {
         match self {
-            Checkpoint::SafeTensors(st) => st.f32(name, shape),
+            Checkpoint::SafeTensors(st) => Ok(st.f32(name, shape)?),
             Checkpoint::Pth(p) => p.f32(name, shape),
         }
     }

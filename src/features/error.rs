@@ -20,6 +20,16 @@ pub enum FeatureError {
     Frame { frame: usize, problem: String },
 }
 
+impl From<crate::safetensors::SafeTensorsError> for FeatureError {
+    fn from(e: crate::safetensors::SafeTensorsError) -> Self {
+        use crate::safetensors::SafeTensorsError;
+        match e {
+            SafeTensorsError::Invalid { file, problem } => FeatureError::Invalid { file, problem },
+            SafeTensorsError::Io { path, source } => FeatureError::Io { path, source },
+        }
+    }
+}
+
 impl FeatureError {
     pub fn invalid(file: impl Into<String>, problem: impl Into<String>) -> Self {
         FeatureError::Invalid {

@@ -29,8 +29,6 @@ pub mod pth;
 #[cfg(test)]
 mod pth_writer;
 #[cfg(not(target_arch = "wasm32"))]
-pub mod safetensors;
-#[cfg(not(target_arch = "wasm32"))]
 pub mod softmax;
 #[cfg(not(target_arch = "wasm32"))]
 mod upscale;

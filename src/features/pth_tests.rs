@@ -178,9 +178,9 @@ fn the_checkpoint_reader_tells_the_formats_apart_by_content() {
     let pth = dir.path().join("weights.safetensors");
     std::fs::write(&pth, to_pth_bytes(&tensors)).unwrap();
     let st = dir.path().join("weights.bin");
-    std::fs::write(&st, super::super::safetensors::to_bytes(&tensors)).unwrap();
+    std::fs::write(&st, crate::safetensors::to_bytes(&tensors)).unwrap();
     let st_pth = dir.path().join("converted.pth");
-    std::fs::write(&st_pth, super::super::safetensors::to_bytes(&tensors)).unwrap();
+    std::fs::write(&st_pth, crate::safetensors::to_bytes(&tensors)).unwrap();
     assert!(matches!(Checkpoint::open(&st_pth).unwrap(), Checkpoint::SafeTensors(_)));
     for path in [&pth, &st, &st_pth] {
         let ck = Checkpoint::open(path).unwrap();

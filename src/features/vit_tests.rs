@@ -1,6 +1,6 @@
 use super::super::checkpoint::Checkpoint;
 use super::super::dino::{DinoExtractor, DinoModel};
-use super::super::safetensors::{self, SafeTensors};
+use crate::safetensors::{self, SafeTensors};
 use super::super::{Extractor, FeatureError};
 use super::*;
 use std::path::Path;

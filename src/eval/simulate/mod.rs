@@ -11,7 +11,7 @@
 //! | `simulate.json` | settings, rounds and clicks done, the curve (the resume state; written last) |
 //! | `curve.csv` | `round,clicks,mean_iou,pixel_acc,steps`, one row per evaluation |
 //! | `labels.json` | every click so far, as 1-point strokes (the `labels.json` format) |
-//! | `trainer.bin` | the trainer's parameters, Adam moments and step count after the last round |
+//! | `trainer.safetensors` | the trainer's parameters, Adam moments and step count after the last round (`field::checkpoint`) |
 //!
 //! **Resume**: a folder holding a run with the same settings (scene bytes, field config, seed,
 //! schedule, frame split; the click budget may differ) continues after its last completed round:
@@ -38,12 +38,13 @@ use super::headless::render_and_score;
 pub const STATE_FILE: &str = "simulate.json";
 pub const CURVE_FILE: &str = "curve.csv";
 pub const LABELS_FILE: &str = "labels.json";
-pub const TRAINER_FILE: &str = "trainer.bin";
+pub const TRAINER_FILE: &str = "trainer.safetensors";
+/// Where runs saved the trainer before its checkpoint was a safetensors file (refused, said so).
+pub const OLD_TRAINER_FILE: &str = "trainer.bin";
 /// Held while a run writes the folder: two runs in one folder would overwrite each other.
 pub const LOCK_FILE: &str = "simulate.lock";
 const STATE_FORMAT: &str = "scribblefield-simulate";
 const STATE_VERSION: u32 = 1;
-const TRAINER_MAGIC: &[u8; 8] = b"SFTRAIN1";
 /// Steps trained between loss read-backs (and progress reports).
 const CHUNK: u32 = 10;
 
@@ -51,7 +52,6 @@ mod files;
 mod run_lock;
 mod settings;
 
-pub use files::{decode_trainer_state, encode_trainer_state};
 use files::{load_state, save};
 use run_lock::RunLock;
 pub use settings::{FrameSplit, SceneId, SimulateSettings};
@@ -205,8 +205,14 @@ pub fn run(
         load_state(out, settings)?
     };
     let (mut state, mut labels) = match previous {
-        Some((state, labels, trainer_state)) => {
-            trainer.restore_state(&trainer_state)?;
+        Some((state, labels, checkpoint)) => {
+            let path = out.join(TRAINER_FILE);
+            trainer
+                .restore_checkpoint(&path.display().to_string(), &checkpoint)
+                .map_err(|e| SimulateError::Output {
+                    path,
+                    problem: e.problem,
+                })?;
             trainer.set_labels(Some(&labels), scene)?;
             events(SimEvent::Resumed {
                 rounds: state.rounds,
@@ -215,7 +221,7 @@ pub fn run(
             (state, labels)
         }
         None => {
-            for name in [STATE_FILE, CURVE_FILE, LABELS_FILE, TRAINER_FILE] {
+            for name in [STATE_FILE, CURVE_FILE, LABELS_FILE, TRAINER_FILE, OLD_TRAINER_FILE] {
                 let path = out.join(name);
                 if path.exists() {
                     std::fs::remove_file(&path).map_err(io_error(&path))?;
@@ -386,7 +392,6 @@ fn evaluate(trainer: &mut Trainer, scene: &Scene, state: &SimulateState) -> Resu
 mod tests {
     use super::*;
     use crate::field::FieldConfig;
-    use crate::field::gpu::trainer::TrainerState;
 
     #[test]
     fn clicks_are_distinct_wrong_unlabelled_and_never_void() {
@@ -442,24 +447,6 @@ mod tests {
         sorted.sort_unstable();
         assert_eq!(sorted, s.train);
         assert_eq!(order, frame_order(&s.train, 0));
-    }
-
-    #[test]
-    fn trainer_state_round_trips_and_damage_is_caught() {
-        let s = TrainerState {
-            step: 350,
-            params: vec![1.0, -2.5, 3.25],
-            first_moment: vec![0.1, 0.2, 0.3],
-            second_moment: vec![1e-9, 0.0, 7.0],
-        };
-        let bytes = encode_trainer_state(4, &s);
-        assert_eq!(decode_trainer_state(&bytes).unwrap(), (4, s));
-        assert!(
-            decode_trainer_state(&bytes[..bytes.len() - 1])
-                .unwrap_err()
-                .contains("bytes")
-        );
-        assert!(decode_trainer_state(b"nonsense-nonsense-nonsense").is_err());
     }
 
     #[test]

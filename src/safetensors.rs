@@ -2,9 +2,36 @@
 //! header `{name: {"dtype", "shape", "data_offsets": [begin, end]}, "__metadata__"?: {..}}` and
 //! the raw little-endian tensor bytes (offsets are relative to the end of the header).
 //! Only `F32` tensors are read; other dtypes are listed (their byte sizes checked) but not decoded.
-use super::FeatureError;
+//! The `__metadata__` map (strings to strings, as the format specifies) is kept.
+//!
+//! Written here rather than taken from the `safetensors` crate because every error must name the
+//! file and the tensor it is about. Used by the feature extractors' weights (`features`) and the
+//! trainer's checkpoints (`field::checkpoint`), hence at the bottom of the module layers.
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// What went wrong reading a safetensors file; both variants name the file.
+#[derive(Debug, thiserror::Error)]
+pub enum SafeTensorsError {
+    /// The content is not a (usable) safetensors file, or lacks what was asked for.
+    #[error("{file}: {problem}")]
+    Invalid { file: String, problem: String },
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+impl SafeTensorsError {
+    pub fn invalid(file: impl Into<String>, problem: impl Into<String>) -> Self {
+        SafeTensorsError::Invalid {
+            file: file.into(),
+            problem: problem.into(),
+        }
+    }
+}
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct TensorInfo {
@@ -20,6 +47,7 @@ pub struct SafeTensors {
     /// The file's name as given, for error messages.
     file: String,
     tensors: BTreeMap<String, TensorInfo>,
+    metadata: BTreeMap<String, String>,
     data: Vec<u8>,
 }
 
@@ -34,15 +62,18 @@ fn dtype_size(dtype: &str) -> Option<usize> {
 }
 
 impl SafeTensors {
-    pub fn open(path: &Path) -> Result<Self, FeatureError> {
-        let bytes = std::fs::read(path).map_err(|e| FeatureError::io(path, e))?;
+    pub fn open(path: &Path) -> Result<Self, SafeTensorsError> {
+        let bytes = std::fs::read(path).map_err(|source| SafeTensorsError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
         Self::from_bytes(path.display().to_string(), bytes)
     }
 
     /// Parses `bytes` (the content of a file named `file` in messages).
-    pub fn from_bytes(file: impl Into<String>, mut bytes: Vec<u8>) -> Result<Self, FeatureError> {
+    pub fn from_bytes(file: impl Into<String>, mut bytes: Vec<u8>) -> Result<Self, SafeTensorsError> {
         let file = file.into();
-        let bad = |problem: String| FeatureError::invalid(file.clone(), problem);
+        let bad = |problem: String| SafeTensorsError::invalid(file.clone(), problem);
         if bytes.len() < 8 {
             return Err(bad(format!(
                 "not a safetensors file: {} bytes, shorter than the 8-byte header length (truncated?)",
@@ -65,8 +96,22 @@ impl SafeTensors {
         };
         let data_len = bytes.len() - header_end;
         let mut tensors = BTreeMap::new();
+        let mut metadata = BTreeMap::new();
         for (name, entry) in entries {
             if name == "__metadata__" {
+                let serde_json::Value::Object(map) = entry else {
+                    return Err(bad(
+                        "`__metadata__` in the safetensors header is not a JSON object".into()
+                    ));
+                };
+                for (key, value) in map {
+                    let serde_json::Value::String(value) = value else {
+                        return Err(bad(format!(
+                            "`__metadata__` entry `{key}` is not a string (the format allows strings only)"
+                        )));
+                    };
+                    metadata.insert(key, value);
+                }
                 continue;
             }
             let bad_entry = |what: &str| bad(format!("tensor `{name}`: {what} in the safetensors header"));
@@ -125,6 +170,7 @@ impl SafeTensors {
         Ok(SafeTensors {
             file,
             tensors,
+            metadata,
             data: bytes,
         })
     }
@@ -141,22 +187,27 @@ impl SafeTensors {
         self.tensors.get(name)
     }
 
+    /// The header's `__metadata__` (empty when it has none).
+    pub fn metadata(&self) -> &BTreeMap<String, String> {
+        &self.metadata
+    }
+
     /// The F32 tensor `name`, which must have shape `shape`.
-    pub fn f32(&self, name: &str, shape: &[usize]) -> Result<Vec<f32>, FeatureError> {
+    pub fn f32(&self, name: &str, shape: &[usize]) -> Result<Vec<f32>, SafeTensorsError> {
         let info = self.tensors.get(name).ok_or_else(|| {
-            FeatureError::invalid(
+            SafeTensorsError::invalid(
                 self.file.clone(),
                 format!("tensor `{name}` missing ({} tensors in the file)", self.tensors.len()),
             )
         })?;
         if info.dtype != "F32" {
-            return Err(FeatureError::invalid(
+            return Err(SafeTensorsError::invalid(
                 self.file.clone(),
                 format!("tensor `{name}` is {}, expected F32", info.dtype),
             ));
         }
         if info.shape != shape {
-            return Err(FeatureError::invalid(
+            return Err(SafeTensorsError::invalid(
                 self.file.clone(),
                 format!("tensor `{name}` has shape {:?}, expected {shape:?}", info.shape),
             ));
@@ -170,8 +221,17 @@ impl SafeTensors {
 
 /// Serialises F32 tensors as a safetensors file (for tests and small tools).
 pub fn to_bytes(tensors: &[(&str, &[usize], &[f32])]) -> Vec<u8> {
+    to_bytes_with_metadata(tensors, &BTreeMap::new())
+}
+
+/// Serialises F32 tensors, in the order given, with `metadata` as the header's `__metadata__`
+/// (left out when empty).
+pub fn to_bytes_with_metadata(tensors: &[(&str, &[usize], &[f32])], metadata: &BTreeMap<String, String>) -> Vec<u8> {
     let mut header = serde_json::Map::new();
-    let mut data = Vec::new();
+    if !metadata.is_empty() {
+        header.insert("__metadata__".into(), serde_json::json!(metadata));
+    }
+    let mut data = Vec::with_capacity(tensors.iter().map(|t| 4 * t.2.len()).sum());
     for (name, shape, values) in tensors {
         let begin = data.len();
         for v in values.iter() {
@@ -203,7 +263,7 @@ mod tests {
         ])
     }
 
-    fn message(r: Result<impl Sized, FeatureError>) -> String {
+    fn message(r: Result<impl Sized, SafeTensorsError>) -> String {
         match r {
             Ok(_) => panic!("expected an error"),
             Err(e) => e.to_string(),
@@ -252,6 +312,30 @@ mod tests {
         garbled[8] = b'[';
         let m = message(SafeTensors::from_bytes("w.safetensors", garbled));
         assert!(m.contains("w.safetensors") && m.contains("not valid JSON"), "{m}");
+    }
+
+    #[test]
+    fn metadata_round_trips_and_must_be_strings() {
+        let meta = BTreeMap::from([
+            ("format".to_string(), "x".to_string()),
+            ("n".to_string(), "3".to_string()),
+        ]);
+        let bytes = to_bytes_with_metadata(&[("b", &[1], &[7.0])], &meta);
+        let st = SafeTensors::from_bytes("m.safetensors", bytes).unwrap();
+        assert_eq!(st.metadata(), &meta);
+        assert_eq!(st.f32("b", &[1]).unwrap(), vec![7.0]);
+        assert!(
+            SafeTensors::from_bytes("w.safetensors", sample())
+                .unwrap()
+                .metadata()
+                .is_empty()
+        );
+        let h = r#"{"__metadata__": {"n": 3}}"#;
+        let m = message(SafeTensors::from_bytes("m.safetensors", with_header(h, 0)));
+        assert!(
+            m.contains("m.safetensors: `__metadata__` entry `n` is not a string"),
+            "{m}"
+        );
     }
 
     /// A file whose header is `header` (JSON) over `data_len` zero bytes.

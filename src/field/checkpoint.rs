@@ -1,0 +1,393 @@
+//! The trainer's checkpoint: its parameters, both Adam moments and its step count, as a
+//! safetensors file (`crate::safetensors`), so any safetensors reader can open it.
+//!
+//! One F32 tensor per range of the parameter layout (`ParamLayout::named_ranges`), in buffer
+//! order: `hash_table` of shape `[levels, entries, features]` (absent without a hash grid), then
+//! `density.0`, `density.1`, ..., `semantic.1`, each `[out, in]` (row-major, as the layout stores
+//! them). The moments follow under the same names prefixed `adam.first_moment.` and
+//! `adam.second_moment.`. The header's `__metadata__` says what the file is:
+//!
+//! | key | value |
+//! |---|---|
+//! | `format` | `scribblefield-trainer` |
+//! | `version` | `1` |
+//! | `step` | the trainer's step count (seeds the ray batches, sets Adam's bias corrections) |
+//! | `config` | the `FieldConfig` as JSON (the layout follows from it) |
+//!
+//! and whatever the writer adds (`simulate` adds `round`). The trainer's seed is not in it: it is
+//! the trainer's own (it draws the ray batches and jitters the renderer's samples), so a run
+//! resumed with the same seed and step draws what it would have drawn. The file before this one
+//! (`trainer.bin`, magic `SFTRAIN1`) is recognised and refused with a message saying so.
+use std::collections::BTreeMap;
+use std::ops::Range;
+
+use super::config::FieldConfig;
+use super::gpu::trainer::{Trainer, TrainerState};
+use super::params::ParamLayout;
+use crate::gpu::GpuError;
+use crate::safetensors::{SafeTensors, to_bytes_with_metadata};
+
+pub const FORMAT: &str = "scribblefield-trainer";
+pub const VERSION: &str = "1";
+/// The first bytes of the private format this one replaced.
+const OLD_MAGIC: &[u8; 8] = b"SFTRAIN1";
+const MOMENTS: [&str; 2] = ["adam.first_moment.", "adam.second_moment."];
+/// Metadata keys of the format itself; a writer's own keys must be others.
+const RESERVED: [&str; 4] = ["format", "version", "step", "config"];
+
+/// A checkpoint that cannot be read or does not fit, naming the file.
+#[derive(Debug, thiserror::Error)]
+#[error("{file}: {problem}")]
+pub struct CheckpointError {
+    pub file: String,
+    pub problem: String,
+}
+
+/// A trainer's state with the config it was trained with.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Checkpoint {
+    pub config: FieldConfig,
+    pub state: TrainerState,
+    /// The writer's own metadata (not the format's keys).
+    pub extra: BTreeMap<String, String>,
+}
+
+/// Every parameter tensor of `layout`: name, shape, range in the flat buffer.
+fn tensors(cfg: &FieldConfig, layout: &ParamLayout) -> Vec<(String, Vec<usize>, Range<usize>)> {
+    let mut out = Vec::new();
+    for (name, range) in layout.named_ranges() {
+        if range.is_empty() {
+            continue;
+        }
+        let shape = if name == "hash_table" {
+            vec![
+                cfg.hash_levels as usize,
+                cfg.hash_table_size(),
+                cfg.hash_features_per_level as usize,
+            ]
+        } else {
+            let (mlp, k) = name.split_once('.').expect("MLP ranges are named mlp.k");
+            let k: usize = k.parse().expect("layer index");
+            let dims = &layout
+                .mlps()
+                .into_iter()
+                .find(|m| m.0 == mlp)
+                .expect("known MLP")
+                .1
+                .dims;
+            vec![dims[k + 1], dims[k]]
+        };
+        out.push((name, shape, range));
+    }
+    out
+}
+
+impl Checkpoint {
+    /// The safetensors file.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let layout = ParamLayout::new(&self.config);
+        let list = tensors(&self.config, &layout);
+        let mut names = Vec::new();
+        for prefix in [""].into_iter().chain(MOMENTS) {
+            for (name, ..) in &list {
+                names.push(format!("{prefix}{name}"));
+            }
+        }
+        let mut entries: Vec<(&str, &[usize], &[f32])> = Vec::new();
+        let parts = [&self.state.params, &self.state.first_moment, &self.state.second_moment];
+        for (p, part) in parts.into_iter().enumerate() {
+            for (i, (_, shape, range)) in list.iter().enumerate() {
+                entries.push((&names[p * list.len() + i], shape, &part[range.clone()]));
+            }
+        }
+        let mut metadata = self.extra.clone();
+        metadata.insert("format".into(), FORMAT.into());
+        metadata.insert("version".into(), VERSION.into());
+        metadata.insert("step".into(), self.state.step.to_string());
+        metadata.insert(
+            "config".into(),
+            serde_json::to_string(&self.config).expect("a config serializes"),
+        );
+        to_bytes_with_metadata(&entries, &metadata)
+    }
+
+    /// Reads a checkpoint from `bytes`, the content of the file named `file` in messages.
+    pub fn from_bytes(file: &str, bytes: Vec<u8>) -> Result<Self, CheckpointError> {
+        let bad = |problem: String| CheckpointError {
+            file: file.to_string(),
+            problem,
+        };
+        if bytes.starts_with(OLD_MAGIC) {
+            return Err(bad(
+                "a trainer checkpoint in the old private format (`SFTRAIN1`, before checkpoints were \
+                 safetensors files); this version cannot read it: train again"
+                    .into(),
+            ));
+        }
+        let st = SafeTensors::from_bytes(file, bytes).map_err(|e| bad(strip_file(e.to_string(), file)))?;
+        let meta = st.metadata();
+        let get = |key: &str| {
+            meta.get(key).ok_or_else(|| {
+                bad(format!(
+                    "no `{key}` in the safetensors `__metadata__`: not a {FORMAT} checkpoint"
+                ))
+            })
+        };
+        let format = get("format")?;
+        if format != FORMAT {
+            return Err(bad(format!("`__metadata__` format is {format:?}, expected {FORMAT:?}")));
+        }
+        let version = get("version")?;
+        if version != VERSION {
+            return Err(bad(format!(
+                "{FORMAT} version {version:?}; this version reads version {VERSION:?}"
+            )));
+        }
+        let step = get("step")?;
+        let step: u32 = step
+            .parse()
+            .map_err(|_| bad(format!("`__metadata__` step {step:?} is not a whole number")))?;
+        let config: FieldConfig = serde_json::from_str(get("config")?)
+            .map_err(|e| bad(format!("`__metadata__` config is not a field config: {e}")))?;
+        config.validate().map_err(|e| bad(format!("`__metadata__` {e}")))?;
+        let layout = ParamLayout::new(&config);
+        let list = tensors(&config, &layout);
+        let expected: std::collections::BTreeSet<String> = [""]
+            .into_iter()
+            .chain(MOMENTS)
+            .flat_map(|p| list.iter().map(move |(name, ..)| format!("{p}{name}")))
+            .collect();
+        if let Some(extra) = st.names().find(|n| !expected.contains(*n)) {
+            return Err(bad(format!(
+                "tensor `{extra}` is not part of the model its config describes"
+            )));
+        }
+        let read = |prefix: &str| -> Result<Vec<f32>, CheckpointError> {
+            let mut out = Vec::new();
+            for (name, shape, _) in &list {
+                let values = st
+                    .f32(&format!("{prefix}{name}"), shape)
+                    .map_err(|e| bad(strip_file(e.to_string(), file)))?;
+                out.extend_from_slice(&values);
+            }
+            Ok(out)
+        };
+        let state = TrainerState {
+            step,
+            params: read("")?,
+            first_moment: read(MOMENTS[0])?,
+            second_moment: read(MOMENTS[1])?,
+        };
+        let extra = meta
+            .iter()
+            .filter(|(k, _)| !RESERVED.contains(&k.as_str()))
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect();
+        Ok(Checkpoint { config, state, extra })
+    }
+
+    /// How `config` differs from the checkpoint's in what the parameters depend on (the
+    /// layout), as `field: here vs file` items; empty when the checkpoint fits.
+    pub fn layout_differences(&self, config: &FieldConfig) -> Vec<String> {
+        if ParamLayout::new(config) == ParamLayout::new(&self.config) {
+            return Vec::new();
+        }
+        let (here, file) = (
+            serde_json::to_value(config).expect("a config serializes"),
+            serde_json::to_value(&self.config).expect("a config serializes"),
+        );
+        let (Some(here), Some(file)) = (here.as_object(), file.as_object()) else {
+            return vec!["config".into()];
+        };
+        here.iter()
+            .filter(|(k, v)| file.get(*k) != Some(v))
+            .map(|(k, v)| {
+                format!(
+                    "{k}: {v} here vs {} in the file",
+                    file.get(k).unwrap_or(&serde_json::Value::Null)
+                )
+            })
+            .collect()
+    }
+}
+
+/// The safetensors reader names the file first; the checkpoint's error does too, once.
+fn strip_file(message: String, file: &str) -> String {
+    message
+        .strip_prefix(&format!("{file}: "))
+        .map(String::from)
+        .unwrap_or(message)
+}
+
+impl Trainer {
+    /// The trainer's checkpoint (reads the GPU's buffers back), with the writer's `extra`
+    /// metadata; the keys of the format itself are refused.
+    pub async fn checkpoint(&self, extra: BTreeMap<String, String>) -> Result<Checkpoint, GpuError> {
+        if let Some(key) = extra.keys().find(|k| RESERVED.contains(&k.as_str())) {
+            return Err(GpuError::invalid_argument(
+                "checkpoint metadata",
+                format!("`{key}` is the format's own key"),
+            ));
+        }
+        Ok(Checkpoint {
+            config: self.config().clone(),
+            state: self.read_state().await?,
+            extra,
+        })
+    }
+
+    /// Continues from `checkpoint` (read from `file`, named in errors): parameters, moments and
+    /// step count. Its config must give this trainer's parameter layout; the rest of the config
+    /// (loss weights, batch size, ...) is this trainer's own.
+    pub fn restore_checkpoint(&mut self, file: &str, checkpoint: &Checkpoint) -> Result<(), CheckpointError> {
+        let diff = checkpoint.layout_differences(self.config());
+        if !diff.is_empty() {
+            return Err(CheckpointError {
+                file: file.to_string(),
+                problem: format!("written for another model ({})", diff.join("; ")),
+            });
+        }
+        self.restore_state(&checkpoint.state).map_err(|e| CheckpointError {
+            file: file.to_string(),
+            problem: e.to_string(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::Preset;
+
+    fn sample(cfg: FieldConfig) -> Checkpoint {
+        let layout = ParamLayout::new(&cfg);
+        let ramp = |k: f32| (0..layout.total).map(|i| k * i as f32 - 0.5).collect::<Vec<_>>();
+        Checkpoint {
+            config: cfg,
+            state: TrainerState {
+                step: 17,
+                params: ramp(1e-3),
+                first_moment: ramp(-2e-4),
+                second_moment: ramp(3e-6),
+            },
+            extra: BTreeMap::from([("round".to_string(), "4".to_string())]),
+        }
+    }
+
+    fn tiny() -> FieldConfig {
+        Preset::Tiny.config()
+    }
+
+    fn message(r: Result<impl Sized, CheckpointError>) -> String {
+        match r {
+            Ok(_) => panic!("expected an error"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn a_checkpoint_round_trips_with_its_metadata() {
+        let ck = sample(tiny());
+        let back = Checkpoint::from_bytes("t.safetensors", ck.to_bytes()).unwrap();
+        assert_eq!(back, ck);
+        let mut freq = tiny();
+        freq.encoding = crate::field::config::Encoding::freq_only_baseline();
+        let ck = sample(freq);
+        assert_eq!(Checkpoint::from_bytes("t.safetensors", ck.to_bytes()).unwrap(), ck);
+    }
+
+    #[test]
+    fn it_is_a_plain_safetensors_file_with_one_tensor_per_layout_range() {
+        let ck = sample(tiny());
+        let st = SafeTensors::from_bytes("t.safetensors", ck.to_bytes()).unwrap();
+        let cfg = &ck.config;
+        let layout = ParamLayout::new(cfg);
+        let table = [
+            cfg.hash_levels as usize,
+            cfg.hash_table_size(),
+            cfg.hash_features_per_level as usize,
+        ];
+        assert_eq!(
+            st.f32("hash_table", &table).unwrap(),
+            ck.state.params[layout.hash_table.clone()]
+        );
+        let d = &layout.density.dims;
+        assert_eq!(
+            st.f32("adam.second_moment.density.1", &[d[2], d[1]]).unwrap(),
+            ck.state.second_moment[layout.density.layers[1].clone()]
+        );
+        assert_eq!(st.metadata()["format"], FORMAT);
+        assert_eq!(st.metadata()["step"], "17");
+        assert_eq!(st.metadata()["round"], "4");
+        assert_eq!(st.names().count(), 3 * layout.named_ranges().len());
+    }
+
+    #[test]
+    fn bad_files_are_refused_naming_the_file_and_the_problem() {
+        let bytes = sample(tiny()).to_bytes();
+        let m = message(Checkpoint::from_bytes(
+            "t.safetensors",
+            bytes[..bytes.len() - 8].to_vec(),
+        ));
+        assert!(m.starts_with("t.safetensors: ") && m.contains("truncated"), "{m}");
+        assert_eq!(m.matches("t.safetensors").count(), 1, "{m}");
+        let m = message(Checkpoint::from_bytes("t.safetensors", bytes[..100].to_vec()));
+        assert!(m.contains("t.safetensors") && m.contains("truncated"), "{m}");
+        let m = message(Checkpoint::from_bytes(
+            "x.safetensors",
+            crate::safetensors::to_bytes(&[("w", &[1], &[1.0])]),
+        ));
+        assert!(
+            m.contains("x.safetensors: no `format`") && m.contains("not a scribblefield-trainer"),
+            "{m}"
+        );
+        let mut old = b"SFTRAIN1".to_vec();
+        old.extend_from_slice(&[0; 12]);
+        let m = message(Checkpoint::from_bytes("run/trainer.bin", old));
+        assert!(
+            m.contains("run/trainer.bin: ") && m.contains("old private format"),
+            "{m}"
+        );
+        // A tensor of the wrong shape is named.
+        let ck = sample(tiny());
+        let mut other = ck.config.clone();
+        other.density_width += 1;
+        let layout = ParamLayout::new(&ck.config);
+        let mut metadata = BTreeMap::new();
+        for (k, v) in [("format", FORMAT), ("version", VERSION), ("step", "1")] {
+            metadata.insert(k.to_string(), v.to_string());
+        }
+        metadata.insert("config".into(), serde_json::to_string(&other).unwrap());
+        let list = tensors(&ck.config, &layout);
+        let entries: Vec<(&str, &[usize], &[f32])> = list
+            .iter()
+            .map(|(n, s, r)| (n.as_str(), &s[..], &ck.state.params[r.clone()]))
+            .collect();
+        let m = message(Checkpoint::from_bytes(
+            "t.safetensors",
+            to_bytes_with_metadata(&entries, &metadata),
+        ));
+        assert!(
+            m.contains("t.safetensors: tensor `density.0`") && m.contains("shape"),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn another_model_is_named_by_its_differences() {
+        let ck = sample(tiny());
+        assert!(ck.layout_differences(&ck.config).is_empty());
+        let mut other = ck.config.clone();
+        other.loss.rgb *= 2.0;
+        assert!(
+            ck.layout_differences(&other).is_empty(),
+            "loss weights do not change the layout"
+        );
+        other.semantic_width *= 2;
+        let diff = ck.layout_differences(&other);
+        assert!(
+            diff.len() == 2 && diff.iter().any(|d| d.starts_with("semantic_width:")),
+            "{diff:?}"
+        );
+    }
+}
