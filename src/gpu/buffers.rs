@@ -11,10 +11,10 @@ use std::future::Future;
 use std::marker::PhantomData;
 use std::ops::Range;
 use std::pin::Pin;
-use std::sync::{Arc, Mutex};
-use std::task::{Context, Poll, Waker};
+use std::task::{Context, Poll};
 
 use bytemuck::Pod;
+use futures_channel::oneshot;
 use wgpu::util::DeviceExt as _;
 
 use super::context::GpuContext;
@@ -167,22 +167,17 @@ pub fn read_elements_async<T: Pod>(ctx: &GpuContext, buffer: &wgpu::Buffer, rang
     encoder.copy_buffer_to_buffer(buffer, aligned_start, &staging, 0, copy_size);
     ctx.queue.submit([encoder.finish()]);
 
-    let state = Arc::new(Mutex::new(MapState::default()));
-    let callback_state = Arc::clone(&state);
+    let (mapped, map_result) = oneshot::channel();
     staging.map_async(wgpu::MapMode::Read, .., move |result| {
-        let mut state = lock(&callback_state);
-        state.result = Some(result.map_err(|error| error.to_string()));
-        if let Some(waker) = state.waker.take() {
-            waker.wake();
-        }
+        // The read may have been dropped meanwhile; then nobody wants the result.
+        let _ = mapped.send(result.map_err(|error| error.to_string()));
     });
     PendingRead {
         #[cfg(not(target_arch = "wasm32"))]
         device: ctx.device.clone(),
         what,
-        stage: ReadStage::InFlight(staging),
+        stage: ReadStage::InFlight(staging, map_result),
         bytes: (start - aligned_start)..(end - aligned_start),
-        state,
         _element: PhantomData,
     }
 }
@@ -197,24 +192,13 @@ fn buffer_name(buffer: &wgpu::Buffer) -> String {
     format!("buffer of {} bytes", buffer.size())
 }
 
-#[derive(Default)]
-struct MapState {
-    result: Option<Result<(), String>>,
-    waker: Option<Waker>,
-}
-
-fn lock(state: &Mutex<MapState>) -> std::sync::MutexGuard<'_, MapState> {
-    // A panic elsewhere while holding the lock leaves the state itself consistent.
-    state.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
-}
-
 enum ReadStage {
     /// The request was invalid; nothing was submitted.
     Invalid(String),
     /// Nothing to read (an empty range).
     Empty,
-    /// Copy submitted, mapping requested.
-    InFlight(wgpu::Buffer),
+    /// Copy submitted, mapping requested; the map callback sends its outcome.
+    InFlight(wgpu::Buffer, oneshot::Receiver<Result<(), String>>),
     /// The data was handed out.
     Taken,
 }
@@ -229,7 +213,6 @@ pub struct PendingRead<T> {
     stage: ReadStage,
     /// The requested bytes within the staging buffer.
     bytes: Range<u64>,
-    state: Arc<Mutex<MapState>>,
     // `fn() -> T`: the read produces Ts but holds none, so it is Unpin and Send whatever T is.
     _element: PhantomData<fn() -> T>,
 }
@@ -244,7 +227,6 @@ impl<T: Pod> PendingRead<T> {
             what,
             stage,
             bytes: 0..0,
-            state: Arc::new(Mutex::new(MapState::default())),
             _element: PhantomData,
         }
     }
@@ -257,22 +239,34 @@ impl<T: Pod> PendingRead<T> {
             // Native callbacks only run inside a poll; this one does not block.
             let _ = self.device.poll(wgpu::PollType::Poll);
         }
-        self.finish_if_ready()
+        self.finish_if_ready(None)
     }
 
-    fn finish_if_ready(&mut self) -> Option<Result<Vec<T>, GpuError>> {
+    /// The outcome if the map callback has run. With `cx`, a read still in flight wakes that
+    /// task when the callback runs.
+    fn finish_if_ready(&mut self, cx: Option<&mut Context<'_>>) -> Option<Result<Vec<T>, GpuError>> {
         let readback_error = |reason: String| GpuError::Readback {
             what: self.what.clone(),
             reason,
         };
-        let outcome = match &self.stage {
+        let outcome = match &mut self.stage {
             ReadStage::Invalid(reason) => Err(readback_error(reason.clone())),
             ReadStage::Empty => Ok(Vec::new()),
             ReadStage::Taken => Err(readback_error("the data was already taken".into())),
-            ReadStage::InFlight(staging) => {
-                let outcome = match lock(&self.state).result.take()? {
-                    Ok(()) => self.copy_out(staging).map_err(readback_error),
-                    Err(reason) => Err(readback_error(reason)),
+            ReadStage::InFlight(staging, map_result) => {
+                let mapped = match cx {
+                    Some(cx) => match Pin::new(map_result).poll(cx) {
+                        Poll::Ready(mapped) => mapped,
+                        Poll::Pending => return None,
+                    },
+                    None => map_result.try_recv().transpose()?,
+                };
+                let outcome = match mapped {
+                    Ok(Ok(())) => copy_out(staging, &self.bytes).map_err(readback_error),
+                    Ok(Err(reason)) => Err(readback_error(reason)),
+                    Err(oneshot::Canceled) => {
+                        Err(readback_error("the map callback was dropped without running".into()))
+                    }
                 };
                 staging.unmap();
                 outcome
@@ -281,25 +275,25 @@ impl<T: Pod> PendingRead<T> {
         self.stage = ReadStage::Taken;
         Some(outcome)
     }
+}
 
-    fn copy_out(&self, staging: &wgpu::Buffer) -> Result<Vec<T>, String> {
-        let view = staging.get_mapped_range(..).map_err(|error| error.to_string())?;
-        let bytes = &view[self.bytes.start as usize..self.bytes.end as usize];
-        let count = bytes.len() / size_of::<T>().max(1);
-        let mut out = vec![T::zeroed(); count];
-        bytemuck::cast_slice_mut::<T, u8>(&mut out).copy_from_slice(&bytes[..count * size_of::<T>()]);
-        Ok(out)
-    }
+/// The requested `bytes` of a mapped staging buffer as elements of `T`.
+fn copy_out<T: Pod>(staging: &wgpu::Buffer, bytes: &Range<u64>) -> Result<Vec<T>, String> {
+    let view = staging.get_mapped_range(..).map_err(|error| error.to_string())?;
+    let bytes = &view[bytes.start as usize..bytes.end as usize];
+    let count = bytes.len() / size_of::<T>().max(1);
+    let mut out = vec![T::zeroed(); count];
+    bytemuck::cast_slice_mut::<T, u8>(&mut out).copy_from_slice(&bytes[..count * size_of::<T>()]);
+    Ok(out)
 }
 
 impl<T: Pod> Future for PendingRead<T> {
     type Output = Result<Vec<T>, GpuError>;
 
     fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
-        if let Some(done) = self.finish_if_ready() {
+        if let Some(done) = self.finish_if_ready(Some(cx)) {
             return Poll::Ready(done);
         }
-        lock(&self.state).waker = Some(cx.waker().clone());
         #[cfg(not(target_arch = "wasm32"))]
         {
             // Nothing else drives a native device: wait for the GPU here (the map callback runs
@@ -311,7 +305,7 @@ impl<T: Pod> Future for PendingRead<T> {
                     reason: error.to_string(),
                 }));
             }
-            if let Some(done) = self.finish_if_ready() {
+            if let Some(done) = self.finish_if_ready(None) {
                 return Poll::Ready(done);
             }
         }

@@ -2,9 +2,9 @@
 //! reported by browser callbacks), waiting for submitted work without blocking, and the
 //! steps-per-second meter.
 use std::future::Future;
-use std::pin::Pin;
 use std::sync::{Arc, Mutex};
-use std::task::{Context, Poll, Waker};
+
+use futures_channel::oneshot;
 
 use super::super::browser::now_ms;
 use super::super::page_status;
@@ -97,41 +97,14 @@ impl RateMeter {
 
 /// Resolves once the GPU has finished everything submitted so far. The browser calls back
 /// from its event loop; nothing blocks.
-pub fn gpu_done(queue: &wgpu::Queue) -> impl Future<Output = ()> {
-    let state = Arc::new(Mutex::new(WorkDone::default()));
-    let callback_state = state.clone();
+pub fn gpu_done(queue: &wgpu::Queue) -> impl Future<Output = ()> + use<> {
+    let (done, finished) = oneshot::channel();
+    // Registered now, not when the future is first polled.
     queue.on_submitted_work_done(move || {
-        if let Ok(mut s) = callback_state.lock() {
-            s.done = true;
-            if let Some(w) = s.waker.take() {
-                w.wake();
-            }
-        }
+        let _ = done.send(());
     });
-    WaitWorkDone(state)
-}
-
-#[derive(Default)]
-struct WorkDone {
-    done: bool,
-    waker: Option<Waker>,
-}
-
-struct WaitWorkDone(Arc<Mutex<WorkDone>>);
-
-impl Future for WaitWorkDone {
-    type Output = ();
-
-    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
-        let Ok(mut s) = self.0.lock() else {
-            // A poisoned lock means the callback panicked: do not wait forever.
-            return Poll::Ready(());
-        };
-        if s.done {
-            Poll::Ready(())
-        } else {
-            s.waker = Some(cx.waker().clone());
-            Poll::Pending
-        }
+    async move {
+        // A callback dropped without running (the device is gone) ends the wait too.
+        let _ = finished.await;
     }
 }
