@@ -13,7 +13,7 @@ pub struct AblateArgs {
     /// Scene archives with ground truth.
     #[arg(required = true)]
     scenes: Vec<PathBuf>,
-    /// Output folder: ablation.csv, table.md, plot-<scene>.svg/.png, and a simulated-user run
+    /// Output folder: ablation.csv, table.md, plot-<scene>.svg, and a simulated-user run
     /// per scene and method in <scene>/<method>/ (each resumable).
     #[arg(short, long)]
     output: PathBuf,

@@ -1,5 +1,5 @@
 //! The configurations `ablate` compares (the paper's baselines, docs/evaluation.md) and the files it writes from
-//! their curves: `ablation.csv`, `table.md` and a plot per scene (`plot-<scene>.svg`, `.png`).
+//! their curves: `ablation.csv`, `table.md` and a plot per scene (`plot-<scene>.svg`).
 use std::path::{Path, PathBuf};
 
 use crate::field::{Encoding, FieldConfig};
@@ -111,7 +111,7 @@ pub fn scene_plot(scene: &str, curves: &[MethodCurve]) -> LinePlot {
     }
 }
 
-/// Writes `ablation.csv`, `table.md` and `plot-<scene>.svg` / `.png` per scene into `dir`;
+/// Writes `ablation.csv`, `table.md` and `plot-<scene>.svg` per scene into `dir`;
 /// returns the paths written.
 pub fn write_outputs(dir: &Path, curves: &[MethodCurve], header: &str) -> std::io::Result<Vec<PathBuf>> {
     let mut written = Vec::new();
@@ -131,11 +131,6 @@ pub fn write_outputs(dir: &Path, curves: &[MethodCurve], header: &str) -> std::i
     for scene in scenes {
         let plot = scene_plot(scene, curves);
         write(format!("plot-{scene}.svg"), plot.to_svg().as_bytes())?;
-        let mut png = Vec::new();
-        plot.to_image()
-            .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-            .map_err(std::io::Error::other)?;
-        write(format!("plot-{scene}.png"), &png)?;
     }
     Ok(written)
 }
