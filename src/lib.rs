@@ -17,6 +17,8 @@ mod module_layers;
 pub mod pause;
 pub mod percent;
 pub mod rng;
+// Weights files and trainer checkpoints: native only (the page reads neither).
+#[cfg(not(target_arch = "wasm32"))]
 pub mod safetensors;
 pub mod scene;
 #[cfg(not(target_arch = "wasm32"))]

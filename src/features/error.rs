@@ -20,6 +20,7 @@ pub enum FeatureError {
     Frame { frame: usize, problem: String },
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 impl From<crate::safetensors::SafeTensorsError> for FeatureError {
     fn from(e: crate::safetensors::SafeTensorsError) -> Self {
         use crate::safetensors::SafeTensorsError;

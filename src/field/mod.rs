@@ -7,6 +7,7 @@
 //! 16,777,216 values + MLPs 24,064 (density) + 20,736 (colour) + 9,152 (feature) +
 //! 5,056 + 64·C (semantic), i.e. 16,836,352 f32 (≈ 64 MiB) for C = 2. The trainer keeps four
 //! buffers of that length (parameters, gradient, Adam m and v).
+#[cfg(not(target_arch = "wasm32"))]
 pub mod checkpoint;
 pub mod config;
 pub mod normals;
