@@ -8,9 +8,9 @@
 //! input that breaks a limit of docs/limits.md: after a success each function asserts the
 //! limits on what it built, so the fuzzer reports such an input as a crash. Memory and time are
 //! bounded by the fuzzer itself (`-rss_limit_mb`, `-malloc_limit_mb`, `-timeout`).
-use crate::safetensors::SafeTensors;
 use crate::features::{NpyLayout, parse_npy_map};
 use crate::labels::share::decode_labels;
+use crate::safetensors::SafeTensors;
 use crate::scene::archive::limits as archive_limits;
 use crate::scene::import::text_checks;
 use crate::scene::label_set::{LabelSet, limits as label_limits};

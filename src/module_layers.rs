@@ -14,7 +14,16 @@ const LAYERS: &[&[&str]] = &[
     // Basics that know nothing of the pipeline: the random source, the CPU optimizer, the CPU
     // dense layer, percent-encoding, pausing long work (`pause`), the class palette, the WebGPU
     // plumbing, the safetensors format (feature weights, trainer checkpoints).
-    &["rng", "adam", "dense", "percent", "colors", "pause", "gpu", "safetensors"],
+    &[
+        "rng",
+        "adam",
+        "dense",
+        "percent",
+        "colors",
+        "pause",
+        "gpu",
+        "safetensors",
+    ],
     // Frames, cameras, ground truth, the labels a scene carries, the archive and importers.
     &["scene"],
     // Annotating: brush, history, share links, autosave, synthetic scribbles, canvas zoom.

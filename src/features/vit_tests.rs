@@ -1,8 +1,8 @@
 use super::super::checkpoint::Checkpoint;
 use super::super::dino::{DinoExtractor, DinoModel};
-use crate::safetensors::{self, SafeTensors};
 use super::super::{Extractor, FeatureError};
 use super::*;
+use crate::safetensors::{self, SafeTensors};
 use std::path::Path;
 
 fn noise(n: usize, seed: u64, scale: f32) -> Vec<f32> {
