@@ -1,7 +1,7 @@
 //! `scribblefield bench`: throughput of the training step on whatever adapter is found, next to
 //! a plain tiled matmul on the same adapter in the same run, and where a step's time goes.
 use clap::Args;
-use scribblefield::field::gpu::trainer::Trainer;
+use scribblefield::field::gpu::trainer::{StageShape, Trainer};
 use scribblefield::gpu::matmul_bench::matmul_bench;
 use scribblefield::gpu::timing::Stopwatch;
 use scribblefield::gpu::{GpuContext, GpuOptions};
@@ -27,6 +27,9 @@ pub struct BenchArgs {
     /// Size n of the n x n x n reference matmul.
     #[arg(long, default_value_t = 512)]
     matmul: u32,
+    /// Print one JSON object (docs/results/bench.md lists its fields) instead of the report.
+    #[arg(long)]
+    json: bool,
 }
 
 /// Multiply-adds of one sample through every MLP, forward.
@@ -39,10 +42,15 @@ fn mlp_macs_per_sample(trainer: &Trainer) -> f64 {
         .sum()
 }
 
+/// Milliseconds of GPU time per stage name, where the adapter has timestamp queries.
+type StageTimes = Option<Vec<(String, f64)>>;
+
 pub fn run(mut args: BenchArgs) -> CliResult {
     args.field.check()?;
     let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
-    println!("adapter:          {}", ctx.describe());
+    if !args.json {
+        println!("adapter:          {}", ctx.describe());
+    }
     args.field.settle(&ctx);
     let mut cfg = args.field.resolve(0, None)?;
     if let Some(r) = args.rays {
@@ -66,6 +74,49 @@ pub fn run(mut args: BenchArgs) -> CliResult {
     let samples = rays * cfg.samples_per_ray() as f64;
     // Forward, input gradient and weight gradient: three products of the same size.
     let gflop = 3.0 * 2.0 * mlp_macs_per_sample(&trainer) * samples / 1e9;
+    let matmul = pollster::block_on(matmul_bench(&ctx, args.matmul, 3))?;
+    let times: StageTimes = pollster::block_on(trainer.profile_step())?
+        .map(|times| times.into_iter().map(|t| (t.name, t.seconds * 1e3)).collect());
+    let shape = trainer.step_shape();
+    if args.json {
+        let stages: Vec<serde_json::Value> = stage_names(&shape)
+            .into_iter()
+            .map(|name| {
+                let of_name = shape.iter().filter(|s| s.name == name);
+                let ms = times.as_ref().and_then(|t| t.iter().find(|t| t.0 == name).map(|t| t.1));
+                serde_json::json!({
+                    "name": name,
+                    "gpu_ms": ms,
+                    "dispatches": of_name.clone().map(|s| s.dispatches).sum::<u64>(),
+                    "bytes": of_name.map(|s| s.bytes).sum::<u64>(),
+                })
+            })
+            .collect();
+        let report = serde_json::json!({
+            "adapter": ctx.describe(),
+            "config": args.field.describe(),
+            "rays": cfg.batch_rays,
+            "samples_per_ray": cfg.samples_per_ray(),
+            "steps_timed": args.steps,
+            "step_s": seconds,
+            "steps_per_s": 1.0 / seconds,
+            "rays_per_s": rays / seconds,
+            "samples_per_s": samples / seconds,
+            // Every sample goes through every head today.
+            "samples_to_heads_per_step": samples,
+            "bytes_per_step": shape.iter().map(|s| s.bytes).sum::<u64>() + trainer.gradient_clear_bytes(),
+            "gradient_clear_bytes": trainer.gradient_clear_bytes(),
+            "dispatches_per_step": shape.iter().map(|s| s.dispatches).sum::<u64>(),
+            "mlp_gflop_per_step": gflop,
+            "mlp_gflops": gflop / seconds,
+            "matmul_gflops": matmul.gflops,
+            "matmul_n": matmul.n,
+            "ratio_to_matmul": gflop / seconds / matmul.gflops,
+            "stages": stages,
+        });
+        println!("{report}");
+        return Ok(());
+    }
     println!(
         "config:           {}: {} rays x {} samples, {} hash levels, table 2^{}, widths {}/{}/{}/{}",
         args.field.describe(),
@@ -85,7 +136,6 @@ pub fn run(mut args: BenchArgs) -> CliResult {
         "MLP GFLOP/s:      {:.3}  ({gflop:.3} GFLOP of MLP products per step)",
         gflop / seconds
     );
-    let matmul = pollster::block_on(matmul_bench(&ctx, args.matmul, 3))?;
     println!(
         "matmul GFLOP/s:   {:.3}  (n = {}, timed by {:?})",
         matmul.gflops, matmul.n, matmul.timed_by
@@ -94,21 +144,33 @@ pub fn run(mut args: BenchArgs) -> CliResult {
         "ratio:            {:.2}  (trainer's MLP throughput / plain matmul)",
         gflop / seconds / matmul.gflops
     );
-    match pollster::block_on(trainer.profile_step())? {
+    let bytes: u64 = shape.iter().map(|s| s.bytes).sum::<u64>() + trainer.gradient_clear_bytes();
+    let dispatches: u64 = shape.iter().map(|s| s.dispatches).sum();
+    println!(
+        "per step:         {:.3} GB through global memory (estimate), {dispatches} dispatches and a gradient clear",
+        bytes as f64 / 1e9
+    );
+    match times {
         Some(times) => {
-            let total: f64 = times.iter().map(|t| t.seconds).sum();
+            let total: f64 = times.iter().map(|t| t.1).sum();
             println!("\nGPU time per stage of one step (timestamp queries):");
-            for t in &times {
-                println!(
-                    "  {:<24} {:>10.3} ms  {:>5.1} %",
-                    t.name,
-                    t.seconds * 1e3,
-                    100.0 * t.seconds / total
-                );
+            for (name, ms) in &times {
+                println!("  {:<24} {:>10.3} ms  {:>5.1} %", name, ms, 100.0 * ms / total);
             }
-            println!("  {:<24} {:>10.3} ms", "total", total * 1e3);
+            println!("  {:<24} {:>10.3} ms", "total", total);
         }
         None => println!("\n(no timestamp queries on this adapter: no per-stage times)"),
     }
     Ok(())
+}
+
+/// Stage names in step order, each once (both glue gathers are "glue backward").
+fn stage_names(shape: &[StageShape]) -> Vec<&'static str> {
+    let mut names = Vec::new();
+    for s in shape {
+        if !names.contains(&s.name) {
+            names.push(s.name);
+        }
+    }
+    names
 }

@@ -181,6 +181,7 @@ impl Dispatch1d {
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         pass.dispatch_workgroups(self.x, self.y, 1);
+        super::dispatch::count_dispatch();
     }
 }
 

@@ -185,6 +185,7 @@ impl UniformWeightPartials {
         for c in 0..self.chunks {
             pass.set_bind_group(1, &self.windows, &[c * self.window_stride, c * self.info_stride]);
             pass.dispatch_workgroups(self.workgroups[0], self.workgroups[1], 1);
+            crate::gpu::dispatch::count_dispatch();
         }
     }
 }

@@ -35,6 +35,7 @@ use super::rays::{NO_LABEL, RayGeometry, TARGET_FLAGS, TARGET_HEADER_WORDS, TARG
 use super::scene_buffers::{LabelIndex, SceneBuffers};
 use super::view::view_rays;
 pub use super::view::{DepthGuide, FrameAssembler, RenderedFrame, ViewCamera};
+pub use stages::StageShape;
 use stages::{FIELD_STAGES, TRAINING_STEP};
 
 mod render;

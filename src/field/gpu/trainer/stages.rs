@@ -2,6 +2,10 @@
 //! pass), [`Trainer::profile_step`] (a timed pass each) and [`Trainer::submit_stage`] (a
 //! submission each), so the three cannot disagree on the order.
 use super::Trainer;
+use crate::field::config::FieldConfig;
+use crate::field::gpu::composite::CompositeLayout;
+use crate::field::gpu::rays::TARGET_HEADER_WORDS;
+use crate::field::params::ParamLayout;
 
 /// One stage of a training step: a group of passes recorded together.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -80,7 +84,154 @@ impl StepStage {
     }
 }
 
+/// Bytes per `f32`/`u32` element.
+const WORD: u64 = 4;
+/// Bytes of one `RayGeometry` (origin, z per t, direction, near, far, depth, pixel, flags).
+const RAY_GEOMETRY_BYTES: u64 = 48;
+/// Bytes of one sample's position (vec4) and interval (vec2).
+const SAMPLE_BYTES: u64 = 16 + 8;
+
+/// Global-memory traffic of one MLP's forward: each layer reads its input rows and its weights
+/// and writes its output rows.
+fn mlp_forward_bytes(dims: &[usize], n: u64) -> u64 {
+    dims.windows(2)
+        .map(|io| {
+            let (i, o) = (io[0] as u64, io[1] as u64);
+            WORD * (n * i + i * o + n * o)
+        })
+        .sum()
+}
+
+/// Global-memory traffic of one MLP's backward, last layer first: a hidden layer's output
+/// gradient is masked by its ReLU (read the activation and the gradient, write the gradient),
+/// the input gradient reads the output gradient and the weights and writes the input rows, and
+/// the weight gradient reads input and output gradient rows and writes the weights' gradient.
+fn mlp_backward_bytes(dims: &[usize], n: u64) -> u64 {
+    let last = dims.len() - 2;
+    dims.windows(2)
+        .enumerate()
+        .map(|(k, io)| {
+            let (i, o) = (io[0] as u64, io[1] as u64);
+            let relu = if k < last { 3 * n * o } else { 0 };
+            let input_grad = n * o + i * o + n * i;
+            let weight_grad = n * i + n * o + i * o;
+            WORD * (relu + input_grad + weight_grad)
+        })
+        .sum()
+}
+
+impl StepStage {
+    /// Bytes the stage moves through global memory in one step, estimated from the kernels'
+    /// shapes: every element a dispatch reads or writes counted once (caches, workgroup
+    /// memory and re-reads of a tile by several workgroups ignored, so it is a lower bound of
+    /// what a kernel without reuse moves). With R rays of S samples (N = R·S), encoding width E,
+    /// geometry g, feature f, classes C and P parameters:
+    ///
+    /// | stage | reads | writes |
+    /// |---|---|---|
+    /// | rays | the pixel's targets, R·(8 + f) words | R ray geometries (48 B) and targets |
+    /// | samples | R ray geometries | N positions and intervals (24 B) |
+    /// | encoding | N positions, 8 corners × levels × features of the hash table per sample | N·E |
+    /// | sh | R ray geometries | N·16 |
+    /// | an MLP forward, per layer in→out | N·in + in·out | N·out |
+    /// | glue | density (N·(1+g)) and feature (N·f) rows | colour input's g, semantic input (N·(f + sg)) |
+    /// | composite | N head values (h₀, colour, logits, features) and intervals, R targets | N head gradients, R ray outputs |
+    /// | an MLP backward, per layer | ReLU mask: N·out twice; dX: N·out + in·out; dW: N·in + N·out | N·out; N·in; in·out |
+    /// | glue backward (feature) | N·f semantic-input and N·f feature-loss gradients | N·f |
+    /// | glue backward (geometry) | N·(g + g + sg + 1) gradients | N·(1 + g) |
+    /// | encoding backward | N hash-grid gradients and positions | an atomic add (read and write) per corner, level and feature |
+    /// | adam | parameters, gradients, both moments: 4·P | parameters, both moments: 3·P |
+    ///
+    /// The gradient buffer's clear before the step (P words written) is not a stage; see
+    /// [`gradient_clear_bytes`].
+    pub(super) fn global_bytes(self, cfg: &FieldConfig) -> u64 {
+        let layout = ParamLayout::new(cfg);
+        let r = u64::from(cfg.batch_rays);
+        let n = r * cfg.samples_per_ray() as u64;
+        let (g, f) = (u64::from(cfg.geometry_dim), u64::from(cfg.feature_dim));
+        let sg = cfg.semantic_geometry_dim() as u64;
+        let targets = r * WORD * (TARGET_HEADER_WORDS as u64 + f);
+        let hash = cfg.encoding.uses_hash_grid();
+        let corners = if hash {
+            8 * u64::from(cfg.hash_levels) * u64::from(cfg.hash_features_per_level)
+        } else {
+            0
+        };
+        let composite = CompositeLayout::new(cfg);
+        let heads = composite.grad_stride() as u64;
+        match self {
+            StepStage::Rays => 2 * targets + r * RAY_GEOMETRY_BYTES,
+            StepStage::Samples => r * RAY_GEOMETRY_BYTES + n * SAMPLE_BYTES,
+            StepStage::Encoding => n * 16 + n * corners * WORD + n * cfg.encoding_dim() as u64 * WORD,
+            StepStage::Sh => r * RAY_GEOMETRY_BYTES + n * 16 * WORD,
+            StepStage::DensityForward => mlp_forward_bytes(&layout.density.dims, n),
+            StepStage::FeatureForward => mlp_forward_bytes(&layout.feature.dims, n),
+            StepStage::ColorForward => mlp_forward_bytes(&layout.color.dims, n),
+            StepStage::SemanticForward => mlp_forward_bytes(&layout.semantic.dims, n),
+            StepStage::GlueAssemble => WORD * n * ((1 + g) + f + g + (f + sg)),
+            StepStage::Composite => {
+                n * (heads * WORD + 8) + targets + n * heads * WORD + r * composite.ray_output_stride() as u64 * WORD
+            }
+            StepStage::SemanticBackward => mlp_backward_bytes(&layout.semantic.dims, n),
+            StepStage::FeatureBackward => mlp_backward_bytes(&layout.feature.dims, n),
+            StepStage::ColorBackward => mlp_backward_bytes(&layout.color.dims, n),
+            StepStage::DensityBackward => mlp_backward_bytes(&layout.density.dims, n),
+            StepStage::GlueGatherFeature => WORD * n * 3 * f,
+            StepStage::GlueGatherGeometry => WORD * n * ((g + g + sg + 1) + (1 + g)),
+            StepStage::EncodingBackward if hash => {
+                n * 16 + n * cfg.hash_encoding_dim() as u64 * WORD + 2 * n * corners * WORD
+            }
+            StepStage::EncodingBackward => 0,
+            StepStage::Adam => 7 * layout.total as u64 * WORD,
+        }
+    }
+}
+
+/// Bytes the clear of the gradient buffer writes before each step.
+pub(super) fn gradient_clear_bytes(cfg: &FieldConfig) -> u64 {
+    ParamLayout::new(cfg).total as u64 * WORD
+}
+
+/// One stage of a training step as `bench` reports it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StageShape {
+    /// The stage's name in profiles (`PassTime::name`).
+    pub name: &'static str,
+    /// Dispatches it records.
+    pub dispatches: u64,
+    /// Its global-memory traffic (the estimate of `StepStage::global_bytes`).
+    pub bytes: u64,
+}
+
 impl Trainer {
+    /// Every stage of a training step in order, with its dispatches (counted by recording a step
+    /// into a command buffer that is never submitted: nothing runs, the step count stays) and
+    /// its global-memory traffic.
+    pub fn step_shape(&self) -> Vec<StageShape> {
+        use crate::gpu::dispatch::dispatches_recorded;
+        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("counting a step's dispatches (never submitted)"),
+        });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+        TRAINING_STEP
+            .iter()
+            .map(|&stage| {
+                let before = dispatches_recorded();
+                self.record_stage(stage, &mut pass);
+                StageShape {
+                    name: stage.name(),
+                    dispatches: dispatches_recorded() - before,
+                    bytes: stage.global_bytes(&self.cfg),
+                }
+            })
+            .collect()
+    }
+
+    /// Bytes the clear of the gradient buffer writes before each step (not a dispatch).
+    pub fn gradient_clear_bytes(&self) -> u64 {
+        gradient_clear_bytes(&self.cfg)
+    }
+
     /// Records one stage's passes.
     pub(super) fn record_stage(&self, stage: StepStage, pass: &mut wgpu::ComputePass<'_>) {
         // Every MLP here was built with gradients, so recording a backward cannot fail.
@@ -132,5 +283,32 @@ mod tests {
         assert_eq!(FIELD_STAGES.first(), Some(&StepStage::Samples));
         assert_eq!(FIELD_STAGES.last(), Some(&StepStage::SemanticForward));
         assert_eq!(FIELD_STAGES.len(), 8);
+    }
+
+    #[test]
+    fn the_traffic_model_counts_the_full_model_near_the_issues_estimate() {
+        // Issue 15 estimated roughly 8.6 GB per step at the default config (4096 rays x 64
+        // samples), MLP backward more than half of it.
+        let cfg = FieldConfig::default();
+        let total: u64 = TRAINING_STEP.iter().map(|s| s.global_bytes(&cfg)).sum();
+        let backward: u64 = [
+            StepStage::SemanticBackward,
+            StepStage::FeatureBackward,
+            StepStage::ColorBackward,
+            StepStage::DensityBackward,
+        ]
+        .iter()
+        .map(|s| s.global_bytes(&cfg))
+        .sum();
+        let gb = total as f64 / 1e9;
+        assert!((4.0..16.0).contains(&gb), "{gb} GB");
+        assert!(backward * 3 > total, "MLP backward {backward} of {total}");
+        // No stage is free, and a smaller batch moves less.
+        assert!(TRAINING_STEP.iter().all(|s| s.global_bytes(&cfg) > 0));
+        let half = FieldConfig {
+            batch_rays: 2048,
+            ..cfg.clone()
+        };
+        assert!(StepStage::DensityForward.global_bytes(&half) < StepStage::DensityForward.global_bytes(&cfg));
     }
 }
