@@ -192,3 +192,91 @@ pub fn replace_fragment(fragment: &str) {
     let url = format!("{}#{fragment}", page_address());
     let _ = history.replace_state_with_url(&JsValue::NULL, "", Some(&url));
 }
+
+/// A capture folder's files, each with its path from the folder's parent (the folder's name
+/// first: `capture/images/0001.jpg`), as a browser hands them over.
+pub type FolderFiles = Vec<(String, web_sys::File)>;
+
+/// `index.html`'s hidden folder input (`<input type=file webkitdirectory>`), which the *pack
+/// capture folder…* button clicks and scripts can set files on.
+pub const FOLDER_INPUT_ID: &str = "capture-folder";
+
+/// The event `index.html` sends when a folder is dropped on the page: browsers hand a dropped
+/// folder over only as an entry to walk (`DataTransferItem.webkitGetAsEntry`), which the page's
+/// script does before the app sees the drop; its `detail` is `[[path, File], ...]`, or
+/// `{error: text}` when the walk failed.
+const FOLDER_DROP_EVENT: &str = "scribblefield-folder";
+
+/// Calls `on_folder` with the files of each folder the user picks with the folder input or drops
+/// on the page, for as long as the page lives.
+pub fn on_capture_folder(on_folder: impl Fn(Result<FolderFiles, String>) + 'static) -> Result<(), BrowserError> {
+    let what = "the capture folder input";
+    let js = |e: JsValue| BrowserError::js(what, &e);
+    let window = web_sys::window().ok_or_else(|| BrowserError::new(what, "no window"))?;
+    let input = folder_input()?;
+    let on_folder = std::rc::Rc::new(on_folder);
+    let picked = {
+        let (input, on_folder) = (input.clone(), on_folder.clone());
+        Closure::<dyn FnMut()>::new(move || {
+            let mut files = Vec::new();
+            if let Some(list) = input.files() {
+                for i in 0..list.length() {
+                    let Some(file) = list.get(i) else { continue };
+                    let path = js_sys::Reflect::get(&file, &JsValue::from_str("webkitRelativePath"))
+                        .ok()
+                        .and_then(|p| p.as_string())
+                        .filter(|p| !p.is_empty())
+                        .unwrap_or_else(|| file.name());
+                    files.push((path, file));
+                }
+            }
+            // Picking the same folder again must fire "change" again.
+            input.set_value("");
+            if !files.is_empty() {
+                on_folder(Ok(files));
+            }
+        })
+    };
+    input
+        .add_event_listener_with_callback("change", picked.as_ref().unchecked_ref())
+        .map_err(js)?;
+    // Both listeners live as long as the page.
+    picked.forget();
+    let dropped = Closure::<dyn FnMut(web_sys::Event)>::new(move |event: web_sys::Event| {
+        let detail = js_sys::Reflect::get(&event, &JsValue::from_str("detail")).unwrap_or(JsValue::UNDEFINED);
+        if let Some(pairs) = detail.dyn_ref::<js_sys::Array>() {
+            let files = pairs
+                .iter()
+                .filter_map(|pair| {
+                    let pair = pair.dyn_into::<js_sys::Array>().ok()?;
+                    Some((pair.get(0).as_string()?, pair.get(1).dyn_into::<web_sys::File>().ok()?))
+                })
+                .collect();
+            on_folder(Ok(files));
+        } else {
+            let error = js_sys::Reflect::get(&detail, &JsValue::from_str("error")).unwrap_or(JsValue::UNDEFINED);
+            on_folder(Err(js_error_text(&error)));
+        }
+    });
+    window
+        .add_event_listener_with_callback(FOLDER_DROP_EVENT, dropped.as_ref().unchecked_ref())
+        .map_err(js)?;
+    dropped.forget();
+    Ok(())
+}
+
+/// Opens the browser's folder dialog; what is chosen arrives through [`on_capture_folder`].
+pub fn pick_capture_folder() -> Result<(), BrowserError> {
+    folder_input()?.click();
+    Ok(())
+}
+
+fn folder_input() -> Result<web_sys::HtmlInputElement, BrowserError> {
+    let what = "the capture folder input";
+    web_sys::window()
+        .and_then(|w| w.document())
+        .and_then(|d| d.get_element_by_id(FOLDER_INPUT_ID))
+        .ok_or_else(|| BrowserError::new(what, format!("no element #{FOLDER_INPUT_ID} in the page")))?
+        .dyn_into::<web_sys::HtmlInputElement>()
+        .map_err(|_| BrowserError::new(what, format!("#{FOLDER_INPUT_ID} is not an <input>")))
+}

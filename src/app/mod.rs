@@ -22,6 +22,8 @@ pub mod model_size;
 #[cfg(target_arch = "wasm32")]
 pub mod overlays;
 #[cfg(target_arch = "wasm32")]
+pub mod packing;
+#[cfg(target_arch = "wasm32")]
 mod page;
 pub mod page_options;
 #[cfg(target_arch = "wasm32")]

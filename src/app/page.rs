@@ -5,8 +5,10 @@ use std::rc::Rc;
 use egui::RichText;
 
 use super::annotator::{Annotator, AnnotatorSetup};
+use super::browser::FolderFiles;
 use super::loading::{self, LoadPhase, Loaded, SceneLoad};
 use super::model_size::ModelSize;
+use super::packing::{self, CaptureInput, PackPhase, ScenePack};
 use super::page_options::{PageOptionError, PageOptions};
 use super::status::PageStatus;
 use super::store::{self, Opened};
@@ -29,12 +31,29 @@ pub struct App {
     /// Values in the address that could not be used, for the first annotator to show.
     option_errors: Vec<PageOptionError>,
     /// Files read by async tasks (picker, drop), handled at the next frame.
-    inbox: Rc<RefCell<Vec<OpenedFile>>>,
+    inbox: Rc<RefCell<Vec<Incoming>>>,
+    /// The archive of the capture packed in this page, while its scene is the one open: *save
+    /// scene archive* downloads it.
+    packed: Option<PackedArchive>,
 }
 
-struct OpenedFile {
-    name: String,
-    bytes: Result<Vec<u8>, String>,
+/// What the user handed the page.
+enum Incoming {
+    /// A file picked or dropped (an archive, a zip of a capture, or annotations).
+    File {
+        name: String,
+        bytes: Result<Vec<u8>, String>,
+    },
+    /// A capture folder picked or dropped.
+    Folder(Result<FolderFiles, String>),
+}
+
+struct PackedArchive {
+    /// The file name to save it under (`<capture>.scene.zip`).
+    file_name: String,
+    bytes: Vec<u8>,
+    /// What `pack` would have printed: warnings, choices, the features and the scene summary.
+    report: String,
 }
 
 enum Stage {
@@ -48,10 +67,17 @@ enum Stage {
         source: SceneSource,
         opened: Rc<RefCell<Option<Opened>>>,
     },
+    /// A capture being packed into an archive, which then opens like any other.
+    Packing(ScenePack),
     Annotating(Box<Annotator>),
     Failed {
-        url: String,
+        /// What could not be done, naming the scene or capture.
+        title: String,
         message: String,
+    },
+    /// Packing was cancelled; nothing is open.
+    Cancelled {
+        name: String,
     },
 }
 
@@ -82,6 +108,17 @@ impl App {
         let source = SceneSource::Url(browser::absolute_url(&scene_url));
         let software = gpu.as_ref().is_some_and(|g| g.is_software());
         let load = SceneLoad::start(scene_url, cc.egui_ctx.clone(), repaint_interval_ms(software));
+        let inbox: Rc<RefCell<Vec<Incoming>>> = Rc::default();
+        let (folder_inbox, ctx) = (inbox.clone(), cc.egui_ctx.clone());
+        let installed = browser::on_capture_folder(move |files| {
+            folder_inbox.borrow_mut().push(Incoming::Folder(files));
+            ctx.request_repaint();
+        });
+        // Without the input (a page other than index.html) capture folders cannot be picked;
+        // archives and capture zips still open.
+        if let Err(e) = installed {
+            web_sys::console::warn_1(&e.to_string().into());
+        }
         App {
             stage: Stage::Loading { load, source },
             gpu_name,
@@ -89,7 +126,8 @@ impl App {
             model,
             options,
             option_errors,
-            inbox: Rc::default(),
+            inbox,
+            packed: None,
         }
     }
 
@@ -103,9 +141,9 @@ impl App {
         let ctx = ctx.clone();
         wasm_bindgen_futures::spawn_local(async move {
             let opened = match browser::pick_file(".zip,application/zip", loading::MAX_ARCHIVE_BYTES).await {
-                Ok(Some((name, bytes))) => OpenedFile { name, bytes: Ok(bytes) },
+                Ok(Some((name, bytes))) => Incoming::File { name, bytes: Ok(bytes) },
                 Ok(None) => return,
-                Err(e) => OpenedFile {
+                Err(e) => Incoming::File {
                     name: "the chosen file".into(),
                     bytes: Err(e.to_string()),
                 },
@@ -138,42 +176,74 @@ impl App {
                     Some(e) => Err(e.to_string()),
                     None => file.bytes_async().await,
                 };
-                inbox.borrow_mut().push(OpenedFile { name, bytes });
+                inbox.borrow_mut().push(Incoming::File { name, bytes });
                 ctx.request_repaint();
             });
         }
     }
 
-    /// A picked or dropped file: annotations go to the annotator, anything else is opened as a
-    /// scene archive (which says clearly when it is not one).
+    /// A picked or dropped file: annotations go to the annotator, a zip of a capture is packed,
+    /// anything else is opened as a scene archive (which says clearly when it is not one). A
+    /// picked or dropped folder is packed.
     fn open_files(&mut self, ctx: &egui::Context) {
-        let files: Vec<OpenedFile> = self.inbox.borrow_mut().drain(..).collect();
-        for file in files {
-            let bytes = match file.bytes {
-                Ok(b) => b,
-                Err(e) => {
+        let incoming: Vec<Incoming> = self.inbox.borrow_mut().drain(..).collect();
+        for item in incoming {
+            let (name, bytes) = match item {
+                Incoming::Folder(Ok(files)) => {
+                    let name = files
+                        .first()
+                        .and_then(|(path, _)| path.split('/').next())
+                        .unwrap_or("the folder")
+                        .to_string();
+                    self.start_pack(name, CaptureInput::Files(files), ctx);
+                    continue;
+                }
+                Incoming::Folder(Err(e)) => {
                     self.stage = Stage::Failed {
-                        url: file.name,
+                        title: "Cannot read the dropped folder".into(),
+                        message: e,
+                    };
+                    continue;
+                }
+                Incoming::File { name, bytes: Ok(b) } => (name, b),
+                Incoming::File { name, bytes: Err(e) } => {
+                    self.stage = Stage::Failed {
+                        title: format!("Cannot open the scene {name}"),
                         message: format!("cannot read the file: {e}"),
                     };
                     continue;
                 }
             };
-            let is_labels = file.name.to_ascii_lowercase().ends_with(".json");
+            let is_labels = name.to_ascii_lowercase().ends_with(".json");
             if let (true, Stage::Annotating(a)) = (is_labels, &mut self.stage) {
-                a.import_labels_bytes(&file.name, &bytes);
+                a.import_labels_bytes(&name, &bytes);
+                continue;
+            }
+            // A zip without a scene.json at its top is a capture: pack it (a zip that is neither
+            // is refused by the packer, which says what layouts it knows).
+            if !is_labels && zip_magic(&bytes) && !packing::is_scene_archive(&bytes) {
+                let capture = name.trim_end_matches(".zip").trim_end_matches(".ZIP").to_string();
+                self.start_pack(capture, CaptureInput::Zip { name, bytes }, ctx);
                 continue;
             }
             let source = SceneSource::File {
-                name: file.name.clone(),
+                name: name.clone(),
                 bytes: bytes.len() as u64,
             };
+            self.packed = None;
             // The old scene's training stops when its annotator is dropped here.
             self.stage = Stage::Loading {
-                load: SceneLoad::from_bytes(file.name, bytes, ctx.clone(), self.repaint_ms()),
+                load: SceneLoad::from_bytes(name, bytes, ctx.clone(), self.repaint_ms()),
                 source,
             };
         }
+    }
+
+    /// Packs a capture; the scene open until now closes (its training stops with its annotator).
+    fn start_pack(&mut self, name: String, input: CaptureInput, ctx: &egui::Context) {
+        self.packed = None;
+        let opts = packing::pack_options(&self.options);
+        self.stage = Stage::Packing(ScenePack::start(name, input, opts, ctx.clone(), self.repaint_ms()));
     }
 }
 
@@ -181,6 +251,46 @@ impl App {
     /// Moves on when a stage is done: a decoded scene has its saved annotations read, and
     /// then it is annotated.
     fn advance(&mut self, ctx: &egui::Context) {
+        if let Stage::Packing(pack) = &self.stage
+            && let Some(outcome) = pack.take_result()
+        {
+            let name = pack.name().to_string();
+            self.stage = match outcome {
+                None => Stage::Cancelled { name },
+                Some(Err(e)) => Stage::Failed {
+                    title: format!("Cannot pack the capture {name}"),
+                    message: e.to_string(),
+                },
+                Some(Ok(packed)) => {
+                    let file_name = format!("{name}.scene.zip");
+                    let mut report: Vec<String> = packed.warnings.iter().map(|w| format!("warning: {w}")).collect();
+                    report.extend(packed.report.iter().cloned());
+                    report.extend(packed.features.iter().cloned());
+                    report.push(format!("packed {name} ({:?} layout)", packed.layout));
+                    report.push(packed.summary.trim_end().to_string());
+                    let report = report.join("\n");
+                    web_sys::console::log_1(&report.clone().into());
+                    let source = SceneSource::File {
+                        name: file_name.clone(),
+                        bytes: packed.archive.len() as u64,
+                    };
+                    // Opened exactly as if the user had opened the archive; the bytes stay for
+                    // *save scene archive*.
+                    let load = SceneLoad::from_bytes(
+                        file_name.clone(),
+                        packed.archive.clone(),
+                        ctx.clone(),
+                        self.repaint_ms(),
+                    );
+                    self.packed = Some(PackedArchive {
+                        file_name,
+                        bytes: packed.archive,
+                        report,
+                    });
+                    Stage::Loading { load, source }
+                }
+            };
+        }
         if let Stage::Loading { load, source } = &self.stage
             && let Some(result) = load.take_result()
         {
@@ -205,7 +315,7 @@ impl App {
                     }
                 }
                 Err(e) => Stage::Failed {
-                    url: load.url().to_string(),
+                    title: format!("Cannot open the scene {}", load.url()),
                     message: e.to_string(),
                 },
             };
@@ -247,17 +357,41 @@ impl eframe::App for App {
         self.advance(&ctx);
 
         let mut pick = false;
+        let mut pick_folder = false;
+        let mut save_archive = false;
         egui::Panel::top("title").show(ui, |ui| {
             ui.horizontal(|ui| {
                 ui.strong("scribblefield");
                 ui.separator();
                 pick = ui
                     .button("open scene…")
-                    .on_hover_text("a .scene.zip archive; or drop one (or a labels.json) on the page")
+                    .on_hover_text(
+                        "a .scene.zip archive, or a zip of a capture folder to pack; or drop one (or a labels.json) \
+                         on the page",
+                    )
+                    .clicked();
+                pick_folder = ui
+                    .button("pack capture folder…")
+                    .on_hover_text(
+                        "a capture folder (COLMAP, transforms.json, NeRF splits, ScanNet, 7-Scenes, autolabel), \
+                         packed here into a scene archive as `scribblefield pack` would; or drop the folder on the page",
+                    )
                     .clicked();
                 if let Stage::Annotating(a) = &self.stage {
                     ui.separator();
                     ui.label(RichText::new(a.source().describe()).monospace().small());
+                    if let Some(p) = &self.packed {
+                        save_archive = ui
+                            .button("save scene archive")
+                            .on_hover_text(format!(
+                                "download {} ({:.1} MB), the archive packed from the capture, to host and share \
+                                 (open it with #scene=<its url>)\n\n{}",
+                                p.file_name,
+                                p.bytes.len() as f64 / 1e6,
+                                p.report
+                            ))
+                            .clicked();
+                    }
                 }
                 ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
                     ui.label(RichText::new(format!("model: {}", self.model.name())).small())
@@ -268,11 +402,25 @@ impl eframe::App for App {
         if pick {
             self.pick_scene(&ctx);
         }
+        if pick_folder && let Err(e) = browser::pick_capture_folder() {
+            self.stage = Stage::Failed {
+                title: "Cannot pick a capture folder".into(),
+                message: e.to_string(),
+            };
+        }
+        if save_archive
+            && let Some(p) = &self.packed
+            && let Err(e) = browser::download(&p.bytes, &p.file_name, "application/zip")
+        {
+            web_sys::console::error_1(&e.to_string().into());
+        }
         match &mut self.stage {
             Stage::Loading { load, .. } => show_loading(ui, load),
+            Stage::Packing(pack) => show_packing(ui, pack),
             Stage::Opening { .. } => show_opening(ui),
             Stage::Annotating(a) => a.show(ui, &self.gpu_name),
-            Stage::Failed { url, message } => show_failure(ui, url, message),
+            Stage::Failed { title, message } => show_failure(ui, title, message),
+            Stage::Cancelled { name } => show_cancelled(ui, name),
         }
         show_drop_hint(&ctx);
     }
@@ -292,7 +440,8 @@ fn show_drop_hint(ctx: &egui::Context) {
     painter.text(
         screen.center(),
         egui::Align2::CENTER_CENTER,
-        "Drop a scene archive (.zip) to open it, or annotations (.json) to import them",
+        "Drop a scene archive (.zip) to open it, a capture folder (or a zip of one) to pack it, \
+         or annotations (.json) to import them",
         egui::FontId::proportional(20.0),
         egui::Color32::WHITE,
     );
@@ -347,6 +496,68 @@ fn show_loading(ui: &mut egui::Ui, load: &SceneLoad) {
     });
 }
 
+fn show_packing(ui: &mut egui::Ui, pack: &ScenePack) {
+    let (status, (text, fraction)) = pack.with_phase(|phase| {
+        let status = match *phase {
+            PackPhase::Reading { done, total, .. } => ("reading", done, total),
+            PackPhase::Packing(packing_progress) => {
+                use crate::features::BakeProgress;
+                use crate::features::pack::PackProgress;
+                match packing_progress {
+                    PackProgress::Importing { done, total } => ("frames", done, total),
+                    PackProgress::Features(BakeProgress::Extracting { done, total }) => ("features", done, total),
+                    PackProgress::Features(BakeProgress::Fitting { step, steps, .. }) => {
+                        ("autoencoder", step as usize, steps as usize)
+                    }
+                    PackProgress::Features(BakeProgress::Encoding) => ("features", 0, 0),
+                    PackProgress::Writing => ("writing", 0, 0),
+                }
+            }
+            PackPhase::Finished(_) | PackPhase::Cancelled | PackPhase::Taken => ("writing", 0, 0),
+        };
+        (status, packing::describe(pack.name(), phase))
+    });
+    page_status::set(&PageStatus::Packing {
+        stage: status.0,
+        done: status.1,
+        total: status.2,
+    });
+    let mut cancel = false;
+    egui::CentralPanel::default().show(ui, |ui| {
+        ui.vertical_centered(|ui| {
+            ui.add_space(ui.available_height() * 0.35);
+            ui.label(RichText::new(text).size(16.0));
+            ui.add_space(8.0);
+            let bar = match fraction {
+                Some(f) => egui::ProgressBar::new(f).show_percentage(),
+                None => egui::ProgressBar::new(0.0).animate(true),
+            };
+            ui.add(bar.desired_width(ui.available_width().min(480.0)));
+            ui.add_space(8.0);
+            if pack.cancelling() {
+                ui.label("cancelling…");
+            } else {
+                cancel = ui.button("Cancel").clicked();
+            }
+        });
+    });
+    if cancel {
+        pack.cancel();
+    }
+}
+
+fn show_cancelled(ui: &mut egui::Ui, name: &str) {
+    page_status::set(&PageStatus::Cancelled);
+    egui::CentralPanel::default().show(ui, |ui| {
+        ui.vertical_centered(|ui| {
+            ui.add_space(ui.available_height() * 0.35);
+            ui.label(RichText::new(format!("Packing {name} was cancelled")).size(16.0));
+            ui.add_space(8.0);
+            ui.label("Open a scene or pack a capture folder with the buttons above, or drop one on the page.");
+        });
+    });
+}
+
 fn show_opening(ui: &mut egui::Ui) {
     page_status::set(&PageStatus::Loading);
     egui::CentralPanel::default().show(ui, |ui| {
@@ -357,26 +568,27 @@ fn show_opening(ui: &mut egui::Ui) {
     });
 }
 
-fn show_failure(ui: &mut egui::Ui, url: &str, message: &str) {
+fn show_failure(ui: &mut egui::Ui, title: &str, message: &str) {
     page_status::set(&PageStatus::Error {
         message: message.to_string(),
     });
     egui::CentralPanel::default().show(ui, |ui| {
         ui.vertical_centered(|ui| {
             ui.add_space(ui.available_height() * 0.3);
-            ui.label(
-                RichText::new(format!("Cannot open the scene {url}"))
-                    .size(18.0)
-                    .strong(),
-            );
+            ui.label(RichText::new(title).size(18.0).strong());
             ui.add_space(8.0);
             ui.label(RichText::new(message).color(ui.visuals().error_fg_color).monospace());
             ui.add_space(12.0);
             ui.label("Open a scene file with the button above or drop one on the page, or open the page");
             ui.label("with #scene=<url of a .scene.zip> in the address (without it: the demo scene).");
-            ui.label("`scribblefield pack` makes an archive from a capture.");
+            ui.label("A capture folder packs here (pack capture folder…, or drop it), or with `scribblefield pack`.");
         });
     });
+}
+
+/// Whether `bytes` start as a zip does (a local file header).
+fn zip_magic(bytes: &[u8]) -> bool {
+    bytes.starts_with(b"PK\x03\x04")
 }
 
 fn megabytes(bytes: u64) -> String {

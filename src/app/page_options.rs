@@ -4,6 +4,7 @@
 //! instead, so a typo never keeps the page from opening. Plain logic: tested natively.
 use super::model_size::ModelSize;
 use crate::labels::share::{parse_fragment, percent_decode};
+use crate::scene::archive::limits;
 
 /// Which dense kernels the trainer uses, whatever the adapter is (`#kernels=`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -39,6 +40,18 @@ pub struct PageOptions {
     pub split: bool,
     /// `kernels=tiled|uniform`.
     pub kernels: Option<Kernels>,
+    /// `pack-size=N`: a capture packed in the page is downscaled to this longest side
+    /// (`pack --max-size`).
+    pub pack_size: Option<u32>,
+    /// `pack-every=N`: pack every N-th frame (`pack --every`).
+    pub pack_every: Option<u32>,
+    /// `pack-frames=N`: pack at most N frames (`pack --max-frames`).
+    pub pack_frames: Option<u32>,
+    /// `pack-stride=N`: baseline feature cells of N x N pixels (`pack --feature-stride`); 0
+    /// packs no features.
+    pub pack_stride: Option<u32>,
+    /// `pack-steps=N`: training steps of the feature autoencoder (`pack --autoencoder-steps`).
+    pub pack_steps: Option<u32>,
 }
 
 /// A value in the address the page cannot use; the option keeps its default.
@@ -111,6 +124,26 @@ impl PageOptions {
                     "uniform" => options.kernels = Some(Kernels::Uniform),
                     _ => bad("kernels", "tiled or uniform"),
                 },
+                "pack-size" => match value.parse::<u32>() {
+                    Ok(n) if (8..=limits::MAX_SIDE).contains(&n) => options.pack_size = Some(n),
+                    _ => bad("pack-size", "a longest side in pixels, from 8 to 8192"),
+                },
+                "pack-every" => match value.parse::<u32>() {
+                    Ok(n) if n >= 1 => options.pack_every = Some(n),
+                    _ => bad("pack-every", "a whole number from 1"),
+                },
+                "pack-frames" => match value.parse::<u32>() {
+                    Ok(n) if n >= 1 => options.pack_frames = Some(n),
+                    _ => bad("pack-frames", "a whole number of frames from 1"),
+                },
+                "pack-stride" => match value.parse::<u32>() {
+                    Ok(n) if n <= 64 => options.pack_stride = Some(n),
+                    _ => bad("pack-stride", "pixels per feature cell, 1 to 64 (0: no features)"),
+                },
+                "pack-steps" => match value.parse::<u32>() {
+                    Ok(n) if (1..=100_000).contains(&n) => options.pack_steps = Some(n),
+                    _ => bad("pack-steps", "autoencoder steps, 1 to 100000"),
+                },
                 _ => {}
             }
         }
@@ -147,8 +180,23 @@ mod tests {
                 profile: true,
                 split: true,
                 kernels: Some(Kernels::Uniform),
+                ..PageOptions::default()
             }
         );
+    }
+
+    #[test]
+    fn reads_the_packing_options() {
+        let (o, errors) = PageOptions::parse("pack-size=120&pack-every=2&pack-frames=6&pack-stride=0&pack-steps=50");
+        assert!(errors.is_empty(), "{errors:?}");
+        assert_eq!(
+            (o.pack_size, o.pack_every, o.pack_frames, o.pack_stride, o.pack_steps),
+            (Some(120), Some(2), Some(6), Some(0), Some(50))
+        );
+        let (o, errors) = PageOptions::parse("pack-size=4&pack-every=0&pack-steps=x");
+        assert_eq!((o.pack_size, o.pack_every, o.pack_steps), (None, None, None));
+        let keys: Vec<_> = errors.iter().map(|e| e.key).collect();
+        assert_eq!(keys, ["pack-size", "pack-every", "pack-steps"]);
     }
 
     #[test]

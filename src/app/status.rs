@@ -15,6 +15,16 @@ pub enum PageStatus {
         done: usize,
         frames: usize,
     },
+    /// Packing a capture in the page: `stage` is `reading` (its files into memory), `frames`
+    /// (decoding them), `features`, `autoencoder` (its steps) or `writing` (the archive), with
+    /// `done` of `total` (both 0 where the stage has no count).
+    Packing {
+        stage: &'static str,
+        done: usize,
+        total: usize,
+    },
+    /// Packing was cancelled; no scene is open.
+    Cancelled,
     Ready(Box<Annotating>),
     /// The scene could not be opened, or the app could not start; shown in the page too.
     Error {
@@ -115,6 +125,15 @@ mod tests {
         assert_eq!(
             PageStatus::Decoding { done: 3, frames: 36 }.to_json(),
             r#"{"state":"decoding","done":3,"frames":36}"#
+        );
+        assert_eq!(
+            PageStatus::Packing {
+                stage: "autoencoder",
+                done: 100,
+                total: 1000
+            }
+            .to_json(),
+            r#"{"state":"packing","stage":"autoencoder","done":100,"total":1000}"#
         );
         assert_eq!(
             PageStatus::Error {

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Browser end-to-end test: builds the web app, serves it on a free localhost port, and runs
 # smoke.mjs, annotate.mjs, durable.mjs and (with ../shared/data beside the repository)
-# spread.mjs in headless Chromium (WebGPU on SwiftShader). Installs Chromium (apt) and the node
-# modules (npm ci) when they are missing. Screenshots go to $E2E_OUT (default /tmp/e2e).
+# spread.mjs and pack.mjs in headless Chromium (WebGPU on SwiftShader). Installs Chromium (apt)
+# and the node modules (npm ci) when they are missing. Screenshots go to $E2E_OUT (default
+# /tmp/e2e).
 set -euo pipefail
 HERE="$(cd "$(dirname "$0")" && pwd)"
 ROOT="$(cd "$HERE/../.." && pwd)"
@@ -35,8 +36,13 @@ if [ -d "$SPARSE_CAPTURE" ]; then
   SPARSE="$ROOT/www/e2e-sparse.scene.zip"
   target/release/scribblefield pack "$SPARSE_CAPTURE" -o "$SPARSE" --max-size 120 --features baseline \
     --feature-stride 2 >/dev/null
+  # pack.mjs packs the capture folder in the page with these options (its page options say
+  # the same); this archive, packed by the command line, gives it the ground truth to plan
+  # strokes from and the scene the page must arrive at.
+  PACK_REFERENCE="$(mktemp -d)/alexander-colmap.scene.zip"
+  target/release/scribblefield pack "$SPARSE_CAPTURE" -o "$PACK_REFERENCE" --max-size 96 --every 9 >/dev/null
 else
-  echo "(no $SPARSE_CAPTURE: skipping spread.mjs)"
+  echo "(no $SPARSE_CAPTURE: skipping spread.mjs and pack.mjs)"
 fi
 
 # A free port: bind port 0, note what the kernel chose, release it for the server.
@@ -44,7 +50,7 @@ PORT=$(node -e 'const s=require("net").createServer().listen(0,"127.0.0.1",()=>{
 LOG=$(mktemp)
 target/release/scribblefield serve www --port "$PORT" >"$LOG" 2>&1 &
 SERVER=$!
-trap 'kill "$SERVER" 2>/dev/null || true; wait "$SERVER" 2>/dev/null || true; rm -f "$LOG" ${SPARSE:+"$SPARSE"}' EXIT
+trap 'kill "$SERVER" 2>/dev/null || true; wait "$SERVER" 2>/dev/null || true; rm -f "$LOG" ${SPARSE:+"$SPARSE"}; [ -z "${PACK_REFERENCE:-}" ] || rm -rf "$(dirname "$PACK_REFERENCE")"' EXIT
 
 URL="http://127.0.0.1:$PORT/"
 for _ in $(seq 1 100); do
@@ -66,5 +72,7 @@ E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_DEMO="$ROOT/www/demo.scene.zip" node "$H
 E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_DEMO="$ROOT/www/demo.scene.zip" node "$HERE/durable.mjs" || STATUS=1
 if [ -n "$SPARSE" ]; then
   E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_SPARSE="$SPARSE" node "$HERE/spread.mjs" || STATUS=1
+  E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_CAPTURE="$SPARSE_CAPTURE" E2E_REFERENCE="$PACK_REFERENCE" \
+    node "$HERE/pack.mjs" || STATUS=1
 fi
 exit $STATUS

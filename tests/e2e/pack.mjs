@@ -1,0 +1,182 @@
+// End-to-end test of packing a capture in the page (src/app/packing.rs) in headless Chromium:
+// a folder that is no capture is refused with the command line's error; then a COLMAP capture
+// folder is set on the page's folder input, packed in wasm (downscaled, a few frames, baseline
+// features), opened for annotation, scribbled on, trained until the page shows masks, and the
+// masks are downloaded and checked. Starts no server: run.sh does, or point E2E_URL at one.
+//
+//   E2E_URL        page to open, e.g. http://127.0.0.1:8080/ (required)
+//   E2E_CAPTURE    the capture folder, e.g. ../shared/data/alexander-colmap (required)
+//   E2E_REFERENCE  the same capture packed by the command line with the same options
+//                  (`pack E2E_CAPTURE --max-size 96 --every 9`): its ground truth plans the
+//                  strokes, and the page's scene must match it (required)
+//   E2E_OUT        folder for screenshots and the downloaded zip (default /tmp/e2e)
+//   CHROMIUM       browser binary (default /usr/bin/chromium)
+import { mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from "node:fs";
+import { tmpdir } from "node:os";
+import { join } from "node:path";
+import { chromium } from "playwright-core";
+import {
+  CHROMIUM_ARGS, Checks, assert, decodePng, drawFrameStroke, openPage, planFrameStrokes, readZip, settledStatus,
+  show, status, waitForStatus,
+} from "./lib.mjs";
+
+const url = process.env.E2E_URL;
+const capturePath = process.env.E2E_CAPTURE;
+const referencePath = process.env.E2E_REFERENCE;
+if (!url || !capturePath || !referencePath) {
+  console.error("E2E_URL, E2E_CAPTURE and E2E_REFERENCE must be set: the served page, a capture folder and its " +
+    "archive packed by the command line with --max-size 96 --every 9");
+  process.exit(2);
+}
+const outDir = process.env.E2E_OUT || "/tmp/e2e";
+const chromiumPath = process.env.CHROMIUM || "/usr/bin/chromium";
+// Packing as `pack --max-size 96 --every 9 --features baseline --feature-stride 4
+// --autoencoder-steps 100`: tiny frames and few steps keep SwiftShader quick. The tiny model,
+// and small batches so a step is short.
+const PAGE_OPTIONS = "pack-size=96&pack-every=9&pack-stride=4&pack-steps=100&model=tiny&rays=256";
+const BRUSH_RADIUS = 3;
+const PACK_TIMEOUT_MS = 300_000;
+const TRAIN_TIMEOUT_MS = 600_000;
+const EXPORT_TIMEOUT_MS = 600_000;
+
+mkdirSync(outDir, { recursive: true });
+const userDataDir = mkdtempSync(join(tmpdir(), "scribblefield-e2e-"));
+const consoleLog = [];
+const checks = new Checks();
+const t0 = Date.now();
+const elapsed = () => `${((Date.now() - t0) / 1000).toFixed(0)} s`;
+
+const reference = readZip(readFileSync(referencePath));
+const sceneJson = JSON.parse(reference.get("scene.json").toString("utf8"));
+const [W, H] = [sceneJson.width, sceneJson.height];
+const strokes = planFrameStrokes(decodePng(reference.get(sceneJson.frames[0].gt)).data, W, H, BRUSH_RADIUS);
+
+// A folder with files but no capture layout: what a user picks by mistake.
+const notCapture = join(mkdtempSync(join(tmpdir(), "scribblefield-e2e-")), "holiday");
+mkdirSync(notCapture);
+writeFileSync(join(notCapture, "notes.txt"), "not a capture\n");
+writeFileSync(join(notCapture, "photo.jpg"), readFileSync(join(capturePath, "images", "DSC05083.JPG")));
+
+let context;
+try {
+  context = await chromium.launchPersistentContext(userDataDir, {
+    executablePath: chromiumPath,
+    headless: false,
+    args: CHROMIUM_ARGS,
+    viewport: { width: 1024, height: 720 },
+  });
+  const pageUrl = new URL(url);
+  pageUrl.hash = PAGE_OPTIONS;
+  const page = await openPage(context, pageUrl.href, "pack", consoleLog);
+  let s = await settledStatus(page, PACK_TIMEOUT_MS);
+  console.log(`page open with the demo scene: ${s.state} (${elapsed()})`);
+
+  await checks.check("a folder that is no capture gets the command line's error", async () => {
+    await page.setInputFiles("#capture-folder", notCapture);
+    // Not waitForStatus: it stops at an error, which is what is awaited here.
+    await page.waitForFunction(() => {
+      try {
+        return ["error", "crashed"].includes(JSON.parse(document.body.dataset.status).state);
+      } catch {
+        return false;
+      }
+    }, null, { timeout: PACK_TIMEOUT_MS, polling: 100 });
+    s = await status(page);
+    assert(s.state === "error", `status is ${show(s)}`);
+    assert(s.message.startsWith("holiday: not a capture layout scribblefield knows; expected one of: an autolabel"),
+      `the message is ${JSON.stringify(s.message)}`);
+    console.log(`     ${s.message.slice(0, 90)}…`);
+  });
+  await page.screenshot({ path: join(outDir, "pack-refused.png") });
+
+  const stages = [];
+  await checks.check("a COLMAP capture folder packs in the page and opens for annotation", async () => {
+    const start = Date.now();
+    await page.setInputFiles("#capture-folder", capturePath);
+    // The error of the folder before stays up until packing starts.
+    let packing = false;
+    for (;;) {
+      s = await status(page);
+      packing ||= s.state === "packing";
+      const stage = s.state === "packing" ? s.stage : s.state;
+      if (packing && stages[stages.length - 1] !== stage) stages.push(stage);
+      if (packing && s.state === "ready") break;
+      if (packing && (s.state === "error" || s.state === "crashed")) throw new Error(`the page says ${show(s)}`);
+      assert(Date.now() - start < PACK_TIMEOUT_MS, `not ready after ${PACK_TIMEOUT_MS / 1000} s: ${show(s)}`);
+      await new Promise((r) => setTimeout(r, 100));
+    }
+    console.log(`     stages ${stages.join(" -> ")} in ${((Date.now() - start) / 1000).toFixed(0)} s`);
+    assert(s.state === "ready", `status is ${show(s)}`);
+    // The autoencoder's 100 steps may pass between two looks at the status.
+    for (const stage of ["frames", "features"]) assert(stages.includes(stage), `no ${stage} stage`);
+    assert(s.frames === sceneJson.frames.length && s.size[0] === W && s.size[1] === H,
+      `the page's scene is ${s.frames} frames of ${s.size}, the command line's ${sceneJson.frames.length} of ${W}x${H}`);
+    assert(s.classes === sceneJson.classes.length, `${s.classes} classes, the command line's ${sceneJson.classes.length}`);
+  });
+  await page.screenshot({ path: join(outDir, "pack-opened.png") });
+
+  await checks.check("scribbles on the packed scene train the field until it shows a mask", async () => {
+    assert(strokes.length >= 2, `the ground truth of frame 0 gives ${strokes.length} strokes`);
+    await waitForStatus(page, (t) => {
+      if (t.training === "failed") throw new Error(`training failed: ${t.failure}`);
+      return t.training === "running";
+    }, "training to start", TRAIN_TIMEOUT_MS);
+    await page.focus("#scribblefield");
+    // Paused while drawing: on SwiftShader a step holds the GPU, and the strokes must not wait.
+    await page.keyboard.press("Space");
+    await waitForStatus(page, (t) => t.training === "paused", "the pause", 120_000);
+    for (const stroke of strokes) await drawFrameStroke(page, stroke, W, H);
+    await waitForStatus(page, (t) => t.strokes === strokes.length, "the strokes", 60_000);
+    await page.keyboard.press("Space");
+    const startSteps = (await status(page)).steps;
+    s = await waitForStatus(page, (t) => t.steps >= startSteps + 5 && t.mask === "full" && t.rendered > startSteps,
+      "a full mask rendered after training with the strokes", TRAIN_TIMEOUT_MS);
+    console.log(`     ${strokes.length} strokes; mask at step ${s.rendered}; trains on ${JSON.stringify(s.spread)} (${elapsed()})`);
+  });
+  await page.screenshot({ path: join(outDir, "pack-mask.png") });
+
+  await checks.check("the masks of the packed scene download", async () => {
+    const downloadPromise = page.waitForEvent("download", { timeout: EXPORT_TIMEOUT_MS });
+    let downloaded = false;
+    downloadPromise.then(() => { downloaded = true; }, () => {});
+    // A key press can be lost while the page is busy (annotate.mjs): press again.
+    for (let attempt = 1; attempt <= 3; attempt++) {
+      await page.keyboard.press("d");
+      const started = await waitForStatus(page, (t) => downloaded || t.training === "exporting",
+        "the export to start", 20_000).then(() => true, () => false);
+      if (started) break;
+    }
+    const download = await downloadPromise;
+    const zipPath = join(outDir, download.suggestedFilename());
+    await download.saveAs(zipPath);
+    console.log(`     ${download.suggestedFilename()} (${elapsed()})`);
+    assert(download.suggestedFilename().startsWith("alexander-colmap"),
+      `the masks are named ${download.suggestedFilename()}`);
+    const files = readZip(readFileSync(zipPath));
+    const manifest = JSON.parse(files.get("classes.json").toString("utf8"));
+    assert(manifest.frames === sceneJson.frames.length, `the manifest lists ${manifest.frames} frames`);
+    const masks = manifest.files.map((name) => decodePng(files.get(name)));
+    assert(masks.every((m) => m.width === W && m.height === H && m.channels === 1), "masks have the wrong format");
+    // Pixel accuracy against the command line's ground truth, for the record: a few steps of
+    // the tiny model are far from converged.
+    let right = 0, counted = 0;
+    sceneJson.frames.forEach((f, i) => {
+      const g = decodePng(reference.get(f.gt)).data;
+      for (let p = 0; p < g.length; p++) if (g[p] !== 255) { counted += 1; right += g[p] === masks[i].data[p] ? 1 : 0; }
+    });
+    const classesSeen = new Set(masks.flatMap((m) => [...new Set(m.data)]));
+    console.log(`     ${masks.length} masks of ${W}x${H}; classes ${[...classesSeen].sort()}; pixel accuracy ` +
+      `${(right / counted).toFixed(3)} against the ground truth`);
+    assert(classesSeen.size >= 2, `the masks hold one class only (${[...classesSeen]})`);
+  });
+} catch (e) {
+  checks.failed += 1;
+  console.log(`FAIL the test itself: ${e.stack || e.message}`);
+} finally {
+  if (context) await context.close();
+  rmSync(userDataDir, { recursive: true, force: true });
+  rmSync(join(notCapture, ".."), { recursive: true, force: true });
+}
+if (checks.failed > 0) console.log(consoleLog.slice(-40).join("\n"));
+console.log(`pack: ${checks.passed} passed, ${checks.failed} failed`);
+process.exit(checks.failed > 0 ? 1 : 0);
