@@ -385,7 +385,7 @@ impl eframe::App for App {
                             .button("save scene archive")
                             .on_hover_text(format!(
                                 "download {} ({:.1} MB), the archive packed from the capture, to host and share \
-                                 (open it with #scene=<its url>)\n\n{}",
+                                 (open it with #scene=<its url>); key A\n\n{}",
                                 p.file_name,
                                 p.bytes.len() as f64 / 1e6,
                                 p.report
@@ -399,6 +399,20 @@ impl eframe::App for App {
                 });
             });
         });
+        // The page's own keys (the annotator reads its own, and none of these): Escape cancels
+        // packing, A saves the packed archive; not while a text field has the keyboard.
+        let (escape, save_key) = if ctx.egui_wants_keyboard_input() {
+            (false, false)
+        } else {
+            ctx.input(|i| {
+                let plain = !i.modifiers.command && !i.modifiers.alt;
+                (i.key_pressed(egui::Key::Escape), plain && i.key_pressed(egui::Key::A))
+            })
+        };
+        if let (true, Stage::Packing(pack)) = (escape, &self.stage) {
+            pack.cancel();
+        }
+        let save_archive = save_archive || (save_key && matches!(self.stage, Stage::Annotating(_)));
         if pick {
             self.pick_scene(&ctx);
         }
@@ -537,7 +551,7 @@ fn show_packing(ui: &mut egui::Ui, pack: &ScenePack) {
             if pack.cancelling() {
                 ui.label("cancelling…");
             } else {
-                cancel = ui.button("Cancel").clicked();
+                cancel = ui.button("Cancel").on_hover_text("Escape").clicked();
             }
         });
     });
