@@ -497,8 +497,11 @@ async fn frame_seeds(
         let mut carried = view.labels(&point_classes);
         let carried = match unreconstructed {
             Some(class) => {
-                for (c, &far) in carried.iter_mut().zip(&far[f]) {
-                    if far && *c == UNLABELLED {
+                // A far pixel inside the outline of the other classes' points is more likely a
+                // hole in the object's reconstruction than the room: it is left to the walk.
+                let outline = view.outline_of_points_not_in(&point_classes, class);
+                for ((c, &far), &inside) in carried.iter_mut().zip(&far[f]).zip(&outline) {
+                    if far && !inside && *c == UNLABELLED {
                         *c = class;
                     }
                 }

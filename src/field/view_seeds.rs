@@ -16,6 +16,10 @@ use crate::scene::Scene;
 /// A pixel is far from the points when no projected point lies within this share of the image
 /// diagonal.
 pub const FAR_FROM_POINTS: f64 = 0.03;
+/// A point counts towards an outline ([`View::outline_of_points_not_in`]) only when more than this
+/// many points land within the far radius of it, itself included: a lone point is more often a
+/// wrong match than an object's edge.
+const OUTLINE_NEIGHBOURS: u32 = 10;
 /// The class the strokes give a region (pixels far from every point, a support plane) must hold
 /// at least this share of the region's stroked pixels to be trusted with all of it...
 const REGION_SHARE: f64 = 0.75;
@@ -69,13 +73,51 @@ impl View {
         map
     }
 
+    /// True for each pixel inside the outline of the points not labelled `class` (`labels` per
+    /// point, unlabelled points included): the convex hull of where they land, without the lone
+    /// ones. A photographed object's reconstruction has holes where its surface is smooth or
+    /// seen from few photos, but its outline still encloses them, so a pixel far from every
+    /// point inside it is more likely such a hole than the room behind the object.
+    pub fn outline_of_points_not_in(&self, labels: &[u16], class: u16) -> Vec<bool> {
+        let landed: Vec<u32> = self
+            .hits
+            .iter()
+            .filter(|&&(_, _, point)| labels[point as usize] != class)
+            .map(|&(pixel, _, _)| pixel)
+            .collect();
+        let neighbours = BoxCounts::new(&landed, self.width, self.height, self.far_radius() as usize);
+        let mut corners: Vec<(i64, i64)> = landed
+            .iter()
+            .map(|&pixel| (pixel as usize % self.width, pixel as usize / self.width))
+            .filter(|&(x, y)| neighbours.around(x, y) > OUTLINE_NEIGHBOURS)
+            .map(|(x, y)| (x as i64, y as i64))
+            .collect();
+        let hull = convex_hull(&mut corners);
+        if hull.len() < 3 {
+            return vec![false; self.width * self.height];
+        }
+        (0..self.width * self.height)
+            .map(|i| {
+                let (x, y) = ((i % self.width) as i64, (i / self.width) as i64);
+                let edges = hull.iter().zip(hull.iter().cycle().skip(1));
+                edges
+                    .into_iter()
+                    .all(|(a, b)| (b.0 - a.0) * (y - a.1) - (b.1 - a.1) * (x - a.0) >= 0)
+            })
+            .collect()
+    }
+
+    fn far_radius(&self) -> f64 {
+        FAR_FROM_POINTS * ((self.width * self.width + self.height * self.height) as f64).sqrt()
+    }
+
     /// True for each pixel with no point within [`FAR_FROM_POINTS`] of the image diagonal.
     pub fn far_from_points(&self) -> Vec<bool> {
         let mut occupied = vec![false; self.width * self.height];
         for &(pixel, _, _) in &self.hits {
             occupied[pixel as usize] = true;
         }
-        let radius = FAR_FROM_POINTS * ((self.width * self.width + self.height * self.height) as f64).sqrt();
+        let radius = self.far_radius();
         distance_to_nearest(&occupied, self.width, self.height)
             .into_iter()
             .map(|d| d > radius)
@@ -98,6 +140,79 @@ pub fn region_class(strokes: &[(&[u16], &[bool])], classes: usize) -> Option<u16
     let total: usize = counts.iter().sum();
     let (best, &count) = counts.iter().enumerate().max_by_key(|(_, n)| **n)?;
     (count >= REGION_PIXELS && count as f64 >= REGION_SHARE * total as f64).then_some(best as u16)
+}
+
+/// How many of a set of pixels lie in each square window of an image, by a summed-area table.
+struct BoxCounts {
+    width: usize,
+    height: usize,
+    radius: usize,
+    /// `(width + 1) x (height + 1)`: the count over the rectangle above and left of each corner.
+    table: Vec<u32>,
+}
+
+impl BoxCounts {
+    fn new(pixels: &[u32], width: usize, height: usize, radius: usize) -> BoxCounts {
+        let stride = width + 1;
+        let mut table = vec![0u32; stride * (height + 1)];
+        for &pixel in pixels {
+            let (x, y) = (pixel as usize % width, pixel as usize / width);
+            table[(y + 1) * stride + x + 1] += 1;
+        }
+        for y in 1..=height {
+            for x in 1..=width {
+                table[y * stride + x] +=
+                    table[(y - 1) * stride + x] + table[y * stride + x - 1] - table[(y - 1) * stride + x - 1];
+            }
+        }
+        BoxCounts {
+            width,
+            height,
+            radius,
+            table,
+        }
+    }
+
+    /// The pixels within `radius` of (x, y) along both axes.
+    fn around(&self, x: usize, y: usize) -> u32 {
+        let stride = self.width + 1;
+        let (x0, y0) = (x.saturating_sub(self.radius), y.saturating_sub(self.radius));
+        let (x1, y1) = (
+            (x + self.radius + 1).min(self.width),
+            (y + self.radius + 1).min(self.height),
+        );
+        self.table[y1 * stride + x1] + self.table[y0 * stride + x0]
+            - self.table[y0 * stride + x1]
+            - self.table[y1 * stride + x0]
+    }
+}
+
+/// The convex hull of `points`, counter-clockwise in image coordinates (x right, y down), by
+/// Andrew's monotone chain; fewer than three points when they are collinear.
+fn convex_hull(points: &mut Vec<(i64, i64)>) -> Vec<(i64, i64)> {
+    points.sort_unstable();
+    points.dedup();
+    if points.len() < 3 {
+        return points.clone();
+    }
+    let cross = |o: (i64, i64), a: (i64, i64), b: (i64, i64)| (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0);
+    let mut hull: Vec<(i64, i64)> = Vec::with_capacity(2 * points.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let ordered: Box<dyn Iterator<Item = &(i64, i64)>> = if pass == 0 {
+            Box::new(points.iter())
+        } else {
+            Box::new(points.iter().rev())
+        };
+        for &p in ordered {
+            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0 {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        hull.pop();
+    }
+    hull
 }
 
 /// Euclidean distance from each pixel to the nearest `true` pixel (infinite when there is
@@ -186,6 +301,45 @@ mod tests {
             }
         }
         assert!(distance_to_nearest(&[false; 6], 3, 2).iter().all(|d| d.is_infinite()));
+    }
+
+    #[test]
+    fn the_convex_hull_keeps_the_corners_and_drops_what_is_inside() {
+        let mut points = vec![(0, 0), (4, 0), (4, 4), (0, 4), (2, 2), (1, 3), (2, 0), (0, 0)];
+        let hull = convex_hull(&mut points);
+        assert_eq!(hull.len(), 4, "{hull:?}");
+        for corner in [(0, 0), (4, 0), (4, 4), (0, 4)] {
+            assert!(hull.contains(&corner), "{corner:?} missing from {hull:?}");
+        }
+        assert!(convex_hull(&mut vec![(0, 0), (1, 1), (2, 2)]).len() < 3);
+    }
+
+    /// Points in a ring, as a reconstruction outlines an object whose middle is smooth, and one
+    /// lone point far off: the outline is the ring's, and the lone point does not stretch it.
+    #[test]
+    fn the_outline_of_the_points_holds_their_hole_and_not_a_lone_point() {
+        let (width, height) = (60usize, 60usize);
+        let mut hits = Vec::new();
+        let mut point = 0u32;
+        for y in 10..50usize {
+            for x in 10..50usize {
+                let ring = !(16..44).contains(&x) || !(16..44).contains(&y);
+                if ring && (x + y) % 2 == 0 {
+                    hits.push(((y * width + x) as u32, 1.0, point));
+                    point += 1;
+                }
+            }
+        }
+        hits.push(((2 * width + 58) as u32, 1.0, point));
+        let labels = vec![1u16; hits.len()];
+        let view = View { width, height, hits };
+        let outline = view.outline_of_points_not_in(&labels, 0);
+        assert!(outline[30 * width + 30], "the hole inside the ring");
+        assert!(outline[12 * width + 12]);
+        assert!(!outline[5 * width + 55], "towards the lone point");
+        assert!(!outline[55 * width + 30]);
+        // Points of the far class itself draw no outline.
+        assert!(view.outline_of_points_not_in(&labels, 1).iter().all(|&inside| !inside));
     }
 
     #[test]

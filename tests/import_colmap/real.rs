@@ -233,7 +233,9 @@ fn strokes_on_two_photos_reach_the_others_through_the_points() {
     // strokes name its class, so every photo gets labels of both classes.
     assert_eq!(frames, FRAMES, "{frames} frames labelled");
     assert!(labelled > 20 * labelled_within, "{labelled} against {labelled_within}");
-    assert!(right > 0.9 && right > right_within, "{right} against {right_within}");
+    // Far pixels inside the outline of the head's points are left to the walk, not given the
+    // room's class (docs/quality.md, "Holes in the object's reconstruction").
+    assert!(right > 0.95 && right > right_within, "{right} against {right_within}");
 
     // Other strokes on the same photos, whose background strokes cover no point of the model:
     // the walk inside the drawn photos carries the background to the pedestal's points, so both
@@ -247,7 +249,7 @@ fn strokes_on_two_photos_reach_the_others_through_the_points() {
         let maps = propagate_labels(&scene, &labels, 2, &PropagationOptions::default());
         let iou = label_iou(&scene, &maps);
         eprintln!("scribbles {seed}: IoU of the labels per class {iou:?}");
-        assert!(iou.iter().all(|&v| v > 0.55), "scribbles {seed}: {iou:?}");
+        assert!(iou.iter().all(|&v| v > 0.7), "scribbles {seed}: {iou:?}");
     }
 }
 
