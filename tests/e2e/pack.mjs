@@ -2,7 +2,8 @@
 // a folder that is no capture is refused with the command line's error; then a COLMAP capture
 // folder is set on the page's folder input, packed in wasm (downscaled, a few frames, baseline
 // features), opened for annotation, scribbled on, trained until the page shows masks, and the
-// masks are downloaded and checked. Starts no server: run.sh does, or point E2E_URL at one.
+// masks and the packed archive are downloaded and checked; last, a pack with a long autoencoder
+// fit is cancelled. Starts no server: run.sh does, or point E2E_URL at one.
 //
 //   E2E_URL        page to open, e.g. http://127.0.0.1:8080/ (required)
 //   E2E_CAPTURE    the capture folder, e.g. ../shared/data/alexander-colmap (required)
@@ -168,6 +169,40 @@ try {
     console.log(`     ${masks.length} masks of ${W}x${H}; classes ${[...classesSeen].sort()}; pixel accuracy ` +
       `${(right / counted).toFixed(3)} against the ground truth`);
     assert(classesSeen.size >= 2, `the masks hold one class only (${[...classesSeen]})`);
+  });
+
+  await checks.check("save scene archive downloads the packed archive", async () => {
+    const downloadPromise = page.waitForEvent("download", { timeout: 60_000 });
+    await page.keyboard.press("a");
+    const download = await downloadPromise;
+    const zipPath = join(outDir, download.suggestedFilename());
+    await download.saveAs(zipPath);
+    assert(download.suggestedFilename() === "alexander-colmap.scene.zip", `named ${download.suggestedFilename()}`);
+    const packed = readZip(readFileSync(zipPath));
+    const packedJson = JSON.parse(packed.get("scene.json").toString("utf8"));
+    assert(packedJson.frames.length === sceneJson.frames.length && packedJson.width === W && packedJson.height === H,
+      `the archive has ${packedJson.frames.length} frames of ${packedJson.width}x${packedJson.height}`);
+    assert(packedJson.features, "the archive has no feature codes");
+    console.log(`     ${download.suggestedFilename()}: ${readFileSync(zipPath).length} bytes, ` +
+      `features ${packedJson.features.width} x ${packedJson.features.height} x ${packedJson.features.dim}`);
+  });
+
+  await checks.check("packing can be cancelled", async () => {
+    // A fit far longer than the test waits.
+    const slow = new URL(url);
+    // (The first occurrence of a key counts.)
+    slow.hash = `pack-steps=100000&${PAGE_OPTIONS}`;
+    // A page of its own: the page reads its options once, when it opens.
+    await page.close();
+    const slowPage = await openPage(context, slow.href, "cancel", consoleLog);
+    await settledStatus(slowPage, PACK_TIMEOUT_MS);
+    await slowPage.setInputFiles("#capture-folder", capturePath);
+    await waitForStatus(slowPage, (t) => t.state === "packing" && t.stage === "autoencoder", "the autoencoder",
+      PACK_TIMEOUT_MS);
+    await slowPage.focus("#scribblefield");
+    await slowPage.keyboard.press("Escape");
+    s = await waitForStatus(slowPage, (t) => t.state === "cancelled", "the cancel", 60_000);
+    console.log(`     cancelled during the autoencoder fit (${elapsed()})`);
   });
 } catch (e) {
   checks.failed += 1;
