@@ -4,13 +4,19 @@
 // same operation order where it matters: transmittance from the summed optical depth, the
 // backward suffix sum accumulated back to front.
 //
-// Per ray it writes a row of `ray_outputs` (stride 4 + 2k, k = 4 + C + D channels in
-// reference::render::Channels order [rgb, depth, logits, feature]):
-//   [loss rgb, loss depth, loss semantic, loss feature, rendered (k), dL/drendered (k)]
-// and per sample n = ray * S + s a row of `grad_heads` (stride k):
+// `ray_outputs` holds three blocks of B rows each, k = 4 + C + D channels in
+// reference::render::Channels order [rgb, depth, logits, feature]:
+//   [losses: B x (loss rgb, loss depth, loss semantic, loss feature)]
+//   [rendered: B x k] [dL/drendered: B x k]
+// so that reading the losses back is one contiguous range, and so is reading a render.
+// Per sample n = ray * S + s a row of `grad_heads` (stride k):
 //   [dL/dh0, dL/d(colour pre-sigmoid) (3), dL/dlogits (C), dL/dfeature (D)].
 // Losses are weighted and divided by the whole batch B. Rays that miss the scene box render
 // nothing and contribute no loss and no gradient (the reference never builds them).
+//
+// Two entry points: `composite` (training: all of the above) and `composite_render` (display:
+// the rendered block only, no loss and no backward; the forward is the same function, so the
+// rendered values are the same).
 //!include _dispatch.wgsl
 //!include _step.wgsl
 //!include _ray_layout.wgsl
@@ -81,44 +87,44 @@ fn target_f32(row: u32, word: u32) -> f32 {
     return bitcast<f32>(targets[row + word]);
 }
 
-@compute @workgroup_size(WORKGROUP_SIZE)
-fn composite(
-    @builtin(workgroup_id) workgroup_id: vec3<u32>,
-    @builtin(num_workgroups) num_workgroups: vec3<u32>,
-    @builtin(local_invocation_index) local_index: u32,
-) {
-    let ray = linear_item_index(workgroup_id, num_workgroups, local_index, WORKGROUP_SIZE);
-    let batch = step_info.batch_rays;
-    if ray >= batch {
-        return;
-    }
-    let samples = step_info.samples_per_ray;
-    let classes = params.classes;
-    let feature_dim = params.feature_dim;
-    let semantic_at = 4u;
-    let feature_at = 4u + classes;
-    let k = 4u + classes + feature_dim;
-    let out_row = ray * (LOSS_WORDS + 2u * k);
-    let rendered_at = out_row + LOSS_WORDS;
-    let grad_at = rendered_at + k;
-    let first = ray * samples;
+// Where one ray's values live.
+struct RayRows {
+    // The ray's first sample.
+    first: u32,
+    // Channels k.
+    k: u32,
+    // Its rendered channels and dL/drendered in `ray_outputs`.
+    rendered_at: u32,
+    grad_at: u32,
+    target_row: u32,
+    flags: u32,
+}
+
+fn ray_rows(ray: u32, batch: u32) -> RayRows {
+    let k = 4u + params.classes + params.feature_dim;
+    let rendered_at = batch * LOSS_WORDS + ray * k;
     let target_row = ray * params.target_stride;
-    let flags = targets[target_row + TARGET_FLAGS];
+    return RayRows(
+        ray * step_info.samples_per_ray,
+        k,
+        rendered_at,
+        rendered_at + batch * k,
+        target_row,
+        targets[target_row + TARGET_FLAGS],
+    );
+}
 
-    for (var c = 0u; c < LOSS_WORDS + 2u * k; c++) {
-        ray_outputs[out_row + c] = 0.0;
-    }
-    if (flags & RAY_HITS_BOX) == 0u {
-        for (var e = 0u; e < samples * k; e++) {
-            grad_heads[first * k + e] = 0.0;
-        }
-        return;
-    }
-
-    // Forward (reference::render::composite). The weights and transmittances are parked in the
-    // first two words of each sample's gradient row (overwritten by the backward walk), so the
-    // logits and features can be summed channel by channel in a register: C and D need no
-    // fixed-size local array, and each sum runs over the samples in the reference's order.
+// Forward (reference::render::composite) of a ray that hits the box: writes its rendered
+// channels and returns (rgb, depth). The weights and transmittances are parked in the first two
+// words of each sample's gradient row (the training backward overwrites them), so the logits
+// and features can be summed channel by channel in a register: C and D need no fixed-size
+// local array, and each sum runs over the samples in the reference's order.
+fn forward(rows: RayRows) -> vec4<f32> {
+    let samples = step_info.samples_per_ray;
+    let k = rows.k;
+    let first = rows.first;
+    let semantic_at = 4u;
+    let feature_at = 4u + params.classes;
     var rgb = vec3<f32>(0.0);
     var depth = 0.0;
     var optical_depth = 0.0;
@@ -135,24 +141,90 @@ fn composite(
         grad_heads[n * k] = w;
         grad_heads[n * k + 1u] = t_after;
     }
-    for (var c = 0u; c < classes; c++) {
+    for (var c = 0u; c < params.classes; c++) {
         var sum = 0.0;
         for (var s = 0u; s < samples; s++) {
             sum += grad_heads[(first + s) * k] * logit_of(first + s, c);
         }
-        ray_outputs[rendered_at + semantic_at + c] = sum;
+        ray_outputs[rows.rendered_at + semantic_at + c] = sum;
     }
-    for (var d = 0u; d < feature_dim; d++) {
+    for (var d = 0u; d < params.feature_dim; d++) {
         var sum = 0.0;
         for (var s = 0u; s < samples; s++) {
             sum += grad_heads[(first + s) * k] * feature_of(first + s, d);
         }
-        ray_outputs[rendered_at + feature_at + d] = sum;
+        ray_outputs[rows.rendered_at + feature_at + d] = sum;
     }
-    ray_outputs[rendered_at] = rgb.x;
-    ray_outputs[rendered_at + 1u] = rgb.y;
-    ray_outputs[rendered_at + 2u] = rgb.z;
-    ray_outputs[rendered_at + 3u] = depth;
+    ray_outputs[rows.rendered_at] = rgb.x;
+    ray_outputs[rows.rendered_at + 1u] = rgb.y;
+    ray_outputs[rows.rendered_at + 2u] = rgb.z;
+    ray_outputs[rows.rendered_at + 3u] = depth;
+    return vec4<f32>(rgb, depth);
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn composite_render(
+    @builtin(workgroup_id) workgroup_id: vec3<u32>,
+    @builtin(num_workgroups) num_workgroups: vec3<u32>,
+    @builtin(local_invocation_index) local_index: u32,
+) {
+    let ray = linear_item_index(workgroup_id, num_workgroups, local_index, WORKGROUP_SIZE);
+    let batch = step_info.batch_rays;
+    if ray >= batch {
+        return;
+    }
+    let rows = ray_rows(ray, batch);
+    if (rows.flags & RAY_HITS_BOX) == 0u {
+        for (var c = 0u; c < rows.k; c++) {
+            ray_outputs[rows.rendered_at + c] = 0.0;
+        }
+        return;
+    }
+    forward(rows);
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn composite(
+    @builtin(workgroup_id) workgroup_id: vec3<u32>,
+    @builtin(num_workgroups) num_workgroups: vec3<u32>,
+    @builtin(local_invocation_index) local_index: u32,
+) {
+    let ray = linear_item_index(workgroup_id, num_workgroups, local_index, WORKGROUP_SIZE);
+    let batch = step_info.batch_rays;
+    if ray >= batch {
+        return;
+    }
+    let samples = step_info.samples_per_ray;
+    let classes = params.classes;
+    let feature_dim = params.feature_dim;
+    let semantic_at = 4u;
+    let feature_at = 4u + classes;
+    let rows = ray_rows(ray, batch);
+    let k = rows.k;
+    let out_row = ray * LOSS_WORDS;
+    let rendered_at = rows.rendered_at;
+    let grad_at = rows.grad_at;
+    let first = rows.first;
+    let target_row = rows.target_row;
+    let flags = rows.flags;
+
+    for (var c = 0u; c < LOSS_WORDS; c++) {
+        ray_outputs[out_row + c] = 0.0;
+    }
+    for (var c = 0u; c < k; c++) {
+        ray_outputs[rendered_at + c] = 0.0;
+        ray_outputs[grad_at + c] = 0.0;
+    }
+    if (flags & RAY_HITS_BOX) == 0u {
+        for (var e = 0u; e < samples * k; e++) {
+            grad_heads[first * k + e] = 0.0;
+        }
+        return;
+    }
+
+    let rendered = forward(rows);
+    let rgb = rendered.xyz;
+    let depth = rendered.w;
 
     // Losses and dL/drendered (reference::loss::ray_loss), scaled by 1/B.
     let inv_batch = 1.0 / f32(batch);

@@ -209,6 +209,11 @@ struct GpuRun {
 }
 
 fn run_on_gpu(ctx: &GpuContext, batch: &Batch) -> GpuRun {
+    run_entry(ctx, batch, false)
+}
+
+/// Runs the training entry point, or with `render` the forward alone, on garbage-filled outputs.
+fn run_entry(ctx: &GpuContext, batch: &Batch, render: bool) -> GpuRun {
     let cfg = &batch.cfg;
     let step = uniform_buffer_from(ctx, "step", &StepUniforms::for_step(cfg, 1, 0, 1e-3));
     let density = storage_buffer_from(ctx, "density out", &batch.density).unwrap();
@@ -248,7 +253,11 @@ fn run_on_gpu(ctx: &GpuContext, batch: &Batch) -> GpuRun {
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     {
         let mut compute = encoder.begin_compute_pass(&Default::default());
-        pass.record(&mut compute);
+        if render {
+            pass.record_render(&mut compute);
+        } else {
+            pass.record(&mut compute);
+        }
     }
     ctx.queue.submit([encoder.finish()]);
     GpuRun {
@@ -283,13 +292,13 @@ fn check_batch(ctx: &GpuContext, batch: &Batch) {
     let gpu = run_on_gpu(ctx, batch);
     let (s_count, k) = (batch.samples(), layout.grad_stride());
     assert_eq!(gpu.grad_heads.len(), cfg.batch_rays as usize * s_count * k);
-    let stride = layout.ray_output_stride();
+    assert_eq!(gpu.ray_outputs.len(), layout.ray_output_words());
     let mut totals = [0.0f64; 4];
     let mut gpu_totals = [0.0f64; 4];
     let mut labelled_rays = 0;
     for ray in 0..cfg.batch_rays as usize {
         let expected = reference_ray(batch, ray);
-        let out = &gpu.ray_outputs[ray * stride..(ray + 1) * stride];
+        let out = &gpu.ray_outputs[layout.losses(ray..ray + 1)];
         let loss_scale = expected.losses.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         for term in 0..4 {
             let (g, e) = (f64::from(out[term]), expected.losses[term]);
@@ -301,9 +310,9 @@ fn check_batch(ctx: &GpuContext, batch: &Batch) {
             gpu_totals[term] += g;
         }
         labelled_rays += usize::from(expected.losses[2] > 0.0);
-        let rendered = &out[layout.rendered_offset()..layout.grad_rendered_offset()];
+        let rendered = &gpu.ray_outputs[layout.rendered(ray..ray + 1)];
         assert_group_close(&format!("ray {ray} rendered"), rendered, &expected.rendered);
-        let grad_rendered = &out[layout.grad_rendered_offset()..];
+        let grad_rendered = &gpu.ray_outputs[layout.grad_rendered(ray..ray + 1)];
         assert_group_close(
             &format!("ray {ray} dL/drendered"),
             grad_rendered,
@@ -351,6 +360,49 @@ fn config(classes: u32, feature_dim: u32, coarse: u32, fine: u32, batch: u32, fe
         feature_supervision: features,
         ..FieldConfig::small()
     }
+}
+
+/// The render entry point (forward alone) writes the rendered block exactly as the training
+/// entry point does, bit for bit, over garbage: misses included (zero), and a render is what a
+/// frame shows. It writes no loss and no gradient.
+fn check_render_matches_training(ctx: &GpuContext, batch: &Batch) {
+    let layout = CompositeLayout::new(&batch.cfg);
+    let trained = run_on_gpu(ctx, batch);
+    let rendered = run_entry(ctx, batch, true);
+    let all = 0..batch.cfg.batch_rays as usize;
+    let (a, b) = (
+        &trained.ray_outputs[layout.rendered(all.clone())],
+        &rendered.ray_outputs[layout.rendered(all.clone())],
+    );
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        assert_eq!(x.to_bits(), y.to_bits(), "rendered word {i}: training {x}, render {y}");
+    }
+    let misses = (0..batch.cfg.batch_rays as usize)
+        .filter(|&r| batch.targets[r * batch.target_stride() + TARGET_FLAGS] & RAY_HITS_BOX == 0)
+        .count();
+    assert!(misses > 0, "the batch should hold rays that miss the box");
+    // The losses and gradients are left as they were (garbage): the render computes none.
+    let garbage = |v: &[f32]| v.iter().filter(|x| !x.is_finite() || x.abs() > 1e6).count();
+    assert!(garbage(&rendered.ray_outputs[layout.losses(all.clone())]) > 0);
+    assert!(garbage(&rendered.ray_outputs[layout.grad_rendered(all)]) > 0);
+}
+
+#[test]
+fn render_entry_point_matches_the_training_render_bit_for_bit() {
+    let Some(ctx) = gpu_for_tests("render_entry_point_matches_the_training_render_bit_for_bit") else {
+        return;
+    };
+    check_render_matches_training(&ctx, &Batch::random(config(3, 5, 5, 7, 300, true), 11));
+    let d = FieldConfig::default();
+    let widths = config(
+        d.num_classes,
+        d.feature_dim,
+        d.samples_coarse,
+        d.samples_fine,
+        130,
+        true,
+    );
+    check_render_matches_training(&ctx, &Batch::random(widths, 12));
 }
 
 #[test]

@@ -215,6 +215,8 @@ fn check_one_step_gradient(name: &str, semantic_input: SemanticInput) {
     let params = pollster::block_on(trainer.read_params()).unwrap();
     trainer.train(1);
     let gpu = pollster::block_on(trainer.read_gradients()).unwrap();
+    let losses = trainer.losses_blocking().unwrap();
+    assert_eq!(losses.step, 1);
 
     let uniforms = StepUniforms::for_step(&cfg, 1, seed, trainer.learning_rate());
     let (w, h) = (scene.width, scene.height);
@@ -252,7 +254,23 @@ fn check_one_step_gradient(name: &str, semantic_input: SemanticInput) {
     let model = FieldModel::new(cfg.clone()).unwrap();
     let mut reference = vec![0.0f64; params.len()];
     let params64: Vec<f64> = params.iter().map(|&p| f64::from(p)).collect();
-    model.loss_and_gradient(&params64, &batch, &mut reference);
+    let reference_losses = model.loss_and_gradient(&params64, &batch, &mut reference);
+
+    // The losses the trainer reads back (the loss block of the ray outputs alone) are the
+    // batch's: each term within f32 rounding of the f64 reference.
+    let terms = |t: &scribblefield::field::reference::LossTerms| [t.rgb, t.depth, t.semantic, t.feature];
+    for (i, (g, e)) in terms(&losses.terms)
+        .into_iter()
+        .zip(terms(&reference_losses))
+        .enumerate()
+    {
+        eprintln!("loss term {i}: GPU {g:.6e}, reference {e:.6e}");
+        assert!(
+            (g - e).abs() <= 1e-4 * e.abs() + 1e-9,
+            "loss term {i}: GPU {g}, reference {e}"
+        );
+    }
+    assert!(reference_losses.rgb > 0.0 && reference_losses.semantic > 0.0);
 
     for (name, range) in model.layout.named_ranges() {
         let scale = reference[range.clone()].iter().fold(0.0f64, |m, v| m.max(v.abs()));

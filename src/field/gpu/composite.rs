@@ -9,11 +9,16 @@
 //!   `[∂L/∂h₀, ∂L/∂colour pre-sigmoid (3), ∂L/∂logits (C), ∂L/∂feature (D)]`: what the MLP
 //!   backward passes start from (σ = exp(clamp(h₀)) and the sigmoid are undone here, as
 //!   `reference::activations`);
-//! - `ray_outputs`, per ray a row of [`CompositeLayout::ray_output_stride`] values
-//!   `[loss rgb, depth, semantic, feature, rendered (k), ∂L/∂rendered (k)]` in
-//!   `reference::render::Channels` order (k = 4 + C + D). The loss terms are weighted and divided
-//!   by the batch size B, so their sum over rays is the batch loss; the trainer reduces or reads
-//!   them now and then.
+//! - `ray_outputs`, three blocks of B rows: the losses `[rgb, depth, semantic, feature]` per ray
+//!   ([`CompositeLayout::losses`]), the rendered channels (k per ray,
+//!   [`CompositeLayout::rendered`]) and ∂L/∂rendered (k per ray,
+//!   [`CompositeLayout::grad_rendered`]), channels in `reference::render::Channels` order
+//!   (k = 4 + C + D). The loss terms are weighted and divided by the batch size B, so their sum
+//!   over rays is the batch loss. Blocks rather than one row per ray, so that the trainer's loss
+//!   read-back copies the losses alone and a render copies the rendered channels alone.
+//!
+//! [`CompositePass::record_render`] runs the forward alone (entry point `composite_render`): the
+//! rendered block and nothing else, for frames that are shown and not trained on.
 //!
 //! A ray that misses the scene box contributes nothing (zero loss and gradients).
 use crate::field::config::FieldConfig;
@@ -74,6 +79,8 @@ pub struct CompositeInputs<'a> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct CompositeLayout {
     pub channels: Channels,
+    /// Rays per batch, B.
+    pub batch: usize,
 }
 
 impl CompositeLayout {
@@ -83,6 +90,7 @@ impl CompositeLayout {
                 classes: cfg.num_classes as usize,
                 feature_dim: cfg.feature_dim as usize,
             },
+            batch: cfg.batch_rays as usize,
         }
     }
 
@@ -91,19 +99,26 @@ impl CompositeLayout {
         self.channels.count()
     }
 
-    /// Values per ray in `ray_outputs`.
-    pub fn ray_output_stride(&self) -> usize {
-        LOSS_WORDS + 2 * self.channels.count()
+    /// Values in `ray_outputs`: B·(4 + 2k).
+    pub fn ray_output_words(&self) -> usize {
+        self.batch * (LOSS_WORDS + 2 * self.channels.count())
     }
 
-    /// Offset of the rendered channels in a ray's output row.
-    pub fn rendered_offset(&self) -> usize {
-        LOSS_WORDS
+    /// Where the losses of rays `rays` lie in `ray_outputs`: [`LOSS_WORDS`] per ray.
+    pub fn losses(&self, rays: std::ops::Range<usize>) -> std::ops::Range<usize> {
+        rays.start * LOSS_WORDS..rays.end * LOSS_WORDS
     }
 
-    /// Offset of ∂L/∂rendered in a ray's output row.
-    pub fn grad_rendered_offset(&self) -> usize {
-        LOSS_WORDS + self.channels.count()
+    /// Where the rendered channels of rays `rays` lie in `ray_outputs`: k per ray.
+    pub fn rendered(&self, rays: std::ops::Range<usize>) -> std::ops::Range<usize> {
+        let (base, k) = (self.batch * LOSS_WORDS, self.channels.count());
+        base + rays.start * k..base + rays.end * k
+    }
+
+    /// Where ∂L/∂rendered of rays `rays` lies in `ray_outputs`: k per ray.
+    pub fn grad_rendered(&self, rays: std::ops::Range<usize>) -> std::ops::Range<usize> {
+        let (base, k) = (self.batch * (LOSS_WORDS + self.channels.count()), self.channels.count());
+        base + rays.start * k..base + rays.end * k
     }
 
     /// Offsets in a `grad_heads` row.
@@ -120,10 +135,12 @@ impl CompositeLayout {
 /// Compositing, losses and their backward for a batch of `cfg.batch_rays` rays.
 pub struct CompositePass {
     dispatch: Dispatch,
+    /// The forward alone (`composite_render`).
+    render: Dispatch,
     pub layout: CompositeLayout,
     /// B·S rows of [`CompositeLayout::grad_stride`] f32.
     pub grad_heads: wgpu::Buffer,
-    /// B rows of [`CompositeLayout::ray_output_stride`] f32.
+    /// [`CompositeLayout::ray_output_words`] f32 in three blocks (see the module docs).
     pub ray_outputs: wgpu::Buffer,
 }
 
@@ -173,8 +190,7 @@ impl CompositePass {
             weight_feature: cfg.loss.feature,
         };
         let grad_heads = storage_buffer_zeroed::<f32>(ctx, "head gradients", samples * layout.grad_stride())?;
-        let ray_outputs =
-            storage_buffer_zeroed::<f32>(ctx, "ray losses and renders", batch * layout.ray_output_stride())?;
+        let ray_outputs = storage_buffer_zeroed::<f32>(ctx, "ray losses and renders", layout.ray_output_words())?;
         let uniform = uniform_buffer_from(ctx, "composite uniforms", &uniforms);
         let spec = KernelSpec::new("composite", shaders::COMPOSITE, "composite");
         let groups = Dispatch1d::for_device(ctx, batch as u64, RAY_WORKGROUP_SIZE)?;
@@ -191,15 +207,26 @@ impl CompositePass {
             ("ray_outputs", &ray_outputs),
         ]);
         let dispatch = Dispatch::build(ctx, &spec, &bindings, groups).await?;
+        let render_spec = KernelSpec::new("composite (render)", shaders::COMPOSITE, "composite_render");
+        let render = Dispatch::build(ctx, &render_spec, &bindings, groups).await?;
         Ok(CompositePass {
             dispatch,
+            render,
             layout,
             grad_heads,
             ray_outputs,
         })
     }
 
+    /// Records the whole pass: rendering, losses and their backward.
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         self.dispatch.record(pass);
+    }
+
+    /// Records the forward alone: the rendered block of `ray_outputs` (the same values
+    /// [`CompositePass::record`] writes there) and, as scratch, the first two words of each
+    /// sample's `grad_heads` row. No loss, no gradient: for frames shown, not trained on.
+    pub fn record_render(&self, pass: &mut wgpu::ComputePass<'_>) {
+        self.render.record(pass);
     }
 }

@@ -577,7 +577,14 @@ impl Trainer {
     /// Starts reading the losses of the latest step, unless a read is already under way.
     pub fn request_losses(&mut self) {
         if self.pending_losses.is_none() && self.step > 0 {
-            let read = read_buffer_async::<f32>(&self.ctx, &self.composite.ray_outputs);
+            // The losses are the first block of the ray outputs: copy that block, not the
+            // rendered channels and their gradients after it.
+            let words = self.composite.layout.losses(0..self.cfg.batch_rays as usize);
+            let read = read_elements_async::<f32>(
+                &self.ctx,
+                &self.composite.ray_outputs,
+                words.start as u64..words.end as u64,
+            );
             self.pending_losses = Some((self.step, read));
         }
     }
@@ -590,10 +597,8 @@ impl Trainer {
             let step = *step;
             self.pending_losses = None;
             let rows = result?;
-            let stride = self.composite.layout.ray_output_stride();
             let mut terms = LossTerms::default();
-            for row in rows.chunks_exact(stride) {
-                let l = &row[..LOSS_WORDS];
+            for l in rows.chunks_exact(LOSS_WORDS) {
                 terms.add(&LossTerms {
                     rgb: l[0] as f64,
                     depth: l[1] as f64,

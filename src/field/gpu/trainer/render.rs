@@ -167,19 +167,20 @@ impl Trainer {
             for &stage in FIELD_STAGES {
                 self.record_stage(stage, &mut pass);
             }
-            self.composite.record(&mut pass);
+            // The forward alone: a render needs no loss and no gradient.
+            self.composite.record_render(&mut pass);
         }
         self.ctx.queue.submit([encoder.finish()]);
-        let stride = self.composite.layout.ray_output_stride();
-        let rendered = self.composite.layout.rendered_offset();
+        let layout = self.composite.layout;
+        let words = layout.rendered(0..count as usize);
         let rows = read_elements_async::<f32>(
             &self.ctx,
             &self.composite.ray_outputs,
-            0..(count as usize * stride) as u64,
+            words.start as u64..words.end as u64,
         )
         .await?;
-        for row in rows.chunks_exact(stride) {
-            out.push(&row[rendered..]);
+        for row in rows.chunks_exact(layout.grad_stride()) {
+            out.push(row);
         }
         Ok(())
     }

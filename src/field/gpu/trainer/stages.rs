@@ -170,7 +170,7 @@ impl StepStage {
             StepStage::SemanticForward => mlp_forward_bytes(&layout.semantic.dims, n),
             StepStage::GlueAssemble => WORD * n * ((1 + g) + f + g + (f + sg)),
             StepStage::Composite => {
-                n * (heads * WORD + 8) + targets + n * heads * WORD + r * composite.ray_output_stride() as u64 * WORD
+                n * (heads * WORD + 8) + targets + n * heads * WORD + composite.ray_output_words() as u64 * WORD
             }
             StepStage::SemanticBackward => mlp_backward_bytes(&layout.semantic.dims, n),
             StepStage::FeatureBackward => mlp_backward_bytes(&layout.feature.dims, n),
