@@ -366,6 +366,9 @@ struct SparseCapture {
     /// point's class (the page asks again after every edit, most of which leave the seeds as
     /// they were).
     last: Option<LastPointWalk>,
+    /// The far class and the points' classes the outlines were found for, and per frame the
+    /// outline of the points of the other classes (`View::outline_of_points_not_in`).
+    outlines: Option<(u16, Vec<u16>, Vec<Vec<bool>>)>,
 }
 
 /// Per frame (by index), a label map.
@@ -390,7 +393,22 @@ impl SparseCapture {
             views,
             far,
             last: None,
+            outlines: None,
         }
+    }
+
+    /// Finds each frame's outline of the points not of class `class`, unless it is known for
+    /// these points' classes.
+    async fn find_outlines(&mut self, point_classes: &[u16], class: u16, pause: &mut impl Pause) {
+        if matches!(&self.outlines, Some((c, seen, _)) if *c == class && seen == point_classes) {
+            return;
+        }
+        let mut outlines = Vec::with_capacity(self.views.len());
+        for view in &self.views {
+            pause.pause().await;
+            outlines.push(view.outline_of_points_not_in(point_classes, class));
+        }
+        self.outlines = Some((class, point_classes.to_vec(), outlines));
     }
 
     /// Each point's class from the walk over the points seeded by `walked`.
@@ -487,20 +505,24 @@ async fn frame_seeds(
     };
     let sparse = cache.sparse.insert(sparse);
     let point_classes = sparse.point_classes(walked, classes, pause).await.to_vec();
-    let (views, far) = (&sparse.views, &sparse.far);
     let drawn: Vec<(&[u16], &[bool])> = strokes
         .iter()
-        .map(|(f, map)| (map.as_slice(), far[*f as usize].as_slice()))
+        .map(|(f, map)| (map.as_slice(), sparse.far[*f as usize].as_slice()))
         .collect();
     let unreconstructed = region_class(&drawn, classes);
+    if let Some(class) = unreconstructed {
+        sparse.find_outlines(&point_classes, class, pause).await;
+    }
+    let (views, far) = (&sparse.views, &sparse.far);
     for (f, view) in views.iter().enumerate() {
         let mut carried = view.labels(&point_classes);
         let carried = match unreconstructed {
             Some(class) => {
                 // A far pixel inside the outline of the other classes' points is more likely a
                 // hole in the object's reconstruction than the room: it is left to the walk.
-                let outline = view.outline_of_points_not_in(&point_classes, class);
-                for ((c, &far), &inside) in carried.iter_mut().zip(&far[f]).zip(&outline) {
+                let outline = sparse.outlines.as_ref().map_or(&[][..], |(_, _, o)| o[f].as_slice());
+                for (i, (c, &far)) in carried.iter_mut().zip(&far[f]).enumerate() {
+                    let inside = outline.get(i).copied().unwrap_or(false);
                     if far && !inside && *c == UNLABELLED {
                         *c = class;
                     }
