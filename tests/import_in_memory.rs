@@ -96,11 +96,14 @@ fn a_zip_of_a_capture_imports_like_its_folder() {
     same_scene(&import(&dir, &opts, &mut |_, _| {}).unwrap().scene, &from_zip);
 }
 
+/// A file of a test capture: its path in the capture folder and its bytes.
+type CaptureFile<'a> = (&'a str, &'a [u8]);
+
 /// Bad captures get the command line's message, with the folder's name where it has its path.
 #[test]
 fn bad_captures_get_the_command_lines_errors() {
     let tmp = TempDir::new().unwrap();
-    let cases: [(&str, &[(&str, &[u8])]); 3] = [
+    let cases: [(&str, &[CaptureFile]); 3] = [
         ("holiday", &[("photo.jpg", b"\xff\xd8 not really")]),
         ("broken-json", &[("transforms.json", b"{\"frames\": [")]),
         (
