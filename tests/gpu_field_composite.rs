@@ -535,31 +535,38 @@ fn composite_throughput_report() {
         targets: &targets,
     };
     let pass = pollster::block_on(CompositePass::new(&ctx, &cfg, &inputs)).unwrap();
-    let run = |repeats: u32| {
+    // The training entry point and the render one (forward alone), on the same inputs.
+    let run = |repeats: u32, render: bool| {
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         {
             let mut compute = encoder.begin_compute_pass(&Default::default());
             for _ in 0..repeats {
-                pass.record(&mut compute);
+                if render {
+                    pass.record_render(&mut compute);
+                } else {
+                    pass.record(&mut compute);
+                }
             }
         }
         ctx.queue.submit([encoder.finish()]);
         ctx.wait_idle().unwrap();
     };
-    run(1);
-    let repeats = 10;
-    let start = Instant::now();
-    run(repeats);
-    let seconds = start.elapsed().as_secs_f64();
-    let rays = f64::from(repeats * cfg.batch_rays);
-    println!(
-        "composite (B = {}, S = {}, C = {}, D = {}) on {}: {:.0} rays/s, {:.0} samples/s",
-        cfg.batch_rays,
-        cfg.samples_per_ray(),
-        cfg.num_classes,
-        cfg.feature_dim,
-        ctx.describe(),
-        rays / seconds,
-        rays * cfg.samples_per_ray() as f64 / seconds
-    );
+    for (name, render) in [("composite", false), ("composite_render", true)] {
+        run(1, render);
+        let repeats = 10;
+        let start = Instant::now();
+        run(repeats, render);
+        let seconds = start.elapsed().as_secs_f64();
+        let rays = f64::from(repeats * cfg.batch_rays);
+        println!(
+            "{name} (B = {}, S = {}, C = {}, D = {}) on {}: {:.0} rays/s, {:.0} samples/s",
+            cfg.batch_rays,
+            cfg.samples_per_ray(),
+            cfg.num_classes,
+            cfg.feature_dim,
+            ctx.describe(),
+            rays / seconds,
+            rays * cfg.samples_per_ray() as f64 / seconds
+        );
+    }
 }
