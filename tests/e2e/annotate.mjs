@@ -10,13 +10,11 @@
 //   E2E_STEPS      training steps to wait for after the last scribble (default below)
 //   E2E_MIN_IOU    mean IoU the masks must reach (default below)
 //   CHROMIUM       browser binary (default /usr/bin/chromium)
-import { mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from "node:fs";
-import { tmpdir } from "node:os";
+import { mkdirSync, readFileSync, writeFileSync } from "node:fs";
 import { join } from "node:path";
-import { chromium } from "playwright-core";
 import {
-  CHROMIUM_ARGS, Checks, assert, clearSaves, decodePng, drawFrameStroke, goToFrame, openPage, planFrameStrokes,
-  readZip, saturatedColours, settledStatus, show, status, waitForStatus,
+  assert, Checks, clearSaves, decodePng, drawFrameStroke, goToFrame, openPage, planFrameStrokes, readZip,
+  runBrowserTest, saturatedColours, settledStatus, show, status, waitForStatus,
 } from "./lib.mjs";
 
 const url = process.env.E2E_URL;
@@ -26,7 +24,6 @@ if (!url) {
 }
 const outDir = process.env.E2E_OUT || "/tmp/e2e";
 const demoPath = process.env.E2E_DEMO || "www/demo.scene.zip";
-const chromiumPath = process.env.CHROMIUM || "/usr/bin/chromium";
 // Training steps after the last scribble before the masks are downloaded, and the mean IoU
 // they must reach. Measured on a loaded 2-core machine: 0.353 (4 frames scribbled) and 0.317
 // (these 2 frames); answering "background" everywhere scores 0.089. The bar sits well above
@@ -51,7 +48,6 @@ const EXPORT_TIMEOUT_MS = 600_000;
 const VOID = 255;
 
 mkdirSync(outDir, { recursive: true });
-const userDataDir = mkdtempSync(join(tmpdir(), "scribblefield-e2e-"));
 const consoleLog = [];
 const checks = new Checks();
 const t0 = Date.now();
@@ -99,17 +95,16 @@ function meanIou(masks) {
   return { mean: valid.reduce((a, b) => a + b, 0) / valid.length, per };
 }
 
-let context;
-try {
-  context = await chromium.launchPersistentContext(userDataDir, {
-    executablePath: chromiumPath,
-    headless: false,
-    args: CHROMIUM_ARGS,
-    // Smaller than the smoke test's: on SwiftShader every repaint of the page takes about a
-    // second at 1280 x 800, and each mouse event is one repaint.
-    viewport: { width: 1024, height: 720 },
-    acceptDownloads: true,
-  });
+await runBrowserTest("annotate", {
+  checks,
+  consoleLog,
+  // Smaller than the smoke test's: on SwiftShader every repaint of the page takes about a
+  // second at 1280 x 800, and each mouse event is one repaint.
+  viewport: { width: 1024, height: 720 },
+  acceptDownloads: true,
+  consoleLines: 200,
+  summary: () => `screenshots in ${outDir} (${elapsed()} in all)`,
+}, async (context) => {
   const sceneUrl = new URL("demo.scene.zip", url).href;
   const pageUrl = new URL(url);
   pageUrl.hash = `scene=demo.scene.zip&${PAGE_OPTIONS}`;
@@ -273,18 +268,4 @@ try {
     await shared.screenshot({ path: join(outDir, "annotate-share-link.png") });
   });
   writeFileSync(join(outDir, "annotate-load-seconds.txt"), `${loadSeconds}\n`);
-} catch (e) {
-  checks.failed += 1;
-  console.log(`FAIL the test could not run: ${e.message}`);
-} finally {
-  await context?.close().catch(() => {});
-  rmSync(userDataDir, { recursive: true, force: true });
-}
-
-console.log(`screenshots in ${outDir} (${elapsed()} in all)`);
-if (checks.failed > 0) {
-  console.log("--- browser console ---");
-  for (const line of consoleLog.slice(-200)) console.log(line);
-}
-console.log(`${checks.passed} passed, ${checks.failed} failed`);
-process.exit(checks.failed > 0 ? 1 : 0);
+});

@@ -12,12 +12,10 @@
 //   E2E_DEMO   the demo archive the page serves (default www/demo.scene.zip)
 //   E2E_OUT    folder for screenshots (default /tmp/e2e)
 //   CHROMIUM   browser binary (default /usr/bin/chromium)
-import { mkdirSync, mkdtempSync, readFileSync, rmSync } from "node:fs";
+import { mkdirSync, readFileSync } from "node:fs";
 import { crc32 } from "node:zlib";
-import { tmpdir } from "node:os";
 import { join } from "node:path";
-import { chromium } from "playwright-core";
-import { CHROMIUM_ARGS, Checks, assert, openPage, settledStatus, show, status, waitForStatus } from "./lib.mjs";
+import { assert, Checks, openPage, runBrowserTest, settledStatus, show, status, waitForStatus } from "./lib.mjs";
 
 const url = process.env.E2E_URL;
 if (!url) {
@@ -25,7 +23,6 @@ if (!url) {
   process.exit(2);
 }
 const outDir = process.env.E2E_OUT || "/tmp/e2e";
-const chromiumPath = process.env.CHROMIUM || "/usr/bin/chromium";
 // The annotate test's CPU-rasterizer options: the tiny model on frames at a quarter size.
 const PAGE_OPTIONS = "model=tiny&res=4&rays=1200";
 const LOAD_TIMEOUT_MS = 180_000;
@@ -35,7 +32,6 @@ const TRAIN_TIMEOUT_MS = 400_000;
 const [W, H] = [160, 120];
 
 mkdirSync(outDir, { recursive: true });
-const userDataDir = mkdtempSync(join(tmpdir(), "scribblefield-durable-"));
 const consoleLog = [];
 const checks = new Checks();
 const t0 = Date.now();
@@ -141,17 +137,18 @@ function withExtraEntry(zip, name, text) {
 
 const strokesOf = (s) => s.save.snapshots.map(([, n]) => n);
 
-let context;
 let sceneId;
-try {
-  context = await chromium.launchPersistentContext(userDataDir, {
-    executablePath: chromiumPath,
-    headless: false,
-    args: CHROMIUM_ARGS,
-    viewport: { width: 1024, height: 720 },
-    acceptDownloads: true,
-  });
-
+// The browser, for `open` above.
+let context;
+await runBrowserTest("durable", {
+  checks,
+  consoleLog,
+  viewport: { width: 1024, height: 720 },
+  acceptDownloads: true,
+  consoleLines: 150,
+  summary: () => `durable: ${elapsed()} in all`,
+}, async (browser) => {
+  context = browser;
   // --- migration and two tabs ---
   let a, b;
   const legacyKey = `scribblefield/labels/${sceneUrl}`;
@@ -303,18 +300,4 @@ try {
       await page.close();
     }
   });
-} catch (e) {
-  checks.failed += 1;
-  console.log(`FAIL the test could not run: ${e.message}`);
-} finally {
-  await context?.close().catch(() => {});
-  rmSync(userDataDir, { recursive: true, force: true });
-}
-
-console.log(`durable: ${elapsed()} in all`);
-if (checks.failed > 0) {
-  console.log("--- browser console ---");
-  for (const line of consoleLog.slice(-150)) console.log(line);
-}
-console.log(`${checks.passed} passed, ${checks.failed} failed`);
-process.exit(checks.failed > 0 ? 1 : 0);
+});

@@ -1,6 +1,11 @@
-// Shared pieces of the browser tests: Chromium's flags, a tiny check runner, PNG and zip
-// decoding (node has zlib but no image or archive reader), and reading the page's status line.
-import { inflateRawSync, inflateSync } from "node:zlib";
+// Shared pieces of the browser tests: Chromium's flags, the run of one test script, a tiny
+// check runner, PNG and zip decoding (node has zlib but no image or archive reader), and reading
+// the page's status.
+import { mkdtempSync, rmSync } from "node:fs";
+import { tmpdir } from "node:os";
+import { join } from "node:path";
+import { crc32, inflateRawSync, inflateSync } from "node:zlib";
+import { chromium } from "playwright-core";
 
 export const CHROMIUM_ARGS = [
   "--headless=new",
@@ -129,6 +134,44 @@ export function readZip(zip) {
   return entries;
 }
 
+/// A zip archive of `files` (`[name, Buffer]` pairs), stored without compression: what a user
+/// makes of a capture folder to drop it on the page as one file.
+export function writeZip(files) {
+  const locals = [];
+  const central = [];
+  let offset = 0;
+  for (const [name, data] of files) {
+    const nameBytes = Buffer.from(name, "utf8");
+    const header = Buffer.alloc(30);
+    header.writeUInt32LE(0x04034b50, 0);
+    header.writeUInt16LE(20, 4);
+    header.writeUInt32LE(crc32(data), 14);
+    header.writeUInt32LE(data.length, 18);
+    header.writeUInt32LE(data.length, 22);
+    header.writeUInt16LE(nameBytes.length, 26);
+    const entry = Buffer.alloc(46);
+    entry.writeUInt32LE(0x02014b50, 0);
+    entry.writeUInt16LE(20, 4);
+    entry.writeUInt16LE(20, 6);
+    entry.writeUInt32LE(crc32(data), 16);
+    entry.writeUInt32LE(data.length, 20);
+    entry.writeUInt32LE(data.length, 24);
+    entry.writeUInt16LE(nameBytes.length, 28);
+    entry.writeUInt32LE(offset, 42);
+    locals.push(header, nameBytes, data);
+    central.push(entry, nameBytes);
+    offset += header.length + nameBytes.length + data.length;
+  }
+  const directory = Buffer.concat(central);
+  const end = Buffer.alloc(22);
+  end.writeUInt32LE(0x06054b50, 0);
+  end.writeUInt16LE(files.length, 8);
+  end.writeUInt16LE(files.length, 10);
+  end.writeUInt32LE(directory.length, 12);
+  end.writeUInt32LE(offset, 16);
+  return Buffer.concat([...locals, directory, end]);
+}
+
 /// The page's status (`data-status`, a JSON object with a `state`; docs/web-app.md lists its
 /// fields), or `{state: "unreadable", text}` when the attribute holds no JSON.
 export function parseStatus(text) {
@@ -176,6 +219,48 @@ export async function settledStatus(page, timeoutMs) {
     { timeout: timeoutMs, polling: 250 },
   );
   return status(page);
+}
+
+/**
+ * Runs one browser test script's body and ends the process with its result. Launches Chromium
+ * (`CHROMIUM`, default /usr/bin/chromium) with our flags and a fresh profile, gives `body` the
+ * browser context, counts a throw out of `body` as a failed check, and always closes the browser
+ * and removes the profile (then runs `cleanup`). Prints `summary()` if given, the last
+ * `consoleLines` lines of `consoleLog` when a check failed, and `name: N passed, M failed`; the
+ * exit status is 1 when a check failed.
+ */
+export async function runBrowserTest(name, options, body) {
+  const {
+    checks, consoleLog, viewport = { width: 1024, height: 720 }, acceptDownloads = true, consoleLines = 60,
+    summary, cleanup,
+  } = options;
+  const userDataDir = mkdtempSync(join(tmpdir(), `scribblefield-${name}-`));
+  let context;
+  try {
+    context = await chromium.launchPersistentContext(userDataDir, {
+      executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
+      // Headless mode comes from --headless=new in the args, so the flags are exactly ours.
+      headless: false,
+      args: CHROMIUM_ARGS,
+      viewport,
+      acceptDownloads,
+    });
+    await body(context);
+  } catch (e) {
+    checks.failed += 1;
+    console.log(`FAIL the test itself: ${e.stack || e.message}`);
+  } finally {
+    await context?.close().catch(() => {});
+    rmSync(userDataDir, { recursive: true, force: true });
+    cleanup?.();
+  }
+  if (summary) console.log(summary());
+  if (checks.failed > 0) {
+    console.log("--- browser console ---");
+    for (const line of consoleLog.slice(-consoleLines)) console.log(line);
+  }
+  console.log(`${name}: ${checks.passed} passed, ${checks.failed} failed`);
+  process.exit(checks.failed > 0 ? 1 : 0);
 }
 
 export async function openPage(context, pageUrl, label, consoleLog) {

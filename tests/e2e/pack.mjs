@@ -12,13 +12,12 @@
 //                  strokes, and the page's scene must match it (required)
 //   E2E_OUT        folder for screenshots and the downloaded zip (default /tmp/e2e)
 //   CHROMIUM       browser binary (default /usr/bin/chromium)
-import { mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from "node:fs";
+import { mkdirSync, mkdtempSync, readdirSync, readFileSync, rmSync, writeFileSync } from "node:fs";
 import { tmpdir } from "node:os";
-import { join } from "node:path";
-import { chromium } from "playwright-core";
+import { basename, join } from "node:path";
 import {
-  CHROMIUM_ARGS, Checks, assert, decodePng, drawFrameStroke, openPage, planFrameStrokes, readZip, settledStatus,
-  show, status, waitForStatus,
+  assert, Checks, decodePng, drawFrameStroke, openPage, planFrameStrokes, readZip, runBrowserTest, settledStatus,
+  show, status, waitForStatus, writeZip,
 } from "./lib.mjs";
 
 const url = process.env.E2E_URL;
@@ -30,7 +29,6 @@ if (!url || !capturePath || !referencePath) {
   process.exit(2);
 }
 const outDir = process.env.E2E_OUT || "/tmp/e2e";
-const chromiumPath = process.env.CHROMIUM || "/usr/bin/chromium";
 // Packing as `pack --max-size 96 --every 9 --features baseline --feature-stride 4
 // --autoencoder-steps 100`: tiny frames and few steps keep SwiftShader quick. The tiny model,
 // and small batches so a step is short.
@@ -41,7 +39,6 @@ const TRAIN_TIMEOUT_MS = 600_000;
 const EXPORT_TIMEOUT_MS = 600_000;
 
 mkdirSync(outDir, { recursive: true });
-const userDataDir = mkdtempSync(join(tmpdir(), "scribblefield-e2e-"));
 const consoleLog = [];
 const checks = new Checks();
 const t0 = Date.now();
@@ -58,14 +55,20 @@ mkdirSync(notCapture);
 writeFileSync(join(notCapture, "notes.txt"), "not a capture\n");
 writeFileSync(join(notCapture, "photo.jpg"), readFileSync(join(capturePath, "images", "DSC05083.JPG")));
 
-let context;
-try {
-  context = await chromium.launchPersistentContext(userDataDir, {
-    executablePath: chromiumPath,
-    headless: false,
-    args: CHROMIUM_ARGS,
-    viewport: { width: 1024, height: 720 },
-  });
+/// Every file below `dir`, named by its path from `dir`'s parent (`prefix/...`), for a zip.
+function filesUnder(dir, prefix) {
+  return readdirSync(dir, { withFileTypes: true }).flatMap((e) => e.isDirectory()
+    ? filesUnder(join(dir, e.name), `${prefix}/${e.name}`)
+    : [[`${prefix}/${e.name}`, readFileSync(join(dir, e.name))]]);
+}
+
+await runBrowserTest("pack", {
+  checks,
+  consoleLog,
+  viewport: { width: 1024, height: 720 },
+  consoleLines: 40,
+  cleanup: () => rmSync(join(notCapture, ".."), { recursive: true, force: true }),
+}, async (context) => {
   const pageUrl = new URL(url);
   pageUrl.hash = PAGE_OPTIONS;
   const page = await openPage(context, pageUrl.href, "pack", consoleLog);
@@ -187,13 +190,36 @@ try {
       `features ${packedJson.features.width} x ${packedJson.features.height} x ${packedJson.features.dim}`);
   });
 
+  await checks.check("a zip of the capture folder dropped on the page packs and opens", async () => {
+    // The same page options, on a page of its own (it reads them once, when it opens).
+    await page.close();
+    const dropPage = await openPage(context, pageUrl.href, "drop", consoleLog);
+    await settledStatus(dropPage, PACK_TIMEOUT_MS);
+    const zip = writeZip(filesUnder(capturePath, basename(capturePath)));
+    const canvas = await dropPage.$("#scribblefield");
+    const dataTransfer = await dropPage.evaluateHandle(([name, base64]) => {
+      const bytes = Uint8Array.from(atob(base64), (c) => c.charCodeAt(0));
+      const transfer = new DataTransfer();
+      transfer.items.add(new File([bytes], name, { type: "application/zip" }));
+      return transfer;
+    }, [`${basename(capturePath)}.zip`, zip.toString("base64")]);
+    await canvas.dispatchEvent("dragenter", { dataTransfer });
+    await canvas.dispatchEvent("dragover", { dataTransfer });
+    await canvas.dispatchEvent("drop", { dataTransfer });
+    await waitForStatus(dropPage, (t) => t.state === "packing", "packing to start", PACK_TIMEOUT_MS);
+    s = await waitForStatus(dropPage, (t) => t.state === "ready", "the dropped capture to open", PACK_TIMEOUT_MS);
+    assert(s.frames === sceneJson.frames.length && s.size[0] === W && s.size[1] === H,
+      `the dropped zip gave ${s.frames} frames of ${s.size}, the command line ${sceneJson.frames.length} of ${W}x${H}`);
+    console.log(`     ${(zip.length / 1e6).toFixed(1)} MB zip dropped; ${s.frames} frames of ${s.size} (${elapsed()})`);
+    await dropPage.close();
+  });
+
   await checks.check("packing can be cancelled", async () => {
     // A fit far longer than the test waits.
     const slow = new URL(url);
     // (The first occurrence of a key counts.)
     slow.hash = `pack-steps=100000&${PAGE_OPTIONS}`;
     // A page of its own: the page reads its options once, when it opens.
-    await page.close();
     const slowPage = await openPage(context, slow.href, "cancel", consoleLog);
     await settledStatus(slowPage, PACK_TIMEOUT_MS);
     await slowPage.setInputFiles("#capture-folder", capturePath);
@@ -204,14 +230,4 @@ try {
     s = await waitForStatus(slowPage, (t) => t.state === "cancelled", "the cancel", 60_000);
     console.log(`     cancelled during the autoencoder fit (${elapsed()})`);
   });
-} catch (e) {
-  checks.failed += 1;
-  console.log(`FAIL the test itself: ${e.stack || e.message}`);
-} finally {
-  if (context) await context.close();
-  rmSync(userDataDir, { recursive: true, force: true });
-  rmSync(join(notCapture, ".."), { recursive: true, force: true });
-}
-if (checks.failed > 0) console.log(consoleLog.slice(-40).join("\n"));
-console.log(`pack: ${checks.passed} passed, ${checks.failed} failed`);
-process.exit(checks.failed > 0 ? 1 : 0);
+});

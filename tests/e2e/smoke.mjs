@@ -6,11 +6,11 @@
 //   E2E_OUT      folder for screenshots (default /tmp/e2e)
 //   E2E_FRAMES   frame count the loaded scene must have (default 36, the demo scene's)
 //   CHROMIUM     browser binary (default /usr/bin/chromium)
-import { mkdirSync, mkdtempSync, rmSync } from "node:fs";
-import { tmpdir } from "node:os";
+import { mkdirSync } from "node:fs";
 import { join } from "node:path";
-import { chromium } from "playwright-core";
-import { CHROMIUM_ARGS, Checks, assert, openPage as open, saturatedColours, settledStatus as settled, show } from "./lib.mjs";
+import {
+  assert, Checks, openPage as open, runBrowserTest, saturatedColours, settledStatus as settled, show,
+} from "./lib.mjs";
 
 const url = process.env.E2E_URL;
 if (!url) {
@@ -19,7 +19,6 @@ if (!url) {
 }
 const outDir = process.env.E2E_OUT || "/tmp/e2e";
 const expectedFrames = Number(process.env.E2E_FRAMES || 36);
-const chromiumPath = process.env.CHROMIUM || "/usr/bin/chromium";
 // Compiling the wasm and starting WebGPU on a CPU rasterizer is slow on a small machine.
 const LOAD_TIMEOUT_MS = 180_000;
 const STEP_TIMEOUT_MS = 15_000;
@@ -28,23 +27,19 @@ const STEP_TIMEOUT_MS = 15_000;
 const MIN_FRAME_COLOURS = 2000;
 
 mkdirSync(outDir, { recursive: true });
-const userDataDir = mkdtempSync(join(tmpdir(), "scribblefield-e2e-"));
 const consoleLog = [];
 const checks = new Checks();
 const check = (name, body) => checks.check(name, body);
 const settledStatus = (page) => settled(page, LOAD_TIMEOUT_MS);
 const openPage = (context, pageUrl, label) => open(context, pageUrl, label, consoleLog);
 
-let context;
-try {
-  context = await chromium.launchPersistentContext(userDataDir, {
-    executablePath: chromiumPath,
-    // Headless mode comes from --headless=new in the args, so the flags are exactly ours.
-    headless: false,
-    args: CHROMIUM_ARGS,
-    viewport: { width: 1280, height: 800 },
-  });
-
+await runBrowserTest("smoke", {
+  checks,
+  consoleLog,
+  viewport: { width: 1280, height: 800 },
+  consoleLines: Infinity,
+  summary: () => `screenshots in ${outDir}`,
+}, async (context) => {
   const page = await openPage(context, url, "demo");
   const started = Date.now();
   const loaded = await settledStatus(page);
@@ -86,18 +81,4 @@ try {
     assert(errorStatus.message.includes("404"), `the message does not give the HTTP status: ${show(errorStatus)}`);
   });
   await errorPage.screenshot({ path: join(outDir, "smoke-missing-scene.png") });
-} catch (e) {
-  checks.failed += 1;
-  console.log(`FAIL the test could not run: ${e.message}`);
-} finally {
-  await context?.close().catch(() => {});
-  rmSync(userDataDir, { recursive: true, force: true });
-}
-
-console.log(`screenshots in ${outDir}`);
-if (checks.failed > 0) {
-  console.log("--- browser console ---");
-  for (const line of consoleLog) console.log(line);
-}
-console.log(`${checks.passed} passed, ${checks.failed} failed`);
-process.exit(checks.failed > 0 ? 1 : 0);
+});

@@ -10,12 +10,10 @@
 //                  strokes), e.g. www/e2e-sparse.scene.zip
 //   E2E_OUT        folder for screenshots (default /tmp/e2e)
 //   CHROMIUM       browser binary (default /usr/bin/chromium)
-import { mkdirSync, mkdtempSync, readFileSync, rmSync } from "node:fs";
-import { tmpdir } from "node:os";
+import { mkdirSync, readFileSync } from "node:fs";
 import { basename, join } from "node:path";
-import { chromium } from "playwright-core";
 import {
-  CHROMIUM_ARGS, Checks, assert, decodePng, drawFrameStroke, openPage, planFrameStrokes, readZip, settledStatus,
+  assert, Checks, decodePng, drawFrameStroke, openPage, planFrameStrokes, readZip, runBrowserTest, settledStatus,
   show, status, waitForStatus,
 } from "./lib.mjs";
 
@@ -26,7 +24,6 @@ if (!url || !archivePath) {
   process.exit(2);
 }
 const outDir = process.env.E2E_OUT || "/tmp/e2e";
-const chromiumPath = process.env.CHROMIUM || "/usr/bin/chromium";
 // Training is paused before drawing: the spreading is what is under test, and on SwiftShader
 // every training step holds the GPU for seconds.
 const PAGE_OPTIONS = "model=tiny&rays=256&res=1";
@@ -38,7 +35,6 @@ const SPREAD_TIMEOUT_MS = 300_000;
 const MAX_TASK_MS = 1000;
 
 mkdirSync(outDir, { recursive: true });
-const userDataDir = mkdtempSync(join(tmpdir(), "scribblefield-e2e-"));
 const consoleLog = [];
 const checks = new Checks();
 
@@ -47,14 +43,12 @@ const sceneJson = JSON.parse(archive.get("scene.json").toString("utf8"));
 const [W, H] = [sceneJson.width, sceneJson.height];
 const strokes = planFrameStrokes(decodePng(archive.get(sceneJson.frames[0].gt)).data, W, H, BRUSH_RADIUS);
 
-let context;
-try {
-  context = await chromium.launchPersistentContext(userDataDir, {
-    executablePath: chromiumPath,
-    headless: false,
-    args: CHROMIUM_ARGS,
-    viewport: { width: 1024, height: 720 },
-  });
+await runBrowserTest("spread", {
+  checks,
+  consoleLog,
+  viewport: { width: 1024, height: 720 },
+  consoleLines: 40,
+}, async (context) => {
   const pageUrl = new URL(url);
   pageUrl.hash = `scene=${basename(archivePath)}&${PAGE_OPTIONS}`;
   const page = await openPage(context, pageUrl.href, "spread", consoleLog);
@@ -117,13 +111,4 @@ try {
     assert(pixels > s.labelled, `${pixels} pixels to train on from ${s.labelled} drawn`);
   });
   await page.screenshot({ path: join(outDir, "spread.png") });
-} catch (e) {
-  checks.failed += 1;
-  console.log(`FAIL the test itself: ${e.stack || e.message}`);
-} finally {
-  if (context) await context.close();
-  rmSync(userDataDir, { recursive: true, force: true });
-}
-if (checks.failed > 0) console.log(consoleLog.slice(-40).join("\n"));
-console.log(`spread: ${checks.passed} passed, ${checks.failed} failed`);
-process.exit(checks.failed > 0 ? 1 : 0);
+});
