@@ -496,6 +496,12 @@ fn show_loading(ui: &mut egui::Ui, load: &SceneLoad) {
         LoadPhase::Finished(_) | LoadPhase::Taken => (PageStatus::Loading, "Opening the scene".into(), Some(1.0)),
     });
     page_status::set(&status);
+    progress_panel(ui, text, fraction, |_| {});
+}
+
+/// A centred line of text over a progress bar (`fraction`, or a moving bar when unknown), then
+/// whatever `below` adds.
+fn progress_panel(ui: &mut egui::Ui, text: String, fraction: Option<f32>, below: impl FnOnce(&mut egui::Ui)) {
     egui::CentralPanel::default().show(ui, |ui| {
         ui.vertical_centered(|ui| {
             ui.add_space(ui.available_height() * 0.35);
@@ -506,6 +512,7 @@ fn show_loading(ui: &mut egui::Ui, load: &SceneLoad) {
                 None => egui::ProgressBar::new(0.0).animate(true),
             };
             ui.add(bar.desired_width(ui.available_width().min(480.0)));
+            below(ui);
         });
     });
 }
@@ -537,23 +544,13 @@ fn show_packing(ui: &mut egui::Ui, pack: &ScenePack) {
         total: status.2,
     });
     let mut cancel = false;
-    egui::CentralPanel::default().show(ui, |ui| {
-        ui.vertical_centered(|ui| {
-            ui.add_space(ui.available_height() * 0.35);
-            ui.label(RichText::new(text).size(16.0));
-            ui.add_space(8.0);
-            let bar = match fraction {
-                Some(f) => egui::ProgressBar::new(f).show_percentage(),
-                None => egui::ProgressBar::new(0.0).animate(true),
-            };
-            ui.add(bar.desired_width(ui.available_width().min(480.0)));
-            ui.add_space(8.0);
-            if pack.cancelling() {
-                ui.label("cancelling…");
-            } else {
-                cancel = ui.button("Cancel").on_hover_text("Escape").clicked();
-            }
-        });
+    progress_panel(ui, text, fraction, |ui| {
+        ui.add_space(8.0);
+        if pack.cancelling() {
+            ui.label("cancelling…");
+        } else {
+            cancel = ui.button("Cancel").on_hover_text("Escape").clicked();
+        }
     });
     if cancel {
         pack.cancel();
