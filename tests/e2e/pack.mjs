@@ -111,8 +111,10 @@ await runBrowserTest("pack", {
     }
     console.log(`     stages ${stages.join(" -> ")} in ${((Date.now() - start) / 1000).toFixed(0)} s`);
     assert(s.state === "ready", `status is ${show(s)}`);
-    // The autoencoder's 100 steps may pass between two looks at the status.
-    for (const stage of ["frames", "features"]) assert(stages.includes(stage), `no ${stage} stage`);
+    // The status is looked at every 100 ms: on a quick machine the frames or the autoencoder's
+    // 100 steps pass between two looks, so only a stage of the feature work must be seen.
+    assert(stages.some((stage) => ["frames", "features", "autoencoder"].includes(stage)),
+      `no packing stage seen: ${stages.join(", ")}`);
     assert(s.frames === sceneJson.frames.length && s.size[0] === W && s.size[1] === H,
       `the page's scene is ${s.frames} frames of ${s.size}, the command line's ${sceneJson.frames.length} of ${W}x${H}`);
     assert(s.classes === sceneJson.classes.length, `${s.classes} classes, the command line's ${sceneJson.classes.length}`);
