@@ -18,9 +18,15 @@ use wasm_bindgen_futures::JsFuture;
 use super::browser::{js_error_text, now_ms, sleep_ms};
 use super::page_options::PageOptions;
 use crate::features::BakeProgress;
-use crate::features::pack::{BaselineFeatures, PackError, PackOptions, PackProgress, Packed, pack_files};
+use crate::features::pack::{
+    BaselineFeatures, PackError, PackEstimate, PackOptions, PackProgress, PackSeconds, Packed, is_capture_file,
+    pack_files,
+};
 use crate::pause::Pause;
 use crate::scene::import::{ImportOptions, MAX_CAPTURE_BYTES, MemoryFiles};
+
+mod setup;
+pub use setup::{PackSetup, PackStart, SetupOutcome, estimate_json, set_body_attribute};
 
 /// Packing holds the thread this long before giving it back.
 const SLICE_MS: f64 = 12.0;
@@ -33,10 +39,6 @@ pub const DEFAULT_MAX_SIZE: u32 = 640;
 pub const DEFAULT_FEATURE_STRIDE: u32 = 8;
 /// Fewer steps than the command line's 3000: the page fits on one core, without SIMD kernels.
 pub const DEFAULT_AUTOENCODER_STEPS: u32 = 1000;
-
-/// Extensions of the files a capture is read from; anything else in the folder (COLMAP's
-/// `database.db`, meshes, videos) is never read into the page's memory.
-const CAPTURE_EXTENSIONS: &[&str] = &["jpg", "jpeg", "png", "txt", "json", "bin"];
 
 /// What the `pack-` page options ask for, with the page's defaults.
 pub fn pack_options(options: &PageOptions) -> PackOptions {
@@ -76,6 +78,13 @@ pub struct ScenePack {
     name: String,
     phase: Rc<RefCell<PackPhase>>,
     cancel: Rc<Cell<bool>>,
+    /// When each stage began (`now_ms`), the last entry being the end: the measured time per
+    /// stage, to compare with the estimate.
+    stages: Rc<RefCell<Vec<(&'static str, f64)>>>,
+    /// What the settings form estimated, when it did.
+    estimate: Option<PackEstimate>,
+    /// The page's wasm memory when packing started (it only ever grows).
+    memory_before: u64,
 }
 
 /// Where the capture's files come from.
@@ -92,6 +101,7 @@ impl ScenePack {
         name: String,
         input: CaptureInput,
         opts: PackOptions,
+        estimate: Option<PackEstimate>,
         ctx: egui::Context,
         repaint_ms: u64,
     ) -> ScenePack {
@@ -101,17 +111,53 @@ impl ScenePack {
             bytes: 0,
         }));
         let cancel = Rc::new(Cell::new(false));
-        let (task_phase, task_cancel) = (phase.clone(), cancel.clone());
+        let stages = Rc::new(RefCell::new(vec![("reading", now_ms())]));
+        let (task_phase, task_cancel, task_stages) = (phase.clone(), cancel.clone(), stages.clone());
         wasm_bindgen_futures::spawn_local(async move {
-            let work = pack(input, &opts, &task_phase, &ctx, repaint_ms);
+            let work = pack(input, &opts, &task_phase, &task_stages, &ctx, repaint_ms);
             let outcome = until_cancelled(work, &task_cancel).await;
+            task_stages.borrow_mut().push(("end", now_ms()));
             *task_phase.borrow_mut() = match outcome {
                 Some(result) => PackPhase::Finished(result),
                 None => PackPhase::Cancelled,
             };
             ctx.request_repaint();
         });
-        ScenePack { name, phase, cancel }
+        ScenePack {
+            name,
+            phase,
+            cancel,
+            stages,
+            estimate,
+            memory_before: wasm_memory_bytes(),
+        }
+    }
+
+    /// How much the page's wasm memory grew while packing: what packing needed beyond what the
+    /// page had (memory freed before is used again first, so this is at most the peak).
+    pub fn memory_growth(&self) -> u64 {
+        wasm_memory_bytes().saturating_sub(self.memory_before)
+    }
+
+    pub fn estimate(&self) -> Option<&PackEstimate> {
+        self.estimate.as_ref()
+    }
+
+    /// Seconds spent in each stage so far (the autoencoder's includes encoding the codes).
+    pub fn measured(&self) -> PackSeconds {
+        let mut s = PackSeconds::default();
+        for pair in self.stages.borrow().windows(2) {
+            let ((stage, from), (_, to)) = (pair[0], pair[1]);
+            let secs = (to - from) / 1e3;
+            match stage {
+                "reading" => s.reading += secs,
+                "frames" => s.frames += secs,
+                "features" => s.features += secs,
+                "autoencoder" | "encoding" => s.autoencoder += secs,
+                _ => s.writing += secs,
+            }
+        }
+        s
     }
 
     pub fn name(&self) -> &str {
@@ -175,10 +221,21 @@ async fn pack(
     input: CaptureInput,
     opts: &PackOptions,
     phase: &RefCell<PackPhase>,
+    stages: &RefCell<Vec<(&'static str, f64)>>,
     ctx: &egui::Context,
     repaint_ms: u64,
 ) -> Result<Packed, PackError> {
     let show = |p: PackPhase| {
+        let (key, _, _) = stage(&p);
+        let key = match p {
+            PackPhase::Packing(PackProgress::Features(BakeProgress::Encoding)) => "encoding",
+            _ => key,
+        };
+        let mut stages = stages.borrow_mut();
+        if stages.last().is_none_or(|&(last, _)| last != key) {
+            stages.push((key, now_ms()));
+        }
+        drop(stages);
         *phase.borrow_mut() = p;
         // A repaint per frame would cost more than the frame on a CPU rasterizer.
         ctx.request_repaint_after(std::time::Duration::from_millis(repaint_ms));
@@ -229,15 +286,28 @@ async fn read_files(list: Vec<(String, web_sys::File)>, show: &impl Fn(PackPhase
     Ok(files)
 }
 
-fn is_capture_file(path: &str) -> bool {
-    path.rsplit_once('.')
-        .is_some_and(|(_, ext)| CAPTURE_EXTENSIONS.contains(&ext.to_ascii_lowercase().as_str()))
-}
-
 /// Whether a zip holds a scene archive (`scene.json` at its top) rather than a capture.
 pub fn is_scene_archive(bytes: &[u8]) -> bool {
     zip::ZipArchive::new(std::io::Cursor::new(bytes))
         .is_ok_and(|z| z.index_for_name(crate::scene::manifest::MANIFEST_FILE).is_some())
+}
+
+/// The stage for `data-status` (`reading`, `frames`, `features`, `autoencoder`, `writing`),
+/// with its progress (`done` of `total`).
+pub fn stage(phase: &PackPhase) -> (&'static str, usize, usize) {
+    match *phase {
+        PackPhase::Reading { done, total, .. } => ("reading", done, total),
+        PackPhase::Packing(PackProgress::Importing { done, total }) => ("frames", done, total),
+        PackPhase::Packing(PackProgress::Features(BakeProgress::Extracting { done, total })) => {
+            ("features", done, total)
+        }
+        PackPhase::Packing(PackProgress::Features(BakeProgress::Fitting { step, steps, .. })) => {
+            ("autoencoder", step as usize, steps as usize)
+        }
+        PackPhase::Packing(PackProgress::Features(BakeProgress::Encoding)) => ("features", 0, 0),
+        PackPhase::Packing(PackProgress::Writing) => ("writing", 0, 0),
+        PackPhase::Finished(_) | PackPhase::Cancelled | PackPhase::Taken => ("writing", 0, 0),
+    }
 }
 
 /// One line for the progress bar, and the fraction done when known.
@@ -265,4 +335,13 @@ pub fn describe(name: &str, phase: &PackPhase) -> (String, Option<f32>) {
         PackPhase::Packing(PackProgress::Writing) => (format!("Packing {name}: writing the archive"), Some(1.0)),
         PackPhase::Finished(_) | PackPhase::Cancelled | PackPhase::Taken => (format!("Packed {name}"), Some(1.0)),
     }
+}
+
+/// Bytes of the page's wasm memory.
+pub fn wasm_memory_bytes() -> u64 {
+    let buffer = js_sys::Reflect::get(&wasm_bindgen::memory(), &"buffer".into()).unwrap_or_default();
+    js_sys::Reflect::get(&buffer, &"byteLength".into())
+        .ok()
+        .and_then(|n| n.as_f64())
+        .unwrap_or(0.0) as u64
 }

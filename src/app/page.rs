@@ -8,7 +8,7 @@ use super::annotator::{Annotator, AnnotatorSetup};
 use super::browser::FolderFiles;
 use super::loading::{self, LoadPhase, Loaded, SceneLoad};
 use super::model_size::ModelSize;
-use super::packing::{self, CaptureInput, PackPhase, ScenePack};
+use super::packing::{self, CaptureInput, PackSetup, PackStart, ScenePack, SetupOutcome};
 use super::page_options::{PageOptionError, PageOptions};
 use super::status::PageStatus;
 use super::store::{self, Opened};
@@ -35,6 +35,9 @@ pub struct App {
     /// The archive of the capture packed in this page, while its scene is the one open: *save
     /// scene archive* downloads it.
     packed: Option<PackedArchive>,
+    /// The pack settings of a capture picked or dropped, shown over the page until the user
+    /// starts packing or cancels.
+    setup: Option<PackSetup>,
 }
 
 /// What the user handed the page.
@@ -128,6 +131,7 @@ impl App {
             option_errors,
             inbox,
             packed: None,
+            setup: None,
         }
     }
 
@@ -195,7 +199,7 @@ impl App {
                         .and_then(|(path, _)| path.split('/').next())
                         .unwrap_or("the folder")
                         .to_string();
-                    self.start_pack(name, CaptureInput::Files(files), ctx);
+                    self.offer_pack(name, CaptureInput::Files(files), ctx);
                     continue;
                 }
                 Incoming::Folder(Err(e)) => {
@@ -223,7 +227,7 @@ impl App {
             // is refused by the packer, which says what layouts it knows).
             if !is_labels && zip_magic(&bytes) && !packing::is_scene_archive(&bytes) {
                 let capture = name.trim_end_matches(".zip").trim_end_matches(".ZIP").to_string();
-                self.start_pack(capture, CaptureInput::Zip { name, bytes }, ctx);
+                self.offer_pack(capture, CaptureInput::Zip { name, bytes }, ctx);
                 continue;
             }
             let source = SceneSource::File {
@@ -239,11 +243,36 @@ impl App {
         }
     }
 
-    /// Packs a capture; the scene open until now closes (its training stops with its annotator).
-    fn start_pack(&mut self, name: String, input: CaptureInput, ctx: &egui::Context) {
-        self.packed = None;
+    /// Shows the pack settings of a capture (the `pack-` page options first) with an estimate;
+    /// nothing changes until the user starts packing.
+    fn offer_pack(&mut self, name: String, input: CaptureInput, ctx: &egui::Context) {
         let opts = packing::pack_options(&self.options);
-        self.stage = Stage::Packing(ScenePack::start(name, input, opts, ctx.clone(), self.repaint_ms()));
+        self.setup = Some(PackSetup::new(name, input, opts, ctx));
+    }
+
+    /// The pack settings, while shown: *Start* packs, *Cancel* leaves the page as it was.
+    fn show_setup(&mut self, ctx: &egui::Context) {
+        let Some(setup) = &mut self.setup else {
+            return;
+        };
+        match setup.show(ctx) {
+            SetupOutcome::Open => return,
+            SetupOutcome::Start(start) => {
+                // The scene open until now closes (its training stops with its annotator).
+                self.packed = None;
+                let PackStart {
+                    name,
+                    input,
+                    opts,
+                    estimate,
+                } = *start;
+                let pack = ScenePack::start(name, input, opts, estimate, ctx.clone(), self.repaint_ms());
+                self.stage = Stage::Packing(pack);
+            }
+            SetupOutcome::Cancel => {}
+        }
+        self.setup = None;
+        packing::set_body_attribute("data-pack-setup", None);
     }
 }
 
@@ -255,6 +284,7 @@ impl App {
             && let Some(outcome) = pack.take_result()
         {
             let name = pack.name().to_string();
+            let (measured, estimate, memory) = (pack.measured(), pack.estimate().cloned(), pack.memory_growth());
             self.stage = match outcome {
                 None => Stage::Cancelled { name },
                 Some(Err(e)) => Stage::Failed {
@@ -268,6 +298,28 @@ impl App {
                     report.extend(packed.features.iter().cloned());
                     report.push(format!("packed {name} ({:?} layout)", packed.layout));
                     report.push(packed.summary.trim_end().to_string());
+                    report.push(format!(
+                        "packed in {:.1} s (reading {:.1} s, frames {:.1} s, features {:.1} s, autoencoder {:.1} s, \
+                         writing {:.1} s), archive {} bytes, the page's memory grew by {} bytes",
+                        measured.total(),
+                        measured.reading,
+                        measured.frames,
+                        measured.features,
+                        measured.autoencoder,
+                        measured.writing,
+                        packed.archive.len(),
+                        memory
+                    ));
+                    if let Some(e) = &estimate {
+                        report.push(format!(
+                            "estimated: {} frames, {:.1} s, archive {} bytes, memory {} bytes",
+                            e.frames,
+                            e.seconds.total(),
+                            e.archive_bytes,
+                            e.memory_bytes
+                        ));
+                    }
+                    publish_pack_result(&measured, packed.archive.len(), memory, estimate.as_ref());
                     let report = report.join("\n");
                     web_sys::console::log_1(&report.clone().into());
                     let source = SceneSource::File {
@@ -409,7 +461,8 @@ impl eframe::App for App {
                 (i.key_pressed(egui::Key::Escape), plain && i.key_pressed(egui::Key::A))
             })
         };
-        if let (true, Stage::Packing(pack)) = (escape, &self.stage) {
+        // With the pack settings open, Escape closes them (and leaves packing alone).
+        if let (true, None, Stage::Packing(pack)) = (escape, &self.setup, &self.stage) {
             pack.cancel();
         }
         let save_archive = save_archive || (save_key && matches!(self.stage, Stage::Annotating(_)));
@@ -436,6 +489,7 @@ impl eframe::App for App {
             Stage::Failed { title, message } => show_failure(ui, title, message),
             Stage::Cancelled { name } => show_cancelled(ui, name),
         }
+        self.show_setup(&ctx);
         show_drop_hint(&ctx);
     }
 }
@@ -518,26 +572,8 @@ fn progress_panel(ui: &mut egui::Ui, text: String, fraction: Option<f32>, below:
 }
 
 fn show_packing(ui: &mut egui::Ui, pack: &ScenePack) {
-    let (status, (text, fraction)) = pack.with_phase(|phase| {
-        let status = match *phase {
-            PackPhase::Reading { done, total, .. } => ("reading", done, total),
-            PackPhase::Packing(packing_progress) => {
-                use crate::features::BakeProgress;
-                use crate::features::pack::PackProgress;
-                match packing_progress {
-                    PackProgress::Importing { done, total } => ("frames", done, total),
-                    PackProgress::Features(BakeProgress::Extracting { done, total }) => ("features", done, total),
-                    PackProgress::Features(BakeProgress::Fitting { step, steps, .. }) => {
-                        ("autoencoder", step as usize, steps as usize)
-                    }
-                    PackProgress::Features(BakeProgress::Encoding) => ("features", 0, 0),
-                    PackProgress::Writing => ("writing", 0, 0),
-                }
-            }
-            PackPhase::Finished(_) | PackPhase::Cancelled | PackPhase::Taken => ("writing", 0, 0),
-        };
-        (status, packing::describe(pack.name(), phase))
-    });
+    let (status, (text, fraction)) =
+        pack.with_phase(|phase| (packing::stage(phase), packing::describe(pack.name(), phase)));
     page_status::set(&PageStatus::Packing {
         stage: status.0,
         done: status.1,
@@ -604,4 +640,25 @@ fn zip_magic(bytes: &[u8]) -> bool {
 
 fn megabytes(bytes: u64) -> String {
     format!("{:.1} MB", bytes as f64 / 1e6)
+}
+
+/// Puts how long packing took, stage by stage, and what the settings form estimated on
+/// `<body data-pack-result="...">` for scripts (docs/web-app.md, "For scripts").
+fn publish_pack_result(
+    measured: &crate::features::pack::PackSeconds,
+    archive_bytes: usize,
+    memory_growth: u64,
+    estimate: Option<&crate::features::pack::PackEstimate>,
+) {
+    let value = serde_json::json!({
+        "seconds": measured.total(),
+        "stages": {
+            "reading": measured.reading, "frames": measured.frames, "features": measured.features,
+            "autoencoder": measured.autoencoder, "writing": measured.writing,
+        },
+        "archive_bytes": archive_bytes,
+        "memory_growth_bytes": memory_growth,
+        "estimate": estimate.map(packing::estimate_json),
+    });
+    packing::set_body_attribute("data-pack-result", Some(&value.to_string()));
 }

@@ -119,6 +119,381 @@ pub async fn pack_files<P: Pause>(
     })
 }
 
+/// Extensions of the files a capture is read from; anything else in the folder (COLMAP's
+/// `database.db`, meshes, videos) is never read into the page's memory.
+pub const CAPTURE_EXTENSIONS: &[&str] = &["jpg", "jpeg", "png", "txt", "json", "bin"];
+
+/// Whether the importers may read `path` (by its extension, [`CAPTURE_EXTENSIONS`]).
+pub fn is_capture_file(path: &str) -> bool {
+    path.rsplit_once('.')
+        .is_some_and(|(_, ext)| CAPTURE_EXTENSIONS.contains(&ext.to_ascii_lowercase().as_str()))
+}
+
+/// What a capture's list of files says before any is read: how many colour images it has, so
+/// the page can estimate what packing will cost before it starts. A guess from names alone: the
+/// importer decides (a COLMAP model may register fewer photos than `images/` holds, a
+/// `transforms.json` may list fewer frames than its folder has images).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CaptureSurvey {
+    /// Colour images found.
+    pub images: usize,
+    /// Index (in the list surveyed) of the first colour image by path: its header gives the
+    /// frames' size.
+    pub first_image: Option<usize>,
+    /// Bytes of the files the page reads (images and model files, [`is_capture_file`]).
+    pub capture_bytes: u64,
+    /// Of those, the bytes of files that are not images (camera, pose and model files), which
+    /// the importer parses whatever frames it keeps.
+    pub model_bytes: u64,
+    /// Where the images were found, for the estimate's caption (`images/`, `color/`, ...).
+    pub found_in: String,
+    /// The capture has depth images (a depth folder, `*.depth.png`), packed beside each frame.
+    pub dense_depth: bool,
+}
+
+const IMAGE_EXTENSIONS: &[&str] = &["jpg", "jpeg", "png"];
+/// Folders whose images are not the frames' colour.
+const NOT_COLOUR_DIRS: &[&str] = &[
+    "depth",
+    "masks",
+    "mask",
+    "gt",
+    "semantic",
+    "sparse",
+    "normals",
+    "pose",
+    "intrinsic",
+];
+
+/// Surveys a capture from its files' paths (`/`-separated, any prefix) and sizes.
+pub fn survey_capture<'a>(files: impl IntoIterator<Item = (&'a str, u64)>) -> CaptureSurvey {
+    let files: Vec<(&str, u64)> = files.into_iter().collect();
+    let capture_bytes = files.iter().filter(|(p, _)| is_capture_file(p)).map(|&(_, b)| b).sum();
+    let is_image = |path: &str| {
+        path.rsplit_once('.')
+            .is_some_and(|(_, e)| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+    };
+    let model_bytes = files
+        .iter()
+        .filter(|(p, _)| is_capture_file(p) && !is_image(p))
+        .map(|&(_, b)| b)
+        .sum();
+    let dirs = |path: &str| -> Vec<String> {
+        let mut parts: Vec<String> = path.split('/').map(|c| c.to_ascii_lowercase()).collect();
+        parts.pop();
+        parts
+    };
+    let name = |path: &str| path.rsplit('/').next().unwrap_or(path).to_ascii_lowercase();
+    let images: Vec<usize> = (0..files.len())
+        .filter(|&i| {
+            let n = name(files[i].0);
+            n.rsplit_once('.').is_some_and(|(_, e)| IMAGE_EXTENSIONS.contains(&e)) && !n.starts_with('.')
+        })
+        .collect();
+    let dense_depth = images
+        .iter()
+        .any(|&i| dirs(files[i].0).iter().any(|d| d == "depth") || name(files[i].0).contains(".depth."));
+    // The colour folder of each layout, most specific first (ScanNet, autolabel, COLMAP and most
+    // transforms.json captures, 7-Scenes); else every image that is not depth, a mask or ground truth.
+    let in_dir = |i: usize, dir: &str| dirs(files[i].0).iter().any(|d| d == dir);
+    let mut found = None;
+    for (label, dir) in [("color/", "color"), ("rgb/", "rgb"), ("images/", "images")] {
+        let chosen: Vec<usize> = images.iter().copied().filter(|&i| in_dir(i, dir)).collect();
+        if !chosen.is_empty() {
+            found = Some((label.to_string(), chosen));
+            break;
+        }
+    }
+    let seven_scenes: Vec<usize> = images
+        .iter()
+        .copied()
+        .filter(|&i| name(files[i].0).contains(".color."))
+        .collect();
+    let (found_in, mut chosen) = match found {
+        Some(f) => f,
+        None if !seven_scenes.is_empty() => ("*.color.*".to_string(), seven_scenes),
+        None => {
+            let colour = images
+                .iter()
+                .copied()
+                .filter(|&i| {
+                    let n = name(files[i].0);
+                    !dirs(files[i].0).iter().any(|d| NOT_COLOUR_DIRS.contains(&d.as_str()))
+                        && !["depth", "normal", "mask", "alpha"].iter().any(|w| n.contains(w))
+                })
+                .collect();
+            ("the folder".to_string(), colour)
+        }
+    };
+    chosen.sort_by_key(|&i| files[i].0);
+    CaptureSurvey {
+        images: chosen.len(),
+        first_image: chosen.first().copied(),
+        capture_bytes,
+        model_bytes,
+        found_in,
+        dense_depth,
+    }
+}
+
+/// The frames' size after `--max-size` (the importers' rule: only ever smaller, aspect kept).
+pub fn packed_size(source: (u32, u32), max_side: Option<u32>) -> (u32, u32) {
+    let (w, h) = source;
+    let longest = w.max(h);
+    match max_side {
+        Some(m) if m > 0 && longest > m => {
+            let s = m as f64 / longest as f64;
+            let side = |v: u32| ((v as f64 * s).round() as u32).clamp(1, m);
+            (side(w), side(h))
+        }
+        _ => (w, h),
+    }
+}
+
+/// What packing a capture will cost, worked out before it starts ([`estimate_pack`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PackEstimate {
+    /// Frames packed (of the images found, after `every` and `max_frames`).
+    pub frames: usize,
+    /// Each frame's size in the archive.
+    pub size: (u32, u32),
+    /// Feature cells per frame (columns, rows), when features are packed.
+    pub grid: Option<(u32, u32)>,
+    pub archive_bytes: u64,
+    /// The page's memory at the peak of packing (the capture's files, the decoded frames, the
+    /// feature maps and codes, the archive and its copy opened for annotation).
+    pub memory_bytes: u64,
+    /// Seconds of packing, by stage: reading the files, decoding frames, features, the
+    /// autoencoder (and encoding the codes), writing the archive.
+    pub seconds: PackSeconds,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PackSeconds {
+    pub reading: f64,
+    pub frames: f64,
+    pub features: f64,
+    pub autoencoder: f64,
+    pub writing: f64,
+}
+
+impl PackSeconds {
+    pub fn total(&self) -> f64 {
+        self.reading + self.frames + self.features + self.autoencoder + self.writing
+    }
+}
+
+/// Per-unit costs of packing in the page, and the archive's bytes per pixel: fitted to five
+/// packs of the COLMAP capture (52 photos of 800 x 800, 4.3 MB of model text) in headless
+/// Chromium on SwiftShader, on a loaded 2-core machine, 2026-12 (6 frames at 64, 96 and 192
+/// pixels, 13 at 320, 26 at 96; stride 4 and 8; 100 to 1000 steps), then checked against two
+/// more (52 frames at 640, the page's defaults: 62 s packed, 67 s estimated; 18 frames at 256:
+/// 20 s and 25 s; docs/web-app.md, "Packing in the page"). They are wall-clock costs of the
+/// page, whose every repaint there takes up to a second that packing waits behind, so a fixed
+/// part per stage is in them; with a GPU the page packs quicker. Within about a third of what
+/// was measured for those packs; the page says the time is an estimate.
+pub mod costs {
+    /// Copying the chosen files into the page.
+    pub const READ_NS_PER_BYTE: f64 = 40.0;
+    /// Parsing the capture's model and camera files (COLMAP's `images.txt` and `points3D.txt`:
+    /// 0.9 s for 4.3 MB).
+    pub const MODEL_NS_PER_BYTE: f64 = 210.0;
+    /// Decoding a frame's image, per pixel of the source image (0.2 s a frame of 800 x 800).
+    pub const DECODE_NS_PER_SOURCE_PIXEL: f64 = 310.0;
+    /// Per pixel of the packed frame: resampling, undistortion, depth, ground truth.
+    pub const IMPORT_NS_PER_PIXEL: f64 = 700.0;
+    /// Baseline features: a fixed part, and per pixel of the packed frames.
+    pub const FEATURES_FIXED_S: f64 = 2.5;
+    pub const FEATURES_NS_PER_PIXEL: f64 = 600.0;
+    /// One step of the feature autoencoder (256 cells a batch, 30 -> 128 -> 64 -> 128 -> 30):
+    /// 3 ms of work, 15 ms of the page's time once the fit is long enough for repaints.
+    pub const AUTOENCODER_MS_PER_STEP: f64 = 15.0;
+    /// Encoding every cell once the autoencoder is fitted.
+    pub const ENCODE_NS_PER_CELL: f64 = 5_000.0;
+    /// Writing the archive: a fixed part, and PNG encoding per pixel of the packed frames.
+    pub const WRITE_FIXED_S: f64 = 0.1;
+    pub const WRITE_NS_PER_PIXEL: f64 = 400.0;
+    /// A photo as a PNG, per pixel (the COLMAP capture's photos at 96, 320 and 640 pixels:
+    /// 1.6-1.8, 1.3-1.4 and about 1.1; downscaled photos compress little).
+    pub const RGB_BYTES_PER_PIXEL: f64 = 1.3;
+    /// Dense depth as a 16-bit PNG, per pixel; sparse depth (COLMAP's points) is mostly zeros
+    /// (0.1-0.4 with its ground truth masks, by size).
+    pub const DENSE_DEPTH_BYTES_PER_PIXEL: f64 = 1.3;
+    pub const SPARSE_DEPTH_BYTES_PER_PIXEL: f64 = 0.15;
+    /// Dimensions of a feature code, as half floats in the archive.
+    pub const CODE_DIM: u64 = 64;
+    /// What deflate leaves of the codes (0.62 for the COLMAP capture's).
+    pub const CODE_COMPRESSION: f64 = 0.65;
+}
+
+/// Estimates what packing `survey`'s capture with `opts` costs, its frames being `source` pixels
+/// (the first image's size).
+pub fn estimate_pack(survey: &CaptureSurvey, source: (u32, u32), opts: &PackOptions) -> PackEstimate {
+    use costs::*;
+    let every = opts.import.every.max(1) as usize;
+    let mut frames = survey.images.div_ceil(every);
+    if let Some(m) = opts.import.max_frames {
+        frames = frames.min(m as usize);
+    }
+    let size = packed_size(source, opts.import.max_size);
+    let pixels = size.0 as f64 * size.1 as f64;
+    let source_pixels = source.0 as f64 * source.1 as f64;
+    let n = frames as f64;
+    let grid = opts
+        .features
+        .map(|f| (size.0.div_ceil(f.stride.max(1)), size.1.div_ceil(f.stride.max(1))));
+    let cells = grid.map_or(0.0, |(w, h)| w as f64 * h as f64 * n);
+    let depth_bytes = if survey.dense_depth {
+        DENSE_DEPTH_BYTES_PER_PIXEL
+    } else {
+        SPARSE_DEPTH_BYTES_PER_PIXEL
+    };
+    let code_bytes = cells * CODE_DIM as f64 * 2.0;
+    let archive = n * pixels * (RGB_BYTES_PER_PIXEL + depth_bytes) + code_bytes * CODE_COMPRESSION + 4096.0 + n * 300.0;
+    let input_dim = 30.0;
+    let memory = survey.capture_bytes as f64
+        // One source image decoded and resized at a time.
+        + source_pixels * 3.0 * 2.0
+        // The frames: colour, depth (f32), ground truth.
+        + n * pixels * (3.0 + 4.0 + 1.0)
+        // Feature maps and the codes (f32 while encoding).
+        + cells * (input_dim * 4.0 + CODE_DIM as f64 * 4.0)
+        // The archive, and the scene opened from it (colour, depth, ground truth, codes).
+        + archive
+        + n * pixels * 6.0
+        + code_bytes;
+    let seconds = PackSeconds {
+        reading: survey.capture_bytes as f64 * READ_NS_PER_BYTE * 1e-9,
+        frames: (survey.model_bytes as f64 * MODEL_NS_PER_BYTE
+            + n * (source_pixels * DECODE_NS_PER_SOURCE_PIXEL + pixels * IMPORT_NS_PER_PIXEL))
+            * 1e-9,
+        features: if opts.features.is_some() {
+            FEATURES_FIXED_S + n * pixels * FEATURES_NS_PER_PIXEL * 1e-9
+        } else {
+            0.0
+        },
+        autoencoder: opts.features.map_or(0.0, |f| {
+            f.autoencoder_steps.max(1) as f64 * AUTOENCODER_MS_PER_STEP * 1e-3 + cells * ENCODE_NS_PER_CELL * 1e-9
+        }),
+        writing: WRITE_FIXED_S + n * pixels * WRITE_NS_PER_PIXEL * 1e-9,
+    };
+    PackEstimate {
+        frames,
+        size,
+        grid,
+        archive_bytes: archive as u64,
+        memory_bytes: memory as u64,
+        seconds,
+    }
+}
+
+/// The pack settings as a user types them (the page's form), each checked as the page options
+/// of the same name are (`#pack-size=` and the others; docs/web-app.md).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PackForm {
+    /// Longest side in pixels.
+    pub max_size: String,
+    /// Every N-th frame.
+    pub every: String,
+    /// At most N frames; empty for all.
+    pub max_frames: String,
+    /// Bake baseline features.
+    pub features: bool,
+    /// Pixels per feature cell.
+    pub stride: String,
+    pub steps: String,
+}
+
+/// A setting of the form that cannot be used, and why.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FormError {
+    /// `max_size`, `every`, `max_frames`, `stride` or `steps`.
+    pub field: &'static str,
+    pub message: String,
+}
+
+impl PackForm {
+    /// The form filled in with `opts`.
+    pub fn from_options(opts: &PackOptions) -> PackForm {
+        let i = &opts.import;
+        PackForm {
+            max_size: i.max_size.map_or(String::new(), |s| s.to_string()),
+            every: i.every.to_string(),
+            max_frames: i.max_frames.map_or(String::new(), |m| m.to_string()),
+            features: opts.features.is_some(),
+            stride: opts.features.map_or(String::from("8"), |f| f.stride.to_string()),
+            steps: opts
+                .features
+                .map_or(String::from("1000"), |f| f.autoencoder_steps.to_string()),
+        }
+    }
+
+    /// The options the form asks for, on top of `base` (its other import options), or what is
+    /// wrong with it, field by field.
+    pub fn options(&self, base: &PackOptions) -> Result<PackOptions, Vec<FormError>> {
+        let mut errors = Vec::new();
+        let mut number = |field: &'static str, text: &str, range: std::ops::RangeInclusive<u32>, what: &str| {
+            let text = text.trim();
+            match text.parse::<u32>() {
+                Ok(n) if range.contains(&n) => Some(n),
+                _ => {
+                    errors.push(FormError {
+                        field,
+                        message: if text.is_empty() {
+                            format!("give {what}")
+                        } else {
+                            format!("{text:?} is not {what}")
+                        },
+                    });
+                    None
+                }
+            }
+        };
+        let max_size = number(
+            "max_size",
+            &self.max_size,
+            8..=crate::scene::archive::limits::MAX_SIDE,
+            "a longest side from 8 to 8192 pixels",
+        );
+        let every = number("every", &self.every, 1..=u32::MAX, "a whole number from 1");
+        let max_frames = if self.max_frames.trim().is_empty() {
+            Some(None)
+        } else {
+            number(
+                "max_frames",
+                &self.max_frames,
+                1..=u32::MAX,
+                "a whole number of frames from 1 (empty: all)",
+            )
+            .map(Some)
+        };
+        let features = if self.features {
+            let stride = number("stride", &self.stride, 1..=64, "a cell of 1 to 64 pixels");
+            let steps = number("steps", &self.steps, 1..=100_000, "a number of steps from 1 to 100000");
+            stride.zip(steps).map(|(stride, autoencoder_steps)| {
+                Some(BaselineFeatures {
+                    stride,
+                    autoencoder_steps,
+                })
+            })
+        } else {
+            Some(None)
+        };
+        match (max_size, every, max_frames, features) {
+            (Some(max_size), Some(every), Some(max_frames), Some(features)) if errors.is_empty() => Ok(PackOptions {
+                import: ImportOptions {
+                    max_size: Some(max_size),
+                    every,
+                    max_frames,
+                    ..base.import.clone()
+                },
+                features,
+            }),
+            _ => Err(errors),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -214,5 +589,135 @@ mod tests {
             .unwrap()
             .to_string();
         assert!(err.starts_with("cap/transforms.json: "), "{err}");
+    }
+
+    #[test]
+    fn a_survey_counts_each_layouts_colour_images() {
+        let colmap = [
+            ("cap/images/b.JPG", 100),
+            ("cap/images/a.JPG", 100),
+            ("cap/masks/a.JPG.png", 10),
+            ("cap/sparse/0/images.txt", 5),
+            ("cap/database.db", 1000),
+        ];
+        let s = survey_capture(colmap);
+        assert_eq!(
+            (s.images, s.first_image, s.capture_bytes, s.model_bytes),
+            (2, Some(1), 215, 5)
+        );
+        assert_eq!((s.found_in.as_str(), s.dense_depth), ("images/", false));
+        let scannet = [
+            ("s/color/0.jpg", 1),
+            ("s/depth/0.png", 1),
+            ("s/color/1.jpg", 1),
+            ("s/depth/1.png", 1),
+            ("s/pose/0.txt", 1),
+        ];
+        let s = survey_capture(scannet);
+        assert_eq!((s.images, s.found_in.as_str(), s.dense_depth), (2, "color/", true));
+        let seven = [("f/frame-000000.color.png", 1), ("f/frame-000000.depth.png", 1)];
+        assert_eq!(survey_capture(seven).images, 1);
+        let lego = [
+            ("lego/transforms_train.json", 1),
+            ("lego/train/r_0.png", 1),
+            ("lego/test/r_0.png", 1),
+            ("lego/test/r_0_depth_0000.png", 1),
+            ("lego/test/r_0_normal_0000.png", 1),
+        ];
+        let s = survey_capture(lego);
+        assert_eq!((s.images, s.found_in.as_str()), (2, "the folder"));
+        assert_eq!(survey_capture([("x/notes.md", 3)]).images, 0);
+    }
+
+    #[test]
+    fn the_estimate_follows_the_settings() {
+        let survey = CaptureSurvey {
+            images: 52,
+            first_image: Some(0),
+            capture_bytes: 9_000_000,
+            model_bytes: 4_000_000,
+            found_in: "images/".into(),
+            dense_depth: false,
+        };
+        let mut opts = PackOptions {
+            import: ImportOptions {
+                max_size: Some(96),
+                every: 9,
+                ..Default::default()
+            },
+            features: Some(BaselineFeatures {
+                stride: 4,
+                autoencoder_steps: 100,
+            }),
+        };
+        let a = estimate_pack(&survey, (800, 600), &opts);
+        assert_eq!((a.frames, a.size, a.grid), (6, (96, 72), Some((24, 18))));
+        // Larger frames: more bytes, memory and time; fewer frames: less.
+        opts.import.max_size = Some(320);
+        let b = estimate_pack(&survey, (800, 600), &opts);
+        assert_eq!(b.size, (320, 240));
+        assert!(b.archive_bytes > 5 * a.archive_bytes && b.memory_bytes > a.memory_bytes);
+        assert!(b.seconds.total() > a.seconds.total());
+        opts.import.max_frames = Some(2);
+        assert_eq!(estimate_pack(&survey, (800, 600), &opts).frames, 2);
+        // Never upscaled; no features: no grid, no autoencoder.
+        opts.import.max_size = Some(2000);
+        opts.features = None;
+        let c = estimate_pack(&survey, (800, 600), &opts);
+        assert_eq!((c.size, c.grid, c.seconds.autoencoder), ((800, 600), None, 0.0));
+        // The autoencoder's time grows with its steps.
+        let steps = |n| {
+            let mut o = opts.clone();
+            o.features = Some(BaselineFeatures {
+                stride: 8,
+                autoencoder_steps: n,
+            });
+            estimate_pack(&survey, (800, 600), &o).seconds.autoencoder
+        };
+        assert!(steps(3000) > 2.0 * steps(1000));
+    }
+
+    #[test]
+    fn the_form_reads_the_settings_and_names_bad_ones() {
+        let base = PackOptions {
+            import: ImportOptions {
+                max_size: Some(640),
+                ..Default::default()
+            },
+            features: Some(BaselineFeatures {
+                stride: 8,
+                autoencoder_steps: 1000,
+            }),
+        };
+        let mut form = PackForm::from_options(&base);
+        assert_eq!(
+            (form.max_size.as_str(), form.every.as_str(), form.max_frames.as_str()),
+            ("640", "1", "")
+        );
+        assert_eq!(form.options(&base).unwrap(), base);
+        form.max_size = " 120 ".into();
+        form.max_frames = "5".into();
+        form.features = false;
+        let o = form.options(&base).unwrap();
+        assert_eq!(
+            (o.import.max_size, o.import.max_frames, o.features),
+            (Some(120), Some(5), None)
+        );
+        form.max_size = "4".into();
+        form.every = "0".into();
+        form.max_frames = "x".into();
+        form.features = true;
+        form.stride = "".into();
+        form.steps = "100001".into();
+        let errors = form.options(&base).unwrap_err();
+        let fields: Vec<_> = errors.iter().map(|e| e.field).collect();
+        assert_eq!(fields, ["max_size", "every", "max_frames", "stride", "steps"]);
+        assert_eq!(errors[0].message, "\"4\" is not a longest side from 8 to 8192 pixels");
+        assert_eq!(errors[3].message, "give a cell of 1 to 64 pixels");
+        // Without features their fields are not looked at.
+        form = PackForm::from_options(&base);
+        form.features = false;
+        form.stride = "x".into();
+        assert!(form.options(&base).is_ok());
     }
 }

@@ -361,3 +361,62 @@ export async function drawFrameStroke(page, stroke, w, h) {
   for (const p of rest) await page.mouse.move(...p);
   await page.mouse.up();
 }
+
+/// The pack settings form shown when a capture is picked or dropped (`data-pack-setup`:
+/// src/app/packing/setup.rs), or null when it is not shown.
+export async function packSetup(page) {
+  return page.evaluate(() => {
+    const s = document.body.dataset.packSetup;
+    return s ? JSON.parse(s) : null;
+  });
+}
+
+/// Waits until the pack settings form (or its absence, null) satisfies `predicate`; returns it.
+export async function waitForPackSetup(page, predicate, what, timeoutMs) {
+  const start = Date.now();
+  let last = null;
+  while (Date.now() - start < timeoutMs) {
+    last = await packSetup(page);
+    if (predicate(last)) return last;
+    await new Promise((r) => setTimeout(r, 250));
+  }
+  throw new Error(`waiting for ${what}: timed out after ${timeoutMs / 1000} s; the pack settings are ` +
+    JSON.stringify(last && { values: last.values, errors: last.errors, estimate: last.estimate }));
+}
+
+/// Clicks the middle of a control of the pack settings form (`rects` in data-pack-setup).
+export async function clickPackControl(page, control) {
+  const setup = await packSetup(page);
+  assert(setup && setup.rects[control], `no pack settings control ${control}: ${JSON.stringify(setup)}`);
+  const [x, y, w, h] = setup.rects[control];
+  await page.mouse.click(x + w / 2, y + h / 2);
+}
+
+/// Types `value` into a field of the pack settings form in place of what it holds, and waits
+/// until the form has it.
+export async function setPackField(page, field, value) {
+  const before = (await packSetup(page)).values[field];
+  await clickPackControl(page, field);
+  await page.keyboard.press("End");
+  for (let i = 0; i < before.length; i++) await page.keyboard.press("Backspace");
+  await page.keyboard.type(value);
+  return waitForPackSetup(page, (s) => s && s.values[field] === value, `${field} = ${value} in the pack settings`,
+    60_000);
+}
+
+/// Waits for the pack settings of a capture just picked or dropped, then starts packing with
+/// them (the form's Start button); returns the settings as they were.
+export async function startPack(page, timeoutMs) {
+  const setup = await waitForPackSetup(page, (s) => s && s.estimate, "the pack settings and their estimate",
+    timeoutMs);
+  // A click can be lost while the page is busy (annotate.mjs): click again.
+  for (let attempt = 1; ; attempt++) {
+    await clickPackControl(page, "start");
+    try {
+      await waitForPackSetup(page, (s) => s === null, "packing to start", 20_000);
+      return setup;
+    } catch (e) {
+      if (attempt === 3) throw e;
+    }
+  }
+}

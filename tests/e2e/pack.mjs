@@ -1,9 +1,14 @@
 // End-to-end test of packing a capture in the page (src/app/packing.rs) in headless Chromium:
 // a folder that is no capture is refused with the command line's error; then a COLMAP capture
-// folder is set on the page's folder input, packed in wasm (downscaled, a few frames, baseline
-// features), opened for annotation, scribbled on, trained until the page shows masks, and the
-// masks and the packed archive are downloaded and checked; last, a pack with a long autoencoder
-// fit is cancelled. Starts no server: run.sh does, or point E2E_URL at one.
+// folder is set on the page's folder input, its pack settings are started as the page options
+// give them, it is packed in wasm (downscaled, a few frames, baseline features), opened for
+// annotation, scribbled on, trained until the page shows masks, and the masks and the packed
+// archive are downloaded and checked; a zip of the folder and the folder itself are dropped on
+// the page (the folder through Chrome DevTools' Input.dispatchDragEvent, which hands the page
+// real directory entries) and pack to the same scene; the pack settings' estimate follows
+// changed settings, bad values are refused, Cancel leaves the open scene, and the pack uses what
+// was changed; last, a pack with a long autoencoder fit is cancelled. Starts no server: run.sh
+// does, or point E2E_URL at one.
 //
 //   E2E_URL        page to open, e.g. http://127.0.0.1:8080/ (required)
 //   E2E_CAPTURE    the capture folder, e.g. ../shared/data/alexander-colmap (required)
@@ -14,10 +19,10 @@
 //   CHROMIUM       browser binary (default /usr/bin/chromium)
 import { mkdirSync, mkdtempSync, readdirSync, readFileSync, rmSync, writeFileSync } from "node:fs";
 import { tmpdir } from "node:os";
-import { basename, join } from "node:path";
+import { basename, join, resolve } from "node:path";
 import {
-  assert, Checks, decodePng, drawFrameStroke, openPage, planFrameStrokes, readZip, runBrowserTest, settledStatus,
-  show, status, waitForStatus, writeZip,
+  assert, Checks, clickPackControl, decodePng, drawFrameStroke, openPage, packSetup, planFrameStrokes, readZip,
+  runBrowserTest, setPackField, settledStatus, show, startPack, status, waitForPackSetup, waitForStatus, writeZip,
 } from "./lib.mjs";
 
 const url = process.env.E2E_URL;
@@ -62,6 +67,51 @@ function filesUnder(dir, prefix) {
     : [[`${prefix}/${e.name}`, readFileSync(join(dir, e.name))]]);
 }
 
+/// How long the latest pack took and what its settings estimated (`data-pack-result`).
+async function packResult(page) {
+  return page.evaluate(() => JSON.parse(document.body.dataset.packResult || "null"));
+}
+
+/// Prints the estimate beside what packing took, for the record (docs/web-app.md).
+function reportEstimate(r) {
+  assert(r && r.estimate, `no pack result with an estimate: ${JSON.stringify(r)}`);
+  const e = r.estimate;
+  const stages = (x) => Object.entries(x.stages).map(([k, v]) => `${k} ${v.toFixed(1)}`).join(", ");
+  console.log(`     packed in ${r.seconds.toFixed(1)} s (${stages(r)}), archive ${r.archive_bytes} bytes, ` +
+    `wasm memory grew ${(r.memory_growth_bytes / 1e6).toFixed(1)} MB`);
+  console.log(`     estimated ${e.seconds.toFixed(1)} s (${stages(e)}), archive ${e.archive_bytes} bytes, ` +
+    `memory ${(e.memory_bytes / 1e6).toFixed(1)} MB`);
+}
+
+/// Drops a folder of this machine on the page as a user would: Chrome DevTools'
+/// Input.dispatchDragEvent with the folder's path hands the page a drop whose item is a real
+/// directory entry (webkitGetAsEntry), which index.html walks. (A DataTransfer made by a script
+/// cannot hold a directory.)
+async function dropFolder(context, page, folder) {
+  const cdp = await context.newCDPSession(page);
+  const [x, y] = await page.evaluate(() => [window.innerWidth / 2, window.innerHeight / 2]);
+  const data = { items: [], files: [resolve(folder)], dragOperationsMask: 1 };
+  for (const type of ["dragEnter", "dragOver", "drop"]) {
+    await cdp.send("Input.dispatchDragEvent", { type, x, y, data });
+  }
+  await cdp.detach();
+}
+
+/// Waits until a pack started on `page` (a page of its own: the scene open before is ready too)
+/// has finished and its scene is open.
+async function waitForPacked(page, what) {
+  const start = Date.now();
+  while (!(await packResult(page))) {
+    const t = await status(page);
+    if (t.state === "error" || t.state === "crashed") throw new Error(`waiting for ${what}: the page says ${show(t)}`);
+    assert(Date.now() - start < PACK_TIMEOUT_MS, `waiting for ${what}: not packed after ${PACK_TIMEOUT_MS / 1000} s`);
+    await new Promise((r) => setTimeout(r, 250));
+  }
+  return waitForStatus(page, (t) => t.state === "ready", what, PACK_TIMEOUT_MS);
+}
+
+let pickedSceneJson = null;
+
 await runBrowserTest("pack", {
   checks,
   consoleLog,
@@ -77,6 +127,7 @@ await runBrowserTest("pack", {
 
   await checks.check("a folder that is no capture gets the command line's error", async () => {
     await page.setInputFiles("#capture-folder", notCapture);
+    await startPack(page, PACK_TIMEOUT_MS);
     // Not waitForStatus: it stops at an error, which is what is awaited here.
     await page.waitForFunction(() => {
       try {
@@ -95,8 +146,17 @@ await runBrowserTest("pack", {
 
   const stages = [];
   await checks.check("a COLMAP capture folder packs in the page and opens for annotation", async () => {
-    const start = Date.now();
     await page.setInputFiles("#capture-folder", capturePath);
+    const setup = await startPack(page, PACK_TIMEOUT_MS);
+    const start = Date.now();
+    // The settings start as the page options give them, and the estimate says what comes.
+    const v = setup.values;
+    assert(v.max_size === "96" && v.every === "9" && v.max_frames === "" && v.features && v.stride === "4" &&
+      v.steps === "100", `the pack settings start as ${JSON.stringify(v)}, not as the page options`);
+    assert(setup.images === 52 && setup.estimate.frames === sceneJson.frames.length &&
+      setup.estimate.size[0] === W && setup.estimate.size[1] === H,
+      `the estimate is ${JSON.stringify(setup.estimate)} of ${setup.images} images; the command line packed ` +
+      `${sceneJson.frames.length} frames of ${W}x${H}`);
     // The error of the folder before stays up until packing starts.
     let packing = false;
     for (;;) {
@@ -118,6 +178,7 @@ await runBrowserTest("pack", {
     assert(s.frames === sceneJson.frames.length && s.size[0] === W && s.size[1] === H,
       `the page's scene is ${s.frames} frames of ${s.size}, the command line's ${sceneJson.frames.length} of ${W}x${H}`);
     assert(s.classes === sceneJson.classes.length, `${s.classes} classes, the command line's ${sceneJson.classes.length}`);
+    reportEstimate(await packResult(page));
   });
   await page.screenshot({ path: join(outDir, "pack-opened.png") });
 
@@ -188,6 +249,7 @@ await runBrowserTest("pack", {
     assert(packedJson.frames.length === sceneJson.frames.length && packedJson.width === W && packedJson.height === H,
       `the archive has ${packedJson.frames.length} frames of ${packedJson.width}x${packedJson.height}`);
     assert(packedJson.features, "the archive has no feature codes");
+    pickedSceneJson = packedJson;
     console.log(`     ${download.suggestedFilename()}: ${readFileSync(zipPath).length} bytes, ` +
       `features ${packedJson.features.width} x ${packedJson.features.height} x ${packedJson.features.dim}`);
   });
@@ -208,13 +270,93 @@ await runBrowserTest("pack", {
     await canvas.dispatchEvent("dragenter", { dataTransfer });
     await canvas.dispatchEvent("dragover", { dataTransfer });
     await canvas.dispatchEvent("drop", { dataTransfer });
-    await waitForStatus(dropPage, (t) => t.state === "packing", "packing to start", PACK_TIMEOUT_MS);
-    s = await waitForStatus(dropPage, (t) => t.state === "ready", "the dropped capture to open", PACK_TIMEOUT_MS);
+    await startPack(dropPage, PACK_TIMEOUT_MS);
+    s = await waitForPacked(dropPage, "the dropped capture to open");
     assert(s.frames === sceneJson.frames.length && s.size[0] === W && s.size[1] === H,
       `the dropped zip gave ${s.frames} frames of ${s.size}, the command line ${sceneJson.frames.length} of ${W}x${H}`);
     console.log(`     ${(zip.length / 1e6).toFixed(1)} MB zip dropped; ${s.frames} frames of ${s.size} (${elapsed()})`);
     await dropPage.close();
   });
+
+  await checks.check("a capture folder dropped on the page packs to the same scene", async () => {
+    const dropPage = await openPage(context, pageUrl.href, "drop-folder", consoleLog);
+    await settledStatus(dropPage, PACK_TIMEOUT_MS);
+    await dropFolder(context, dropPage, capturePath);
+    const setup = await startPack(dropPage, PACK_TIMEOUT_MS);
+    assert(setup.name === basename(capturePath) && setup.images === 52,
+      `the dropped folder is ${setup.name} with ${setup.images} images`);
+    s = await waitForPacked(dropPage, "the dropped folder to open");
+    assert(s.frames === sceneJson.frames.length && s.size[0] === W && s.size[1] === H,
+      `the dropped folder gave ${s.frames} frames of ${s.size}, the command line ${sceneJson.frames.length} of ${W}x${H}`);
+    // The very archive the folder picked with the input gave.
+    const downloadPromise = dropPage.waitForEvent("download", { timeout: 60_000 });
+    await dropPage.focus("#scribblefield");
+    await dropPage.keyboard.press("a");
+    const download = await downloadPromise;
+    const zipPath = join(outDir, `dropped-${download.suggestedFilename()}`);
+    await download.saveAs(zipPath);
+    const droppedJson = JSON.parse(readZip(readFileSync(zipPath)).get("scene.json").toString("utf8"));
+    assert(pickedSceneJson, "no archive of the picked folder to compare with (an earlier check failed)");
+    assert(JSON.stringify(droppedJson) === JSON.stringify(pickedSceneJson),
+      "the dropped folder's scene.json differs from the picked folder's");
+    console.log(`     ${setup.images} images dropped as a folder; ${s.frames} frames of ${s.size}, the same ` +
+      `scene.json as the picked folder (${elapsed()})`);
+    await dropPage.close();
+  });
+
+  await checks.check("the pack settings estimate, refuse bad values, cancel, and pack with what was changed",
+    async () => {
+      const setPage = await openPage(context, pageUrl.href, "settings", consoleLog);
+      const before = await settledStatus(setPage, PACK_TIMEOUT_MS);
+      // Cancel leaves the scene open as it was.
+      await setPage.setInputFiles("#capture-folder", capturePath);
+      await waitForPackSetup(setPage, (t) => t && t.estimate, "the pack settings", PACK_TIMEOUT_MS);
+      await clickPackControl(setPage, "cancel");
+      await waitForPackSetup(setPage, (t) => t === null, "the settings to close", 60_000);
+      s = await status(setPage);
+      assert(s.state === "ready" && s.frames === before.frames, `after Cancel the page says ${show(s)}`);
+
+      await setPage.setInputFiles("#capture-folder", capturePath);
+      const first = await waitForPackSetup(setPage, (t) => t && t.estimate, "the pack settings", PACK_TIMEOUT_MS);
+      // A bad value is named and keeps packing from starting.
+      let t = await setPackField(setPage, "max_size", "4");
+      assert(t.errors.max_size && t.errors.max_size.includes("is not a longest side from 8 to 8192 pixels") &&
+        t.estimate === null, `with a longest side of 4 the form says ${JSON.stringify(t.errors)}`);
+      await clickPackControl(setPage, "start");
+      await new Promise((r) => setTimeout(r, 3000));
+      t = await packSetup(setPage);
+      s = await status(setPage);
+      assert(t !== null && s.state === "ready" && s.frames === before.frames,
+        `Start with a bad value: settings ${t ? "shown" : "gone"}, page ${show(s)}`);
+      t = await setPackField(setPage, "max_frames", "0");
+      assert(t.errors.max_frames, `at most 0 frames is accepted: ${JSON.stringify(t.errors)}`);
+      // Smaller frames and fewer of them: the estimate follows.
+      await setPackField(setPage, "max_size", "64");
+      t = await setPackField(setPage, "max_frames", "4");
+      const size = [64, Math.round(64 * H / W)];
+      assert(Object.keys(t.errors).length === 0 && t.estimate, `the form says ${JSON.stringify(t.errors)}`);
+      assert(t.estimate.frames === 4 && t.estimate.size[0] === size[0] && t.estimate.size[1] === size[1],
+        `the estimate is ${t.estimate.frames} frames of ${t.estimate.size}, not 4 of ${size}`);
+      assert(t.estimate.archive_bytes < first.estimate.archive_bytes &&
+        t.estimate.memory_bytes < first.estimate.memory_bytes && t.estimate.seconds < first.estimate.seconds,
+        `the estimate did not shrink: ${JSON.stringify(first.estimate)} -> ${JSON.stringify(t.estimate)}`);
+      console.log(`     estimate ${first.estimate.frames} frames of ${first.estimate.size}, ` +
+        `${first.estimate.archive_bytes} bytes -> ${t.estimate.frames} of ${t.estimate.size}, ` +
+        `${t.estimate.archive_bytes} bytes`);
+      // No features: no grid.
+      await clickPackControl(setPage, "features");
+      t = await waitForPackSetup(setPage, (x) => x && !x.values.features, "features off", 60_000);
+      assert(t.estimate && t.estimate.grid === null, `without features the estimate has ${JSON.stringify(t.estimate)}`);
+      await startPack(setPage, PACK_TIMEOUT_MS);
+      s = await waitForPacked(setPage, "the capture packed with the changed settings");
+      assert(s.frames === 4 && s.size[0] === size[0] && s.size[1] === size[1],
+        `packed ${s.frames} frames of ${s.size}, the settings asked for 4 of ${size}`);
+      const result = await packResult(setPage);
+      reportEstimate(result);
+      assert(result.stages.features === 0 || result.stages.features < 0.5,
+        `features took ${result.stages.features} s though they were off`);
+      await setPage.close();
+    });
 
   await checks.check("packing can be cancelled", async () => {
     // A fit far longer than the test waits.
@@ -225,6 +367,7 @@ await runBrowserTest("pack", {
     const slowPage = await openPage(context, slow.href, "cancel", consoleLog);
     await settledStatus(slowPage, PACK_TIMEOUT_MS);
     await slowPage.setInputFiles("#capture-folder", capturePath);
+    await startPack(slowPage, PACK_TIMEOUT_MS);
     await waitForStatus(slowPage, (t) => t.state === "packing" && t.stage === "autoencoder", "the autoencoder",
       PACK_TIMEOUT_MS);
     await slowPage.focus("#scribblefield");
