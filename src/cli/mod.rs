@@ -3,6 +3,7 @@ mod ablate;
 mod bench;
 mod demo;
 mod eval;
+mod export;
 mod features;
 mod field_config;
 mod info;
@@ -44,6 +45,8 @@ enum Command {
     ScribbleFromGt(scribble::ScribbleArgs),
     /// Train the field on a scene's scribbles (headless, on the GPU) and write masks of every frame.
     Segment(segment::SegmentArgs),
+    /// Write the masks again from a field `segment --save-checkpoint` saved, without training (another resolution with --source, other refinement).
+    Export(export::ExportArgs),
     /// The paper's simulated user: click wrongly predicted pixels with their ground truth, train, score held-out frames; resumable.
     Simulate(simulate::SimulateArgs),
     /// Run the simulated user with each encoding (with and without feature supervision) and write a CSV, plots and tables.
@@ -71,6 +74,7 @@ pub fn run(cli: Cli) -> CliResult {
         Command::DemoScene(args) => demo::run(args),
         Command::ScribbleFromGt(args) => scribble::run(args),
         Command::Segment(args) => segment::run(args),
+        Command::Export(args) => export::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Simulate(args) => simulate::run(args),
         Command::Ablate(args) => ablate::run(args),

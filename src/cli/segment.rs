@@ -1,10 +1,12 @@
-use std::path::PathBuf;
+use std::error::Error;
+use std::path::{Path, PathBuf};
 
 use clap::Args;
 use scribblefield::eval::Confusion;
 use scribblefield::eval::headless::{render_and_score, train_schedule};
 use scribblefield::eval::source_size::{SourceCapture, render_at_source};
 use scribblefield::export::{MaskDirWriter, MaskSet};
+use scribblefield::field::checkpoint::TrainedOn;
 use scribblefield::field::gpu::scene_buffers::LabelIndex;
 use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::field::refine::RefineOptions;
@@ -23,9 +25,8 @@ pub struct SegmentArgs {
     /// Annotations (`labels.json`); default: the labels shipped in the archive.
     #[arg(long)]
     labels: Option<PathBuf>,
-    /// Output folder for the masks (class-id PNGs, previews, classes.json, labels.json).
-    #[arg(short, long)]
-    output: PathBuf,
+    #[command(flatten)]
+    masks: MaskArgs,
     /// Training steps with labels.
     #[arg(long, default_value_t = 500)]
     steps: u32,
@@ -36,6 +37,19 @@ pub struct SegmentArgs {
     field: FieldConfigArgs,
     #[arg(long, default_value_t = 0)]
     seed: u32,
+    /// Also write the trained field to FILE (`.safetensors`, with the archive and labels it was
+    /// trained on), so `scribblefield export FILE ARCHIVE -o DIR` writes these masks again (at
+    /// another resolution, with other refinement) without training.
+    #[arg(long, value_name = "FILE")]
+    save_checkpoint: Option<PathBuf>,
+}
+
+/// Where and how `segment` and `export` write the masks.
+#[derive(Args)]
+pub(super) struct MaskArgs {
+    /// Output folder for the masks (class-id PNGs, previews, classes.json, labels.json).
+    #[arg(short, long)]
+    output: PathBuf,
     /// Rounds of edge-aware refinement of each mask with its frame's colour and depth (0: the
     /// field's own argmax); see `field::refine`.
     #[arg(long, default_value_t = RefineOptions::default().iterations)]
@@ -49,56 +63,12 @@ pub struct SegmentArgs {
 
 pub fn run(mut args: SegmentArgs) -> CliResult {
     let mut scene = read_archive_path(&args.archive)?;
-    let labels = match &args.labels {
-        Some(path) => {
-            let text = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
-            LabelSet::from_json(&text, &path.display().to_string(), scene.frames.len() as u32)?
-        }
-        None => scene.labels.clone().ok_or_else(|| {
-            format!(
-                "{}: ships no labels; give --labels (e.g. from `scribble-from-gt`)",
-                args.archive.display()
-            )
-        })?,
-    };
-    if labels.classes.is_empty() {
-        return Err("labels define no classes".into());
-    }
+    let labels = read_labels(args.labels.as_deref(), &scene, &args.archive)?;
     args.field.check()?;
-    let refine = RefineOptions {
-        iterations: args.refine_iterations,
-        ..RefineOptions::default()
-    };
-    refine.validate()?;
-    let archive_name = args.archive.display().to_string();
-    let source = match &args.source {
-        Some(dir) => {
-            let bar = progress::bar("reading");
-            let capture = SourceCapture::check(&scene, &archive_name, dir, &mut |done, total| {
-                bar.set_length(total as u64);
-                bar.set_position(done as u64);
-            })?;
-            bar.finish_and_clear();
-            println!(
-                "source: {} ({} layout), all {} frames found with the archive's poses; masks at {} x {} (the archive is {} x {})",
-                dir.display(),
-                capture.layout.name(),
-                scene.frames.len(),
-                capture.width,
-                capture.height,
-                scene.width,
-                scene.height
-            );
-            if capture.background != Background::default() {
-                println!(
-                    "source: transparent pixels composited on {}, as when the archive was packed",
-                    capture.background.name()
-                );
-            }
-            Some(capture)
-        }
-        None => None,
-    };
+    if let Some(file) = &args.save_checkpoint {
+        check_checkpoint_path(file)?;
+    }
+    let masks = args.masks.check(&scene, &args.archive)?;
 
     let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
     eprintln!("training on {}", ctx.describe());
@@ -147,18 +117,152 @@ pub fn run(mut args: SegmentArgs) -> CliResult {
         );
     }
 
+    if let Some(file) = &args.save_checkpoint {
+        save_checkpoint(&trainer, file, &args.archive, &scene, args.seed, &labels)?;
+    }
+    write_masks(&mut trainer, &scene, &labels, &masks)
+}
+
+/// The annotations: `--labels FILE` (`path`), else those shipped in `archive`.
+pub(super) fn read_labels(path: Option<&Path>, scene: &Scene, archive: &Path) -> Result<LabelSet, Box<dyn Error>> {
+    let labels = match path {
+        Some(path) => {
+            let text = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+            LabelSet::from_json(&text, &path.display().to_string(), scene.frames.len() as u32)?
+        }
+        None => scene.labels.clone().ok_or_else(|| {
+            format!(
+                "{}: ships no labels; give --labels (e.g. from `scribble-from-gt`)",
+                archive.display()
+            )
+        })?,
+    };
+    if labels.classes.is_empty() {
+        return Err("labels define no classes".into());
+    }
+    Ok(labels)
+}
+
+impl MaskArgs {
+    /// Checks the refinement and finds the `--source` capture's frames for `scene` (read from
+    /// `archive`): before any GPU work, and before the output folder is created.
+    pub(super) fn check<'a>(&'a self, scene: &Scene, archive: &'a Path) -> Result<Masks<'a>, Box<dyn Error>> {
+        let refine = RefineOptions {
+            iterations: self.refine_iterations,
+            ..RefineOptions::default()
+        };
+        refine.validate()?;
+        let source = match &self.source {
+            Some(dir) => Some(check_source(scene, archive, dir)?),
+            None => None,
+        };
+        Ok(Masks {
+            archive,
+            output: &self.output,
+            refine,
+            source,
+        })
+    }
+}
+
+/// Finds every frame of `scene` (read from `archive`) in the capture at `dir` (`--source`),
+/// before any training or rendering, and says what the masks will be.
+fn check_source(scene: &Scene, archive: &Path, dir: &Path) -> Result<SourceCapture, Box<dyn Error>> {
+    let bar = progress::bar("reading");
+    let archive_name = archive.display().to_string();
+    let capture = SourceCapture::check(scene, &archive_name, dir, &mut |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })?;
+    bar.finish_and_clear();
+    println!(
+        "source: {} ({} layout), all {} frames found with the archive's poses; masks at {} x {} (the archive is {} x {})",
+        dir.display(),
+        capture.layout.name(),
+        scene.frames.len(),
+        capture.width,
+        capture.height,
+        scene.width,
+        scene.height
+    );
+    if capture.background != Background::default() {
+        println!(
+            "source: transparent pixels composited on {}, as when the archive was packed",
+            capture.background.name()
+        );
+    }
+    Ok(capture)
+}
+
+/// A checkpoint is written only where it can be, to a `.safetensors` file: checked before
+/// training, so that a long run does not end in a refusal.
+fn check_checkpoint_path(file: &Path) -> CliResult {
+    let shown = file.display();
+    if file.extension().and_then(|e| e.to_str()) != Some("safetensors") {
+        return Err(format!("--save-checkpoint {shown}: the file must end in .safetensors").into());
+    }
+    if file.is_dir() {
+        return Err(format!("--save-checkpoint {shown}: is a directory").into());
+    }
+    if let Some(parent) = file.parent().filter(|p| !p.as_os_str().is_empty())
+        && !parent.is_dir()
+    {
+        return Err(format!("--save-checkpoint {shown}: folder {} does not exist", parent.display()).into());
+    }
+    Ok(())
+}
+
+/// Writes the trained field with what `export` needs ([`TrainedOn`]) to `file`, through a
+/// temporary file and a rename, so an interrupted write leaves no truncated checkpoint.
+fn save_checkpoint(
+    trainer: &Trainer,
+    file: &Path,
+    archive: &Path,
+    scene: &Scene,
+    seed: u32,
+    labels: &LabelSet,
+) -> CliResult {
+    let trained_on = TrainedOn::of_scene(&archive.display().to_string(), scene, seed, labels);
+    let checkpoint = pollster::block_on(trainer.checkpoint(trained_on.to_extra()))?;
+    let tmp = file.with_extension("safetensors.tmp");
+    std::fs::write(&tmp, checkpoint.to_bytes()).map_err(|e| format!("{}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, file).map_err(|e| format!("{}: {e}", file.display()))?;
+    println!(
+        "saved the trained field to {} (`scribblefield export {} {} -o DIR` writes masks from it without training)",
+        file.display(),
+        file.display(),
+        archive.display()
+    );
+    Ok(())
+}
+
+/// [`MaskArgs`] checked: what to write, and where.
+pub(super) struct Masks<'a> {
+    /// The archive, for messages.
+    archive: &'a Path,
+    output: &'a Path,
+    refine: RefineOptions,
+    /// Masks at this capture's resolution (`--source`), else the archive's.
+    source: Option<SourceCapture>,
+}
+
+/// Renders every frame of `scene` with `trainer`'s field and writes the masks folder (class-id
+/// PNGs, previews, classes.json, `labels` as labels.json; the classes are `labels`'), scored
+/// against the ground truth where there is some: what `segment` writes after training and
+/// `export` from a checkpoint.
+pub(super) fn write_masks(trainer: &mut Trainer, scene: &Scene, labels: &LabelSet, masks: &Masks) -> CliResult {
     let names: Vec<String> = labels.classes.iter().map(|c| c.name.clone()).collect();
-    if let Some(capture) = &source {
-        return write_at_source(&mut trainer, &scene, capture, &labels, &names, &refine, &args);
+    if let Some(capture) = &masks.source {
+        return write_at_source(trainer, scene, capture, labels, &names, masks);
     }
     let render = progress::bar("rendering");
     render.set_length(scene.frames.len() as u64);
-    let mut masks = Vec::with_capacity(scene.frames.len());
+    let mut images = Vec::with_capacity(scene.frames.len());
     let mut bad_size = false;
     let frames = 0..scene.frames.len();
-    let report = render_and_score(&mut trainer, &scene, &names, frames, &refine, |_, rendered| {
+    let report = render_and_score(trainer, scene, &names, frames, &masks.refine, |_, rendered| {
         match image::GrayImage::from_raw(scene.width, scene.height, rendered.classes) {
-            Some(mask) => masks.push(mask),
+            Some(mask) => images.push(mask),
             None => bad_size = true,
         }
         render.inc(1);
@@ -169,17 +273,17 @@ pub fn run(mut args: SegmentArgs) -> CliResult {
     }
     let set = MaskSet {
         classes: labels.classes.clone(),
-        masks,
+        masks: images,
     };
-    set.write_dir(&args.output, Some(&labels))?;
+    set.write_dir(masks.output, Some(labels))?;
     println!(
         "wrote {} masks of {} x {} (the archive's resolution; --source CAPTURE for the capture's) to {}",
         scene.frames.len(),
         scene.width,
         scene.height,
-        args.output.display()
+        masks.output.display()
     );
-    say_refinement(&refine);
+    say_refinement(&masks.refine);
     if scene.has_gt() {
         print!("{}", report.table());
     }
@@ -206,21 +310,20 @@ fn write_at_source(
     capture: &SourceCapture,
     labels: &LabelSet,
     names: &[String],
-    refine: &RefineOptions,
-    args: &SegmentArgs,
+    masks: &Masks,
 ) -> CliResult {
-    let archive_name = args.archive.display().to_string();
+    let archive_name = masks.archive.display().to_string();
     let render = progress::bar("rendering");
     render.set_length(scene.frames.len() as u64);
     let quiet = render.is_hidden();
-    let mut writer = MaskDirWriter::new(&args.output, labels.classes.clone())?;
+    let mut writer = MaskDirWriter::new(masks.output, labels.classes.clone())?;
     let mut confusion = Confusion::new(names.len());
     let mut scored = 0;
     let started = std::time::Instant::now();
     for frames in capture.chunks() {
         let source = capture.load(frames.clone(), &archive_name)?;
         for (k, i) in frames.enumerate() {
-            let mask = render_at_source(trainer, scene, i, &source, k, refine)?;
+            let mask = render_at_source(trainer, scene, i, &source, k, &masks.refine)?;
             if let Some(gt) = &source.frames[k].gt {
                 confusion.add(gt.as_raw(), mask.as_raw());
                 scored += 1;
@@ -248,10 +351,10 @@ fn write_at_source(
         capture.dir.display(),
         scene.width,
         scene.height,
-        args.output.display(),
+        masks.output.display(),
         started.elapsed().as_secs_f64()
     );
-    say_refinement(refine);
+    say_refinement(&masks.refine);
     if scored > 0 {
         println!(
             "scored against the capture's ground truth at {} x {}:",

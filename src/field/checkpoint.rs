@@ -25,7 +25,9 @@ use super::config::FieldConfig;
 use super::gpu::trainer::{Trainer, TrainerState};
 use super::params::ParamLayout;
 use crate::gpu::GpuError;
+use crate::labels::LabelSet;
 use crate::safetensors::{SafeTensors, to_bytes_with_metadata};
+use crate::scene::Scene;
 
 pub const FORMAT: &str = "scribblefield-trainer";
 pub const VERSION: &str = "1";
@@ -211,6 +213,247 @@ impl Checkpoint {
     }
 }
 
+/// Metadata keys `segment --save-checkpoint` adds ([`TrainedOn`]).
+pub mod trained_on_keys {
+    /// `segment`: which command wrote the file.
+    pub const WRITTEN_BY: &str = "written_by";
+    /// The archive's file name as it was given (for messages only).
+    pub const ARCHIVE: &str = "archive";
+    pub const FRAMES: &str = "archive_frames";
+    /// `WxH`.
+    pub const SIZE: &str = "archive_size";
+    /// [`super::scene_fingerprints`]: size, intrinsics, depth scale, bounds and every pose.
+    pub const CAMERAS: &str = "archive_cameras";
+    /// [`super::scene_fingerprints`]: every frame's colour and depth pixels.
+    pub const IMAGES: &str = "archive_images";
+    /// The trainer's seed (it jitters the renderer's samples, so the masks depend on it).
+    pub const SEED: &str = "seed";
+    /// The `labels.json` the field was trained with (its classes name the class ids).
+    pub const LABELS: &str = "labels";
+    pub const ALL: [&str; 8] = [WRITTEN_BY, ARCHIVE, FRAMES, SIZE, CAMERAS, IMAGES, SEED, LABELS];
+}
+
+/// What a field was trained on, kept in its checkpoint's metadata by `segment --save-checkpoint`
+/// so that `export` renders the same masks without training: the archive (by name, frame count,
+/// size and two fingerprints of its content), the trainer's seed and the labels.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainedOn {
+    pub archive: String,
+    pub frames: u32,
+    pub width: u32,
+    pub height: u32,
+    pub cameras: String,
+    pub images: String,
+    pub seed: u32,
+    pub labels: LabelSet,
+}
+
+/// 64-bit FNV-1a, fed piece by piece.
+struct Fnv(u64);
+
+impl Fnv {
+    fn new() -> Self {
+        Fnv(0xcbf2_9ce4_8422_2325)
+    }
+    fn bytes(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0 ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    fn f64s(&mut self, values: &[f64]) {
+        for v in values {
+            self.bytes(&v.to_le_bytes());
+        }
+    }
+    fn hex(&self) -> String {
+        format!("{:016x}", self.0)
+    }
+}
+
+/// Two fingerprints of `scene` (hex): its cameras (size, intrinsics, depth scale, bounds, every
+/// frame's pose) and its images (every frame's colour and depth). A field renders what it was
+/// trained on only through the same cameras, and is refined with the same images.
+pub fn scene_fingerprints(scene: &Scene) -> (String, String) {
+    let mut cameras = Fnv::new();
+    cameras.bytes(&scene.width.to_le_bytes());
+    cameras.bytes(&scene.height.to_le_bytes());
+    let k = &scene.intrinsics;
+    cameras.f64s(&[k.fx, k.fy, k.cx, k.cy, scene.depth_scale]);
+    cameras.f64s(&scene.bounds.min);
+    cameras.f64s(&scene.bounds.max);
+    let mut images = Fnv::new();
+    for f in &scene.frames {
+        cameras.f64s(&f.pose.to_row_major());
+        images.bytes(f.rgb.as_raw());
+        match &f.depth {
+            Some(d) => {
+                images.bytes(&[1]);
+                for v in d.as_raw() {
+                    images.bytes(&v.to_le_bytes());
+                }
+            }
+            None => images.bytes(&[0]),
+        }
+    }
+    (cameras.hex(), images.hex())
+}
+
+impl TrainedOn {
+    /// `scene` (read from `archive`), trained with `seed` on `labels`.
+    pub fn of_scene(archive: &str, scene: &Scene, seed: u32, labels: &LabelSet) -> Self {
+        let (cameras, images) = scene_fingerprints(scene);
+        TrainedOn {
+            archive: archive.to_string(),
+            frames: scene.frames.len() as u32,
+            width: scene.width,
+            height: scene.height,
+            cameras,
+            images,
+            seed,
+            labels: labels.clone(),
+        }
+    }
+
+    /// The checkpoint metadata (`Trainer::checkpoint`'s `extra`).
+    pub fn to_extra(&self) -> BTreeMap<String, String> {
+        use trained_on_keys::*;
+        BTreeMap::from(
+            [
+                (WRITTEN_BY, "segment".to_string()),
+                (ARCHIVE, self.archive.clone()),
+                (FRAMES, self.frames.to_string()),
+                (SIZE, format!("{}x{}", self.width, self.height)),
+                (CAMERAS, self.cameras.clone()),
+                (IMAGES, self.images.clone()),
+                (SEED, self.seed.to_string()),
+                (LABELS, self.labels.to_json()),
+            ]
+            .map(|(k, v)| (k.to_string(), v)),
+        )
+    }
+
+    /// Reads it back from `checkpoint` (read from `file`); a checkpoint written by something other
+    /// than `segment --save-checkpoint` (`simulate`'s) lacks it, and says so.
+    pub fn from_checkpoint(file: &str, checkpoint: &Checkpoint) -> Result<Self, CheckpointError> {
+        use trained_on_keys::*;
+        let bad = |problem: String| CheckpointError {
+            file: file.to_string(),
+            problem,
+        };
+        let get = |key: &str| {
+            checkpoint.extra.get(key).ok_or_else(|| {
+                bad(format!(
+                    "no `{key}` in the safetensors `__metadata__`: a {FORMAT} checkpoint, but not one written by \
+                     `segment --save-checkpoint`, which records the archive and labels the field was trained on"
+                ))
+            })
+        };
+        let number = |key: &str| -> Result<u32, CheckpointError> {
+            let text = get(key)?;
+            text.parse()
+                .map_err(|_| bad(format!("`__metadata__` {key} {text:?} is not a whole number")))
+        };
+        get(WRITTEN_BY)?;
+        let size = get(SIZE)?;
+        let (width, height) = size
+            .split_once('x')
+            .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
+            .ok_or_else(|| bad(format!("`__metadata__` {SIZE} {size:?} is not WIDTHxHEIGHT")))?;
+        let frames = number(FRAMES)?;
+        let labels = LabelSet::from_json(get(LABELS)?.as_bytes(), "`__metadata__` labels", frames)
+            .map_err(|e| bad(e.to_string()))?;
+        let classes = labels.classes.len();
+        if classes != checkpoint.config.num_classes as usize {
+            return Err(bad(format!(
+                "`__metadata__` labels define {classes} classes, but its field config has num_classes {}",
+                checkpoint.config.num_classes
+            )));
+        }
+        Ok(TrainedOn {
+            archive: get(ARCHIVE)?.clone(),
+            frames,
+            width,
+            height,
+            cameras: get(CAMERAS)?.clone(),
+            images: get(IMAGES)?.clone(),
+            seed: number(SEED)?,
+            labels,
+        })
+    }
+
+    /// Whether `scene`, read from `archive`, is the archive the field in checkpoint `file` (of
+    /// config `config`) was trained on: the same frame count, size, cameras and images, and
+    /// feature codes (if any) of the width the field renders. Errors name the checkpoint, the
+    /// archive and the two values.
+    pub fn check_scene(
+        &self,
+        file: &str,
+        config: &FieldConfig,
+        archive: &str,
+        scene: &Scene,
+    ) -> Result<(), CheckpointError> {
+        let trained = format!(
+            "{} ({} frames of {} x {})",
+            self.archive, self.frames, self.width, self.height
+        );
+        let bad = |problem: String| CheckpointError {
+            file: file.to_string(),
+            problem: format!("the field was trained on {trained}, {problem}"),
+        };
+        if scene.frames.len() != self.frames as usize {
+            return Err(bad(format!("but {archive} has {} frames", scene.frames.len())));
+        }
+        if (scene.width, scene.height) != (self.width, self.height) {
+            return Err(bad(format!(
+                "but {archive}'s frames are {} x {}",
+                scene.width, scene.height
+            )));
+        }
+        if let Some(codes) = &scene.features
+            && codes.dim != config.feature_dim
+        {
+            return Err(bad(format!(
+                "its config has feature_dim {}, but {archive}'s feature codes have {} dims",
+                config.feature_dim, codes.dim
+            )));
+        }
+        let (cameras, images) = scene_fingerprints(scene);
+        if cameras != self.cameras {
+            return Err(bad(format!(
+                "but {archive} has other cameras (poses, intrinsics or bounds: fingerprint {cameras}, the \
+                 checkpoint's {}); was it packed again, or from another capture?",
+                self.cameras
+            )));
+        }
+        if images != self.images {
+            return Err(bad(format!(
+                "but {archive} has other images with the same cameras (fingerprint {images}, the checkpoint's {}); \
+                 was it packed again with other settings?",
+                self.images
+            )));
+        }
+        Ok(())
+    }
+
+    /// Whether `labels` (read from `labels_file`) name the field's classes as the labels it was
+    /// trained with do (`file`'s): the same class names in the same order; colours may differ.
+    pub fn check_labels(&self, file: &str, labels: &LabelSet, labels_file: &str) -> Result<(), CheckpointError> {
+        let names = |l: &LabelSet| l.classes.iter().map(|c| c.name.clone()).collect::<Vec<_>>();
+        let (given, trained) = (names(labels), names(&self.labels));
+        if given != trained {
+            return Err(CheckpointError {
+                file: file.to_string(),
+                problem: format!(
+                    "the field was trained on {} classes {trained:?}, but {labels_file} defines {} classes {given:?}",
+                    trained.len(),
+                    given.len()
+                ),
+            });
+        }
+        Ok(())
+    }
+}
+
 /// The safetensors reader names the file first; the checkpoint's error does too, once.
 fn strip_file(message: String, file: &str) -> String {
     message
@@ -369,6 +612,117 @@ mod tests {
         ));
         assert!(
             m.contains("t.safetensors: tensor `density.0`") && m.contains("shape"),
+            "{m}"
+        );
+    }
+
+    fn demo(seed: u64, frames: u32) -> Scene {
+        crate::scene::demo::demo_scene(&crate::scene::demo::DemoOptions {
+            seed,
+            width: 20,
+            height: 16,
+            frames,
+        })
+        .unwrap()
+    }
+
+    fn two_classes() -> LabelSet {
+        let text = r#"{"format":"scribblefield-labels","version":1,
+            "classes":[{"name":"a","color":[1,2,3]},{"name":"b","color":[4,5,6]}],"frames":[]}"#;
+        LabelSet::from_json(text.as_bytes(), "l.json", 4).unwrap()
+    }
+
+    fn trained(scene: &Scene) -> Checkpoint {
+        let mut ck = sample(FieldConfig {
+            num_classes: 2,
+            ..tiny()
+        });
+        ck.extra = TrainedOn::of_scene("d.scene.zip", scene, 7, &two_classes()).to_extra();
+        Checkpoint::from_bytes("t.safetensors", ck.to_bytes()).unwrap()
+    }
+
+    #[test]
+    fn what_segment_trained_on_round_trips_and_fits_its_archive() {
+        let scene = demo(0, 4);
+        let ck = trained(&scene);
+        let on = TrainedOn::from_checkpoint("t.safetensors", &ck).unwrap();
+        assert_eq!(on, TrainedOn::of_scene("d.scene.zip", &scene, 7, &two_classes()));
+        assert_eq!((on.frames, on.width, on.height, on.seed), (4, 20, 16, 7));
+        on.check_scene("t.safetensors", &ck.config, "elsewhere/d.scene.zip", &scene)
+            .unwrap();
+        on.check_labels("t.safetensors", &two_classes(), "l.json").unwrap();
+    }
+
+    #[test]
+    fn another_archive_or_other_labels_are_named() {
+        let scene = demo(0, 4);
+        let ck = trained(&scene);
+        let on = TrainedOn::from_checkpoint("t.safetensors", &ck).unwrap();
+        let check = |other: &Scene| message(on.check_scene("t.safetensors", &ck.config, "o.scene.zip", other));
+        let m = check(&demo(0, 5));
+        assert!(
+            m.starts_with("t.safetensors: the field was trained on d.scene.zip (4 frames of 20 x 16), but o.scene.zip has 5 frames"),
+            "{m}"
+        );
+        let m = check(&demo(1, 4));
+        assert!(m.contains("o.scene.zip has other cameras"), "{m}");
+        let mut repainted = scene.clone();
+        repainted.frames[2].rgb.put_pixel(0, 0, image::Rgb([1, 2, 3]));
+        let m = check(&repainted);
+        assert!(m.contains("o.scene.zip has other images with the same cameras"), "{m}");
+        let mut coded = scene.clone();
+        coded.features = Some(crate::scene::FeatureCodes {
+            height: 1,
+            width: 1,
+            dim: ck.config.feature_dim + 1,
+            extractor: "x".into(),
+            data: vec![half::f16::ZERO; 4 * (ck.config.feature_dim as usize + 1)],
+            pca: crate::scene::Pca {
+                mean: Vec::new(),
+                components: [Vec::new(), Vec::new(), Vec::new()],
+                lo: [0.0; 3],
+                hi: [1.0; 3],
+            },
+        });
+        let m = check(&coded);
+        assert!(
+            m.contains(&format!(
+                "its config has feature_dim {}, but o.scene.zip's feature codes have {} dims",
+                ck.config.feature_dim,
+                ck.config.feature_dim + 1
+            )),
+            "{m}"
+        );
+        let mut three = two_classes();
+        three.classes.push(crate::labels::ClassInfo {
+            name: "c".into(),
+            color: [7, 8, 9],
+        });
+        let m = message(on.check_labels("t.safetensors", &three, "l3.json"));
+        assert!(
+            m.contains("trained on 2 classes [\"a\", \"b\"], but l3.json defines 3 classes"),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn a_checkpoint_without_what_it_was_trained_on_says_so() {
+        let ck = sample(tiny());
+        let m = message(TrainedOn::from_checkpoint("run/trainer.safetensors", &ck));
+        assert!(
+            m.starts_with("run/trainer.safetensors: no `written_by`") && m.contains("segment --save-checkpoint"),
+            "{m}"
+        );
+        let scene = demo(0, 4);
+        let mut ck = trained(&scene);
+        ck.extra.insert(trained_on_keys::SIZE.into(), "20 by 16".into());
+        let m = message(TrainedOn::from_checkpoint("t.safetensors", &ck));
+        assert!(m.contains("archive_size \"20 by 16\" is not WIDTHxHEIGHT"), "{m}");
+        let mut ck = trained(&scene);
+        ck.config.num_classes = 3;
+        let m = message(TrainedOn::from_checkpoint("t.safetensors", &ck));
+        assert!(
+            m.contains("labels define 2 classes, but its field config has num_classes 3"),
             "{m}"
         );
     }
