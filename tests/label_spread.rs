@@ -2,7 +2,9 @@
 //! before any training, on the demo scene, the YCB clip and the COLMAP capture, for three sets of
 //! synthetic strokes each (`cargo test --release --test label_spread -- --ignored --nocapture`).
 //! docs/quality.md reports these figures; `tests/quality.rs` and `tests/import_colmap` hold the
-//! checks.
+//! checks. With `SCRIBBLEFIELD_LABEL_DUMP=DIR` it also writes every label map as an 8-bit PNG
+//! (class id, 255 unlabelled) to `DIR/<capture>-<scribble seed>/<frame>.png`, to look at where
+//! the labels go wrong.
 use std::path::Path;
 
 use scribblefield::field::propagate::{PropagationOptions, propagate_labels};
@@ -14,7 +16,7 @@ use scribblefield::scene::import::{ImportOptions, import};
 /// Labelled pixels, the share of them that are right, and per class: pixels labelled right over
 /// pixels labelled as it or truly it (an unlabelled pixel counts as missed), over the frames the
 /// labels reach.
-fn spread(scene: &Scene, frames: &[u32], options: &PropagationOptions) {
+fn spread(name: &str, scene: &Scene, frames: &[u32], options: &PropagationOptions) {
     let classes = scene.classes.len();
     for seed in 0..3 {
         let scribbles = ScribbleOptions {
@@ -23,6 +25,9 @@ fn spread(scene: &Scene, frames: &[u32], options: &PropagationOptions) {
         };
         let labels = scribble_frames(scene, frames, &scribbles);
         let maps = propagate_labels(scene, &labels, classes, options);
+        if let Some(dir) = std::env::var_os("SCRIBBLEFIELD_LABEL_DUMP") {
+            dump(&Path::new(&dir).join(format!("{name}-{seed}")), scene, &maps);
+        }
         let (mut labelled, mut right) = (0usize, 0usize);
         let mut iou = vec![(0usize, 0usize); classes];
         for (frame, map) in &maps {
@@ -54,6 +59,18 @@ fn spread(scene: &Scene, frames: &[u32], options: &PropagationOptions) {
     }
 }
 
+fn dump(dir: &Path, scene: &Scene, maps: &[(u32, Vec<u16>)]) {
+    std::fs::create_dir_all(dir).expect("label dump folder");
+    for (frame, map) in maps {
+        let pixels = map
+            .iter()
+            .map(|&l| if l == u16::MAX { 255 } else { l.min(254) as u8 })
+            .collect();
+        let image = image::GrayImage::from_raw(scene.width, scene.height, pixels).expect("label map size");
+        image.save(dir.join(format!("{frame:05}.png"))).expect("label dump");
+    }
+}
+
 fn real(name: &str, max_size: u32) -> Option<Scene> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(name);
     if !dir.is_dir() {
@@ -79,14 +96,14 @@ fn labels_before_training() {
     })
     .unwrap();
     eprintln!("demo, strokes on frames 0 and 12:");
-    spread(&demo, &[0, 12], &options);
+    spread("demo", &demo, &[0, 12], &options);
     if let Some(ycb) = real("ycb-video-0000", 160) {
         eprintln!("YCB, strokes on frame 0:");
-        spread(&ycb, &[0], &options);
+        spread("ycb", &ycb, &[0], &options);
     }
     if let Some(colmap) = real("alexander-colmap", 200) {
         eprintln!("COLMAP capture, strokes on photos 0 and 26:");
-        spread(&colmap, &[0, 26], &options);
+        spread("colmap", &colmap, &[0, 26], &options);
     }
 }
 
