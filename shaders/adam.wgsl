@@ -3,6 +3,9 @@
 //   m ← β₁ m + (1 − β₁) g;  v ← β₂ v + (1 − β₂) g²;  p ← p − lr · (m · c₁) / (√(v · c₂) + ε)
 // β₁, β₂, ε and the segment length are fixed per pass; lr, c₁, c₂ change every step and come
 // from the trainer's shared StepUniforms (fields lr, adam_c1, adam_c2).
+//
+// The step also zeroes the gradient it consumed, so the buffer starts the next step cleared
+// (every backward pass adds to it) without a separate clear of the whole buffer.
 //!include _dispatch.wgsl
 //!include _step.wgsl
 
@@ -17,7 +20,7 @@ struct AdamConstants {
 @group(0) @binding(0) var<uniform> constants: AdamConstants;
 @group(0) @binding(1) var<uniform> step_info: StepUniforms;
 @group(0) @binding(2) var<storage, read_write> params: array<f32>;
-@group(0) @binding(3) var<storage, read> grads: array<f32>;
+@group(0) @binding(3) var<storage, read_write> grads: array<f32>;
 @group(0) @binding(4) var<storage, read_write> first_moment: array<f32>;
 @group(0) @binding(5) var<storage, read_write> second_moment: array<f32>;
 
@@ -34,6 +37,7 @@ fn adam(
         return;
     }
     let g = grads[i];
+    grads[i] = 0.0;
     // Same operation order as the reference so f32 rounding matches.
     let m = constants.beta1 * first_moment[i] + (1.0 - constants.beta1) * g;
     let v = constants.beta2 * second_moment[i] + (1.0 - constants.beta2) * g * g;

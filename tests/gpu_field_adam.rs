@@ -1,6 +1,6 @@
 //! `AdamPass` against `reference::adam` over several steps, with the step values coming from the
 //! trainer's `StepUniforms` buffer rewritten between submits, also when the buffers are split
-//! into segments.
+//! into segments; every step leaves the gradient buffer zeroed.
 //!
 //! Tolerance: the kernel does the reference's f32 operations in the same order, but a Vulkan
 //! device may fuse a multiply-add and its `sqrt` and division are not correctly rounded (a few
@@ -99,6 +99,12 @@ fn check_adam(ctx: &GpuContext, count: usize, segment_len: Option<u64>) {
     let gpu_params: Vec<f32> = read_buffer_blocking(ctx, &params_buffer).unwrap();
     let gpu_m: Vec<f32> = read_buffer_blocking(ctx, &m_buffer).unwrap();
     let gpu_v: Vec<f32> = read_buffer_blocking(ctx, &v_buffer).unwrap();
+    // Adam zeroes the gradient it consumed (the trainer needs no clear before a step).
+    let gpu_grads: Vec<f32> = read_buffer_blocking(ctx, &grads_buffer).unwrap();
+    assert!(
+        gpu_grads.iter().all(|&g| g.to_bits() == 0),
+        "{what}: gradient left after the step"
+    );
     assert_close(&format!("{what}: m"), &gpu_m[..count], &reference.m, 0.0);
     assert_close(&format!("{what}: v"), &gpu_v[..count], &reference.v, 0.0);
     assert_close(&format!("{what}: params"), &gpu_params[..count], &params, total_lr);

@@ -213,10 +213,23 @@ fn check_one_step_gradient(name: &str, semantic_input: SemanticInput) {
     let seed = 3;
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, seed)).unwrap();
     let params = pollster::block_on(trainer.read_params()).unwrap();
-    trainer.train(1);
-    let gpu = pollster::block_on(trainer.read_gradients()).unwrap();
+    let gpu = pollster::block_on(trainer.step_gradient()).unwrap();
     let losses = trainer.losses_blocking().unwrap();
     assert_eq!(losses.step, 1);
+    assert_eq!(
+        pollster::block_on(trainer.read_params()).unwrap(),
+        params,
+        "a step without its update leaves the parameters"
+    );
+    // A whole step: Adam consumes the gradient and zeroes it, so no clear is needed before
+    // the next step's backward passes add to it.
+    trainer.train(1);
+    let after_adam = pollster::block_on(trainer.read_gradients()).unwrap();
+    assert!(
+        after_adam.iter().all(|&g| g == 0.0),
+        "Adam leaves the gradient buffer zeroed"
+    );
+    assert_ne!(pollster::block_on(trainer.read_params()).unwrap(), params);
 
     let uniforms = StepUniforms::for_step(&cfg, 1, seed, trainer.learning_rate());
     let (w, h) = (scene.width, scene.height);

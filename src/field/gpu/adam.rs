@@ -1,5 +1,7 @@
 //! Adam over the whole flat parameter buffer on the GPU (`shaders/adam.wgsl`), the twin of
-//! `reference::adam`: one element-wise kernel over params, gradient and the two moments.
+//! `reference::adam`: one element-wise kernel over params, gradient and the two moments. It
+//! zeroes each gradient it reads, so the gradient buffer is clear for the next step's backward
+//! passes (which add to it) without a separate clear.
 //!
 //! β₁, β₂ and ε are fixed when the pass is built; the learning rate and the bias corrections
 //! c₁, c₂ change every step and are read from the trainer's shared `StepUniforms` buffer

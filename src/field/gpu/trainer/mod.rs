@@ -36,7 +36,7 @@ use super::scene_buffers::{LabelIndex, SceneBuffers};
 use super::view::view_rays;
 pub use super::view::{DepthGuide, FrameAssembler, RenderedFrame, ViewCamera};
 pub use stages::StageShape;
-use stages::{FIELD_STAGES, TRAINING_STEP};
+use stages::{FIELD_STAGES, StepStage, TRAINING_STEP};
 
 mod render;
 mod stages;
@@ -631,9 +631,36 @@ impl Trainer {
         read_elements_async::<f32>(&self.ctx, &self.optimizer.params, 0..self.layout.total as u64)
     }
 
-    /// Reads back the gradient of the latest step (tests: compare with the reference).
+    /// Reads back the gradient buffer as it is. Between steps it is all zeros: each step's Adam
+    /// zeroes the gradient it consumed (tests check that; [`Trainer::step_gradient`] reads a
+    /// step's gradient).
     pub fn read_gradients(&self) -> PendingRead<f32> {
         read_buffer_async::<f32>(&self.ctx, &self.optimizer.grads)
+    }
+
+    /// Runs one training step up to, not including, its Adam update and reads back the gradient
+    /// it produced (tests: compare with the reference). The step counts (its losses can be
+    /// read), the parameters do not move, and the gradient buffer is cleared after the copy so
+    /// the next step starts from zero as it would after Adam.
+    pub fn step_gradient(&mut self) -> PendingRead<f32> {
+        let mut encoder = self.begin_step();
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("training step without its update"),
+                timestamp_writes: None,
+            });
+            for &stage in TRAINING_STEP.iter().filter(|&&s| s != StepStage::Adam) {
+                self.record_stage(stage, &mut pass);
+            }
+        }
+        self.ctx.queue.submit([encoder.finish()]);
+        let read = read_buffer_async::<f32>(&self.ctx, &self.optimizer.grads);
+        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("clearing the gradient read back"),
+        });
+        encoder.clear_buffer(&self.optimizer.grads, 0, None);
+        self.ctx.queue.submit([encoder.finish()]);
+        read
     }
 
     /// Everything a training run depends on besides the scene, the config and the labels: the

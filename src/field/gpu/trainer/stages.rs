@@ -140,10 +140,10 @@ impl StepStage {
     /// | glue backward (feature) | N·f semantic-input and N·f feature-loss gradients | N·f |
     /// | glue backward (geometry) | N·(g + g + sg + 1) gradients | N·(1 + g) |
     /// | encoding backward | N hash-grid gradients and positions | an atomic add (read and write) per corner, level and feature |
-    /// | adam | parameters, gradients, both moments: 4·P | parameters, both moments: 3·P |
+    /// | adam | parameters, gradients, both moments: 4·P | parameters, gradients (zeroed), both moments: 4·P |
     ///
-    /// The gradient buffer's clear before the step (P words written) is not a stage; see
-    /// [`gradient_clear_bytes`].
+    /// Adam zeroes the gradient it consumed, so there is no separate clear of the gradient
+    /// buffer before a step ([`gradient_clear_bytes`] is 0).
     pub(super) fn global_bytes(self, cfg: &FieldConfig) -> u64 {
         let layout = ParamLayout::new(cfg);
         let r = u64::from(cfg.batch_rays);
@@ -182,14 +182,15 @@ impl StepStage {
                 n * 16 + n * cfg.hash_encoding_dim() as u64 * WORD + 2 * n * corners * WORD
             }
             StepStage::EncodingBackward => 0,
-            StepStage::Adam => 7 * layout.total as u64 * WORD,
+            StepStage::Adam => 8 * layout.total as u64 * WORD,
         }
     }
 }
 
-/// Bytes the clear of the gradient buffer writes before each step.
-pub(super) fn gradient_clear_bytes(cfg: &FieldConfig) -> u64 {
-    ParamLayout::new(cfg).total as u64 * WORD
+/// Bytes a clear of the gradient buffer writes before each step: none, Adam zeroes the gradient
+/// it consumes (the step's last stage), so the next step starts from a clear buffer.
+pub(super) fn gradient_clear_bytes(_cfg: &FieldConfig) -> u64 {
+    0
 }
 
 /// One stage of a training step as `bench` reports it.
@@ -227,7 +228,8 @@ impl Trainer {
             .collect()
     }
 
-    /// Bytes the clear of the gradient buffer writes before each step (not a dispatch).
+    /// Bytes a clear of the gradient buffer writes before each step (not a dispatch): 0 since
+    /// Adam zeroes the gradient as it consumes it (kept so `bench --json` can show it).
     pub fn gradient_clear_bytes(&self) -> u64 {
         gradient_clear_bytes(&self.cfg)
     }
@@ -258,19 +260,18 @@ impl Trainer {
         }
     }
 
-    /// Starts a training step: the next step's uniforms, and an encoder that first zeroes the
-    /// gradient buffer (every backward pass adds to it).
+    /// Starts a training step: the next step's uniforms and an encoder. The gradient buffer
+    /// the backward passes add to is already zero: it starts zeroed and the previous step's
+    /// Adam zeroed what it consumed.
     pub(super) fn begin_step(&mut self) -> wgpu::CommandEncoder {
         self.step += 1;
         let uniforms = super::StepUniforms::for_step(&self.cfg, self.step, self.seed, self.learning_rate());
         self.ctx
             .queue
             .write_buffer(&self.step_uniforms, 0, bytemuck::bytes_of(&uniforms));
-        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+        self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("training step"),
-        });
-        encoder.clear_buffer(&self.optimizer.grads, 0, None);
-        encoder
+        })
     }
 }
 
