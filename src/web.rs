@@ -7,6 +7,7 @@ use eframe::wgpu;
 use wasm_bindgen::JsCast;
 use wasm_bindgen::prelude::*;
 
+use crate::app::bench::BenchApp;
 use crate::app::page_options::PageOptions;
 use crate::app::status::PageStatus;
 use crate::app::{App, browser, page_status};
@@ -47,7 +48,13 @@ async fn run(canvas_id: &str) -> Result<(), JsValue> {
         .start(
             canvas,
             web_options(),
-            Box::new(move |cc| Ok(Box::new(App::new(cc, options, errors)))),
+            Box::new(move |cc| -> Result<Box<dyn eframe::App>, _> {
+                // `#bench=PRESET`: the page's training bench instead of the annotator.
+                Ok(match options.bench {
+                    Some(preset) => Box::new(BenchApp::new(cc, preset, &options)),
+                    None => Box::new(App::new(cc, options, errors)),
+                })
+            }),
         )
         .await
 }

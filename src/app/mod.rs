@@ -9,6 +9,8 @@
 #[cfg(target_arch = "wasm32")]
 pub mod annotator;
 #[cfg(target_arch = "wasm32")]
+pub mod bench;
+#[cfg(target_arch = "wasm32")]
 pub mod browser;
 #[cfg(target_arch = "wasm32")]
 pub mod canvas;

@@ -3,6 +3,7 @@
 //! cannot be used is reported ([`PageOptionError`], shown as a notice) and the default is used
 //! instead, so a typo never keeps the page from opening. Plain logic: tested natively.
 use super::model_size::ModelSize;
+use crate::field::Preset;
 use crate::labels::share::{parse_fragment, percent_decode};
 use crate::scene::archive::limits;
 
@@ -52,6 +53,14 @@ pub struct PageOptions {
     pub pack_stride: Option<u32>,
     /// `pack-steps=N`: training steps of the feature autoencoder (`pack --autoencoder-steps`).
     pub pack_steps: Option<u32>,
+    /// `bench=PRESET`: no annotator; train this preset on the built-in demo scene as the page
+    /// trains and report the figures of `scribblefield bench --json` (`app::bench`).
+    pub bench: Option<Preset>,
+    /// `bench-steps=N`: timed steps of the bench (after its warm-up).
+    pub bench_steps: Option<u32>,
+    /// `bench-inflight=N`: training batches the bench keeps in flight (1: wait for each batch
+    /// before recording the next, as the page did before it kept two).
+    pub bench_inflight: Option<u32>,
 }
 
 /// A value in the address the page cannot use; the option keeps its default.
@@ -144,6 +153,18 @@ impl PageOptions {
                     Ok(n) if (1..=100_000).contains(&n) => options.pack_steps = Some(n),
                     _ => bad("pack-steps", "autoencoder steps, 1 to 100000"),
                 },
+                "bench" => match Preset::parse(&value) {
+                    Some(p) => options.bench = Some(p),
+                    None => bad("bench", "a preset: tiny, small, budget or full"),
+                },
+                "bench-steps" => match value.parse::<u32>() {
+                    Ok(n) if (1..=10_000).contains(&n) => options.bench_steps = Some(n),
+                    _ => bad("bench-steps", "timed steps, 1 to 10000"),
+                },
+                "bench-inflight" => match value.parse::<u32>() {
+                    Ok(n) if (1..=2).contains(&n) => options.bench_inflight = Some(n),
+                    _ => bad("bench-inflight", "1 or 2 batches in flight"),
+                },
                 _ => {}
             }
         }
@@ -197,6 +218,20 @@ mod tests {
         assert_eq!((o.pack_size, o.pack_every, o.pack_steps), (None, None, None));
         let keys: Vec<_> = errors.iter().map(|e| e.key).collect();
         assert_eq!(keys, ["pack-size", "pack-every", "pack-steps"]);
+    }
+
+    #[test]
+    fn reads_the_bench_options() {
+        let (o, errors) = PageOptions::parse("bench=budget&bench-steps=20&bench-inflight=1");
+        assert!(errors.is_empty(), "{errors:?}");
+        assert_eq!(
+            (o.bench, o.bench_steps, o.bench_inflight),
+            (Some(Preset::Budget), Some(20), Some(1))
+        );
+        let (o, errors) = PageOptions::parse("bench=huge&bench-steps=0&bench-inflight=3");
+        assert_eq!((o.bench, o.bench_steps, o.bench_inflight), (None, None, None));
+        let keys: Vec<_> = errors.iter().map(|e| e.key).collect();
+        assert_eq!(keys, ["bench", "bench-steps", "bench-inflight"]);
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! Writes what scripts and tests read on `<body>`: the status (`data-status`, JSON: see
-//! [`PageStatus`]), the latest share link, a lost GPU device, the `#profile` result.
+//! [`PageStatus`]), the latest share link, a lost GPU device, the `#profile` result, the page
+//! bench (`#bench=`).
 use std::cell::RefCell;
 
 use super::status::PageStatus;
@@ -53,5 +54,13 @@ pub fn set_gpu_lost(message: &str) {
 pub fn set_profile(text: &str) {
     if let Some(body) = web_sys::window().and_then(|w| w.document()).and_then(|d| d.body()) {
         let _ = body.set_attribute("data-profile", text);
+    }
+}
+
+/// Puts the page bench's state and, once done, its report (`#bench=` in the address,
+/// `app::bench`; a JSON object) on `<body data-bench="...">`.
+pub fn set_bench(json: &str) {
+    if let Some(body) = web_sys::window().and_then(|w| w.document()).and_then(|d| d.body()) {
+        let _ = body.set_attribute("data-bench", json);
     }
 }

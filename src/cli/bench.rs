@@ -1,12 +1,11 @@
 //! `scribblefield bench`: throughput of the training step on whatever adapter is found, next to
 //! a plain tiled matmul on the same adapter in the same run, and where a step's time goes.
 use clap::Args;
-use scribblefield::field::gpu::trainer::{StageShape, Trainer};
+use scribblefield::eval::bench::{bench_scene, mlp_gflop_per_step, step_report};
+use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::gpu::matmul_bench::matmul_bench;
 use scribblefield::gpu::timing::Stopwatch;
 use scribblefield::gpu::{GpuContext, GpuOptions};
-use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
-use scribblefield::scene::demo::{DemoOptions, demo_scene};
 
 use super::CliResult;
 use super::field_config::FieldConfigArgs;
@@ -32,16 +31,6 @@ pub struct BenchArgs {
     json: bool,
 }
 
-/// Multiply-adds of one sample through every MLP, forward.
-fn mlp_macs_per_sample(trainer: &Trainer) -> f64 {
-    trainer
-        .layout()
-        .mlps()
-        .iter()
-        .flat_map(|(_, mlp)| mlp.layers.iter().map(|r| r.len() as f64))
-        .sum()
-}
-
 /// Milliseconds of GPU time per stage name, where the adapter has timestamp queries.
 type StageTimes = Option<Vec<(String, f64)>>;
 
@@ -57,11 +46,7 @@ pub fn run(mut args: BenchArgs) -> CliResult {
         cfg.batch_rays = r;
     }
     // The demo scene has labels (synthetic scribbles) but no feature codes.
-    let mut scene = demo_scene(&DemoOptions::default())?;
-    scene.labels = Some(scribble_frames(&scene, &[0, 12], &ScribbleOptions::default()));
-    cfg.num_classes = scene.classes.len() as u32;
-    cfg.feature_supervision = false;
-    cfg.validate()?;
+    let scene = bench_scene(&mut cfg)?;
 
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, 0))?;
     trainer.train(args.warmup);
@@ -69,51 +54,19 @@ pub fn run(mut args: BenchArgs) -> CliResult {
     let clock = Stopwatch::start();
     trainer.train(args.steps);
     ctx.wait_idle()?;
-    let seconds = clock.elapsed_seconds() / f64::from(args.steps.max(1));
+    let elapsed = clock.elapsed_seconds();
+    let seconds = elapsed / f64::from(args.steps.max(1));
     let rays = f64::from(cfg.batch_rays);
     let samples = rays * cfg.samples_per_ray() as f64;
-    // Forward, input gradient and weight gradient: three products of the same size.
-    let gflop = 3.0 * 2.0 * mlp_macs_per_sample(&trainer) * samples / 1e9;
+    let gflop = mlp_gflop_per_step(&trainer);
     let matmul = pollster::block_on(matmul_bench(&ctx, args.matmul, 3))?;
     let times: StageTimes = pollster::block_on(trainer.profile_step())?
         .map(|times| times.into_iter().map(|t| (t.name, t.seconds * 1e3)).collect());
     let shape = trainer.step_shape();
     if args.json {
-        let stages: Vec<serde_json::Value> = stage_names(&shape)
-            .into_iter()
-            .map(|name| {
-                let of_name = shape.iter().filter(|s| s.name == name);
-                let ms = times.as_ref().and_then(|t| t.iter().find(|t| t.0 == name).map(|t| t.1));
-                serde_json::json!({
-                    "name": name,
-                    "gpu_ms": ms,
-                    "dispatches": of_name.clone().map(|s| s.dispatches).sum::<u64>(),
-                    "bytes": of_name.map(|s| s.bytes).sum::<u64>(),
-                })
-            })
-            .collect();
-        let report = serde_json::json!({
-            "adapter": ctx.describe(),
-            "config": args.field.describe(),
-            "rays": cfg.batch_rays,
-            "samples_per_ray": cfg.samples_per_ray(),
-            "steps_timed": args.steps,
-            "step_s": seconds,
-            "steps_per_s": 1.0 / seconds,
-            "rays_per_s": rays / seconds,
-            "samples_per_s": samples / seconds,
-            // Every sample goes through every head today.
-            "samples_to_heads_per_step": samples,
-            "bytes_per_step": shape.iter().map(|s| s.bytes).sum::<u64>() + trainer.gradient_clear_bytes(),
-            "gradient_clear_bytes": trainer.gradient_clear_bytes(),
-            "dispatches_per_step": shape.iter().map(|s| s.dispatches).sum::<u64>(),
-            "mlp_gflop_per_step": gflop,
-            "mlp_gflops": gflop / seconds,
-            "matmul_gflops": matmul.gflops,
-            "matmul_n": matmul.n,
-            "ratio_to_matmul": gflop / seconds / matmul.gflops,
-            "stages": stages,
-        });
+        let mut report = step_report(&ctx, &trainer, args.steps, elapsed, Some(&matmul), times.as_deref());
+        report.insert("config".into(), args.field.describe().into());
+        let report = serde_json::Value::Object(report);
         println!("{report}");
         return Ok(());
     }
@@ -162,15 +115,4 @@ pub fn run(mut args: BenchArgs) -> CliResult {
         None => println!("\n(no timestamp queries on this adapter: no per-stage times)"),
     }
     Ok(())
-}
-
-/// Stage names in step order, each once (both glue gathers are "glue backward").
-fn stage_names(shape: &[StageShape]) -> Vec<&'static str> {
-    let mut names = Vec::new();
-    for s in shape {
-        if !names.contains(&s.name) {
-            names.push(s.name);
-        }
-    }
-    names
 }

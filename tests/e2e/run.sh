@@ -1,10 +1,16 @@
 #!/usr/bin/env bash
 # Browser end-to-end test: builds the web app, serves it on a free localhost port, and runs
 # smoke.mjs, annotate.mjs, durable.mjs and (with ../shared/data beside the repository)
-# spread.mjs and pack.mjs in headless Chromium (WebGPU on SwiftShader). Installs Chromium (apt)
-# and the node modules (npm ci) when they are missing. Screenshots go to $E2E_OUT (default
-# /tmp/e2e).
+# spread.mjs and pack.mjs in headless Chromium (WebGPU on SwiftShader), then bench.mjs (the page's
+# training bench, its report checked, no timings asserted). Installs Chromium (apt) and the node
+# modules (npm ci) when they are missing. Screenshots go to $E2E_OUT (default /tmp/e2e).
+#
+# With test names as arguments it runs only those: `tests/e2e/run.sh bench` (E2E_BENCH=budget
+# E2E_BENCH_STEPS=20 for a measurement; bench.mjs lists its settings).
 set -euo pipefail
+ONLY=" $* "
+# Whether the test named $1 is to run.
+wanted() { [ "$ONLY" = "  " ] || [[ "$ONLY" == *" $1 "* ]]; }
 HERE="$(cd "$(dirname "$0")" && pwd)"
 ROOT="$(cd "$HERE/../.." && pwd)"
 cd "$ROOT"
@@ -32,7 +38,7 @@ cargo build --release --quiet
 # A photo capture with sparse depth for spread.mjs, packed small, when the shared data is there.
 SPARSE_CAPTURE="$ROOT/../shared/data/alexander-colmap"
 SPARSE=""
-if [ -d "$SPARSE_CAPTURE" ]; then
+if [ -d "$SPARSE_CAPTURE" ] && { wanted spread || wanted pack; }; then
   SPARSE="$ROOT/www/e2e-sparse.scene.zip"
   target/release/scribblefield pack "$SPARSE_CAPTURE" -o "$SPARSE" --max-size 120 --features baseline \
     --feature-stride 2 >/dev/null
@@ -41,7 +47,7 @@ if [ -d "$SPARSE_CAPTURE" ]; then
   # strokes from and the scene the page must arrive at.
   PACK_REFERENCE="$(mktemp -d)/alexander-colmap.scene.zip"
   target/release/scribblefield pack "$SPARSE_CAPTURE" -o "$PACK_REFERENCE" --max-size 96 --every 9 >/dev/null
-else
+elif [ ! -d "$SPARSE_CAPTURE" ]; then
   echo "(no $SPARSE_CAPTURE: skipping spread.mjs and pack.mjs)"
 fi
 
@@ -67,12 +73,25 @@ done
 
 # Every test runs even when one fails, so one run shows every failure.
 STATUS=0
-E2E_URL="$URL" CHROMIUM="$CHROMIUM" node "$HERE/smoke.mjs" || STATUS=1
-E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_DEMO="$ROOT/www/demo.scene.zip" node "$HERE/annotate.mjs" || STATUS=1
-E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_DEMO="$ROOT/www/demo.scene.zip" node "$HERE/durable.mjs" || STATUS=1
+if wanted smoke; then
+  E2E_URL="$URL" CHROMIUM="$CHROMIUM" node "$HERE/smoke.mjs" || STATUS=1
+fi
+if wanted annotate; then
+  E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_DEMO="$ROOT/www/demo.scene.zip" node "$HERE/annotate.mjs" || STATUS=1
+fi
+if wanted durable; then
+  E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_DEMO="$ROOT/www/demo.scene.zip" node "$HERE/durable.mjs" || STATUS=1
+fi
 if [ -n "$SPARSE" ]; then
-  E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_SPARSE="$SPARSE" node "$HERE/spread.mjs" || STATUS=1
-  E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_CAPTURE="$SPARSE_CAPTURE" E2E_REFERENCE="$PACK_REFERENCE" \
-    node "$HERE/pack.mjs" || STATUS=1
+  if wanted spread; then
+    E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_SPARSE="$SPARSE" node "$HERE/spread.mjs" || STATUS=1
+  fi
+  if wanted pack; then
+    E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_CAPTURE="$SPARSE_CAPTURE" E2E_REFERENCE="$PACK_REFERENCE" \
+      node "$HERE/pack.mjs" || STATUS=1
+  fi
+fi
+if wanted bench; then
+  E2E_URL="$URL" CHROMIUM="$CHROMIUM" node "$HERE/bench.mjs" || STATUS=1
 fi
 exit $STATUS

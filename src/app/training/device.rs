@@ -2,6 +2,7 @@
 //! reported by browser callbacks), waiting for submitted work without blocking, and the
 //! steps-per-second meter.
 use std::future::Future;
+use std::pin::Pin;
 use std::sync::{Arc, Mutex};
 
 use futures_channel::oneshot;
@@ -69,9 +70,10 @@ pub struct RateMeter {
 }
 
 impl RateMeter {
-    pub fn add(&mut self, steps: u32, ms: f64) {
-        self.samples.push_back((now_ms(), steps, ms));
-        while self.samples.len() > 2 && self.samples.front().is_some_and(|s| now_ms() - s.0 > 3000.0) {
+    /// `steps` steps that took `ms` and ended at `at_ms` (page clock).
+    pub fn add_at(&mut self, at_ms: f64, steps: u32, ms: f64) {
+        self.samples.push_back((at_ms, steps, ms));
+        while self.samples.len() > 2 && self.samples.front().is_some_and(|s| at_ms - s.0 > 3000.0) {
             self.samples.pop_front();
         }
     }
@@ -107,4 +109,18 @@ pub fn gpu_done(queue: &wgpu::Queue) -> impl Future<Output = ()> + use<> {
         // A callback dropped without running (the device is gone) ends the wait too.
         let _ = finished.await;
     }
+}
+
+/// Resolves to when (page clock, ms) the GPU finished everything submitted before it was made;
+/// `None` when the callback was dropped without running (the device is gone).
+pub type GpuDone = Pin<Box<dyn Future<Output = Option<f64>>>>;
+
+/// Like [`gpu_done`], and notes the time the browser reported the work done, so a caller that
+/// awaits it later (with more work queued behind) still learns when it ended.
+pub fn gpu_done_at(queue: &wgpu::Queue) -> GpuDone {
+    let (done, finished) = oneshot::channel();
+    queue.on_submitted_work_done(move || {
+        let _ = done.send(now_ms());
+    });
+    Box::pin(async move { finished.await.ok() })
 }

@@ -6,7 +6,8 @@
 //! The visible frame's mask refreshes progressively: when it is out of date (another frame is
 //! shown, or new labels have had one batch of training) the frame is first rendered at a
 //! fraction of its resolution ([`Refresh`]), shown enlarged, then rendered in full.
-mod device;
+pub mod batches;
+pub mod device;
 pub mod messages;
 pub mod scene;
 mod task;

@@ -1,17 +1,16 @@
 //! The training task: owns the [`Trainer`] and, each turn, applies the page's commands, then
 //! does one thing ([`Action`]): wait, export, refresh the visible mask, render it again, or
 //! train a batch of steps. It waits for the GPU without blocking and adapts the batch to the
-//! time it took.
-//!
-//! The batch is sized so one batch takes about [`TARGET_BATCH_MS`] of GPU time: the UI shares the
-//! GPU, and a longer queue of training work would delay every repaint behind it.
+//! time it took ([`Batches`]: on a GPU the next batch is submitted before the previous one is
+//! waited for).
 use std::rc::Rc;
 
 use futures_channel::mpsc::{TryRecvError, UnboundedReceiver, UnboundedSender};
 use image::GrayImage;
 
 use super::super::browser::{now_ms, sleep_ms};
-use super::device::{GpuFaults, RateMeter, gpu_done};
+use super::batches::{Batches, MAX_BATCH, stage_wall_ms, train_split};
+use super::device::{GpuFaults, gpu_done};
 use super::messages::{Phase, Progress, RefreshTimes, Rendered, Spread, TrainCommand, TrainError, TrainEvent};
 use super::scene::upscale_mask;
 use super::{TrainingOptions, TrainingSetup};
@@ -26,10 +25,6 @@ use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
 use crate::scene::Scene;
 
-/// GPU time one batch of steps should take.
-const TARGET_BATCH_MS: f64 = 20.0;
-/// Most steps in one batch (a fast GPU would otherwise queue seconds of work on a slow frame).
-const MAX_BATCH: u32 = 64;
 /// The visible frame is re-rendered at most this often while training (a render costs as much
 /// as tens of steps).
 const RENDER_INTERVAL_MS: f64 = 1500.0;
@@ -117,13 +112,12 @@ pub struct TrainingTask {
     /// large frame's filter does not hold up the page's thread).
     refine_pass: Option<RefinePass>,
     requests: Requests,
-    /// Steps per batch, adapted to [`TARGET_BATCH_MS`].
-    batch: u32,
+    /// The batches of steps: their size, the ones in flight, the rate.
+    batches: Batches,
     /// The labels version the trainer has.
     trained_version: u64,
     last_render_end: f64,
     render_ms: f64,
-    rate: RateMeter,
     /// New labels wait for one batch of training before the mask is refreshed for them.
     labels_refresh: bool,
     trained_since_labels: bool,
@@ -142,6 +136,7 @@ impl TrainingTask {
         egui_ctx: egui::Context,
     ) -> TrainingTask {
         let faults = GpuFaults::watch(&ctx.device, &egui_ctx);
+        let batches = Batches::for_device(&ctx, setup.options.split_steps);
         TrainingTask {
             options: setup.options,
             ctx,
@@ -163,11 +158,10 @@ impl TrainingTask {
                 export: None,
                 render_untaken: false,
             },
-            batch: 1,
+            batches,
             trained_version: 0,
             last_render_end: f64::NEG_INFINITY,
             render_ms: 0.0,
-            rate: RateMeter::default(),
             labels_refresh: false,
             trained_since_labels: false,
             full_pending: None,
@@ -290,7 +284,7 @@ impl TrainingTask {
             match self.next_action() {
                 Action::Wait => sleep_ms(30).await,
                 Action::Paused => {
-                    self.rate.reset();
+                    self.batches.rate.reset();
                     sleep_ms(100).await;
                 }
                 Action::Export(labels) => {
@@ -382,40 +376,24 @@ impl TrainingTask {
         let _ = self.events.unbounded_send(TrainEvent::Refresh(times));
     }
 
-    /// Trains one batch of steps and adapts the batch size to the time it took.
+    /// Trains one batch of steps (on a GPU submitted behind the previous one, which is then
+    /// waited for) and reports the progress.
     async fn train_batch(&mut self, trainer: &mut Trainer) -> Result<(), TrainError> {
-        let batch = self.batch;
-        let start = now_ms();
-        if self.options.split_steps {
-            train_split(trainer, batch);
-        } else {
-            trainer.train(batch);
-        }
-        trainer.request_losses();
-        let submitted = now_ms();
-        gpu_done(&self.ctx.queue).await;
-        let done = now_ms();
-        let elapsed = (done - start).max(0.1);
-        self.rate.add(batch, elapsed);
+        let times = self.batches.run(&self.ctx, trainer, MAX_BATCH).await;
         self.trained_since_labels = true;
-        // Aim the next batch at the target time, changing by at most 2x at a time so one
-        // slow frame (a tab switch, a render in between) does not swing it wildly.
-        let steps = f64::from(batch);
-        let wanted = steps * TARGET_BATCH_MS / elapsed;
-        self.batch = (wanted.clamp(steps / 2.0, steps * 2.0).round() as u32).clamp(1, MAX_BATCH);
         let losses = trainer.poll_losses().map_err(TrainError::Losses)?;
+        let steps = f64::from(times.steps.max(1));
         let _ = self.events.unbounded_send(TrainEvent::Progress(Progress {
             steps: trainer.steps_done(),
-            steps_per_second: self.rate.per_second(),
+            steps_per_second: self.batches.rate.per_second(),
             losses,
-            batch: self.batch,
-            step_submit_ms: (submitted - start) / steps,
-            step_wait_ms: (done - submitted) / steps,
+            batch: self.batches.size,
+            step_submit_ms: times.record_ms / steps,
+            step_wait_ms: times.wait_ms / steps,
         }));
         self.egui_ctx
             .request_repaint_after(std::time::Duration::from_millis(self.options.repaint_ms.max(50)));
-        // Let the browser run the UI's frame before the next batch.
-        sleep_ms(0).await;
+        self.batches.yield_to_page().await;
         Ok(())
     }
 
@@ -492,18 +470,11 @@ impl TrainingTask {
             split = split.min(timed(start));
         }
         out.push(format!("step_split={split:.1}"));
-        let stages = trainer.stage_count();
-        let mut best = vec![(String::new(), f64::MAX); stages];
-        for _ in 0..2 {
-            for (i, slot) in best.iter_mut().enumerate() {
-                let start = now_ms();
-                let name = trainer.submit_stage(i).unwrap_or("?");
-                gpu_done(&self.ctx.queue).await;
-                let ms = timed(start);
-                slot.0 = name.replace(' ', "_");
-                slot.1 = slot.1.min(ms);
-            }
-        }
+        let best: Vec<(String, f64)> = stage_wall_ms(&self.ctx, trainer, 2)
+            .await
+            .into_iter()
+            .map(|(name, ms)| (name.replace(' ', "_"), ms))
+            .collect();
         let sum: f64 = best.iter().map(|b| b.1).sum();
         out.push(format!("stages_sum={sum:.1}"));
         out.extend(best.iter().map(|(name, ms)| format!("{name}={ms:.1}")));
@@ -538,15 +509,5 @@ impl TrainingTask {
             masks,
         };
         Ok(set.to_zip(Some(labels)))
-    }
-}
-
-/// Trains `steps` steps submitting each stage on its own (see [`TrainingOptions::split_steps`]).
-fn train_split(trainer: &mut Trainer, steps: u32) {
-    let stages = trainer.stage_count();
-    for _ in 0..steps {
-        for i in 0..stages {
-            trainer.submit_stage(i);
-        }
     }
 }

@@ -1,0 +1,116 @@
+//! What `scribblefield bench` and the page's bench mode (`#bench=PRESET`, `app::bench`) share:
+//! the scene and labels a bench trains on, and the figures of a report, so the two measure the
+//! same thing and name it the same way (docs/results/bench.md lists the fields).
+use serde_json::{Map, Value, json};
+
+use crate::field::FieldConfig;
+use crate::field::gpu::trainer::{StageShape, Trainer};
+use crate::gpu::GpuContext;
+use crate::gpu::matmul_bench::MatmulBenchReport;
+use crate::labels::synthetic::{ScribbleOptions, scribble_frames};
+use crate::scene::Scene;
+use crate::scene::demo::{DemoOptions, demo_scene};
+
+/// Frames of the demo scene that carry the bench's synthetic scribbles.
+pub const SCRIBBLED_FRAMES: [u32; 2] = [0, 12];
+
+/// The demo scene (default options: no feature codes) with synthetic scribbles on
+/// [`SCRIBBLED_FRAMES`], and `cfg` fitted to it: its classes, no feature supervision.
+pub fn bench_scene(cfg: &mut FieldConfig) -> Result<Scene, Box<dyn std::error::Error>> {
+    let mut scene = demo_scene(&DemoOptions::default())?;
+    scene.labels = Some(scribble_frames(&scene, &SCRIBBLED_FRAMES, &ScribbleOptions::default()));
+    cfg.num_classes = scene.classes.len() as u32;
+    cfg.feature_supervision = false;
+    cfg.validate()?;
+    Ok(scene)
+}
+
+/// Multiply-adds of one sample through every MLP, forward.
+pub fn mlp_macs_per_sample(trainer: &Trainer) -> f64 {
+    trainer
+        .layout()
+        .mlps()
+        .iter()
+        .flat_map(|(_, mlp)| mlp.layers.iter().map(|r| r.len() as f64))
+        .sum()
+}
+
+/// MLP products of one step, GFLOP: forward, input gradient and weight gradient, three products
+/// of the same size.
+pub fn mlp_gflop_per_step(trainer: &Trainer) -> f64 {
+    let cfg = trainer.config();
+    let samples = f64::from(cfg.batch_rays) * cfg.samples_per_ray() as f64;
+    3.0 * 2.0 * mlp_macs_per_sample(trainer) * samples / 1e9
+}
+
+/// The report's fields for `steps` steps timed over `seconds` (wall clock), in `bench --json`'s
+/// names: the batch, the rates, the step's estimated traffic and dispatches, the MLP rate, and,
+/// when given, the plain matmul's rate and the ratio to it. `stage_ms` are GPU milliseconds per
+/// stage name where timestamp queries measured them. With the adapter and the dense kernels'
+/// family (`uniform` on CPU devices, `tiled` on GPUs); the caller adds `config`.
+pub fn step_report(
+    ctx: &GpuContext,
+    trainer: &Trainer,
+    steps: u32,
+    seconds: f64,
+    matmul: Option<&MatmulBenchReport>,
+    stage_ms: Option<&[(String, f64)]>,
+) -> Map<String, Value> {
+    let cfg = trainer.config();
+    let step_s = seconds / f64::from(steps.max(1));
+    let rays = f64::from(cfg.batch_rays);
+    let samples = rays * cfg.samples_per_ray() as f64;
+    let gflop = mlp_gflop_per_step(trainer);
+    let shape = trainer.step_shape();
+    let stages: Vec<Value> = stage_names(&shape)
+        .into_iter()
+        .map(|name| {
+            let of_name = shape.iter().filter(|s| s.name == name);
+            let ms = stage_ms.and_then(|t| t.iter().find(|t| t.0 == name).map(|t| t.1));
+            json!({
+                "name": name,
+                "gpu_ms": ms,
+                "dispatches": of_name.clone().map(|s| s.dispatches).sum::<u64>(),
+                "bytes": of_name.map(|s| s.bytes).sum::<u64>(),
+            })
+        })
+        .collect();
+    let Value::Object(mut fields) = json!({
+        "adapter": ctx.describe(),
+        "kernels": if ctx.is_software() { "uniform" } else { "tiled" },
+        "rays": cfg.batch_rays,
+        "samples_per_ray": cfg.samples_per_ray(),
+        "steps_timed": steps,
+        "step_s": step_s,
+        "steps_per_s": 1.0 / step_s,
+        "rays_per_s": rays / step_s,
+        "samples_per_s": samples / step_s,
+        // Every sample goes through every head today.
+        "samples_to_heads_per_step": samples,
+        "bytes_per_step": shape.iter().map(|s| s.bytes).sum::<u64>() + trainer.gradient_clear_bytes(),
+        "gradient_clear_bytes": trainer.gradient_clear_bytes(),
+        "dispatches_per_step": shape.iter().map(|s| s.dispatches).sum::<u64>(),
+        "mlp_gflop_per_step": gflop,
+        "mlp_gflops": gflop / step_s,
+    }) else {
+        unreachable!("a JSON object literal")
+    };
+    if let Some(m) = matmul {
+        fields.insert("matmul_gflops".into(), json!(m.gflops));
+        fields.insert("matmul_n".into(), json!(m.n));
+        fields.insert("ratio_to_matmul".into(), json!(gflop / step_s / m.gflops));
+    }
+    fields.insert("stages".into(), Value::Array(stages));
+    fields
+}
+
+/// Stage names in step order, each once (both glue gathers are "glue backward").
+pub fn stage_names(shape: &[StageShape]) -> Vec<&'static str> {
+    let mut names = Vec::new();
+    for s in shape {
+        if !names.contains(&s.name) {
+            names.push(s.name);
+        }
+    }
+    names
+}
