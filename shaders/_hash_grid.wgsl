@@ -14,7 +14,7 @@ struct HashGridUniforms {
     levels: u32,
     // Features per level (F).
     features: u32,
-    // Entries per level (a power of two).
+    // Entries of a hashed level (a power of two); a dense level holds its vertices only.
     table_size: u32,
     // Index of the table's first value in the flat params / gradient buffer.
     table_offset: u32,
@@ -29,7 +29,9 @@ struct HashGridUniforms {
     _pad0: u32,
     _pad1: u32,
     _pad2: u32,
-    // Per level: x = cells per axis, y = vertices per axis when indexed densely, 0 when hashed.
+    // Per level: x = cells per axis, y = vertices per axis when indexed densely, 0 when hashed,
+    // z = the level's first entry in the table (levels hold min((res+1)³, table_size) entries,
+    // one after the other), w = 0.
     level_geometry: array<vec4<u32>, MAX_HASH_LEVELS>,
 }
 
@@ -63,7 +65,8 @@ fn corner_entry(cell: vec3<u32>, corner: u32, dense_side: u32, table_size: u32) 
     return (v.x ^ (v.y * 2654435761u) ^ (v.z * 805459861u)) & (table_size - 1u);
 }
 
-// Index of feature 0 of a level's table entry in the flat params / gradient buffer.
-fn table_index(table_offset: u32, table_size: u32, features: u32, level: u32, entry: u32) -> u32 {
-    return table_offset + (level * table_size + entry) * features;
+// Index of feature 0 of a level's table entry in the flat params / gradient buffer
+// (`level_first_entry`: level_geometry's z).
+fn table_index(table_offset: u32, features: u32, level_first_entry: u32, entry: u32) -> u32 {
+    return table_offset + (level_first_entry + entry) * features;
 }

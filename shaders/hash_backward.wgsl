@@ -72,7 +72,7 @@ fn hash_backward(
     var first_value: array<u32, 8>;
     for (var corner = 0u; corner < 8u; corner++) {
         let entry = corner_entry(key.xyz, corner, geometry.y, grid.table_size);
-        first_value[corner] = table_index(grid.table_offset, grid.table_size, grid.features, level, entry);
+        first_value[corner] = table_index(grid.table_offset, grid.features, geometry.z, entry);
     }
     for (var f = 0u; f < grid.features; f++) {
         var sums: array<f32, 8>;

@@ -42,7 +42,7 @@ fn encode_level(sample: u32, level: u32) {
     for (var corner = 0u; corner < 8u; corner++) {
         weights[corner] = corner_weight(located.frac, corner);
         let entry = corner_entry(located.cell, corner, geometry.y, grid.table_size);
-        first_value[corner] = table_index(grid.table_offset, grid.table_size, grid.features, level, entry);
+        first_value[corner] = table_index(grid.table_offset, grid.features, geometry.z, entry);
     }
     let first_column = sample * grid.row_stride + level * grid.features;
     for (var f = 0u; f < grid.features; f++) {

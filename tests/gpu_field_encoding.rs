@@ -92,6 +92,18 @@ fn configs() -> Vec<(&'static str, FieldConfig)> {
             },
         ),
         (
+            // Dense levels of 4³ and 7³ entries, one of exactly the table's 2^12 (16³, still
+            // dense), then hashed levels: each level at its own offset in the shrunken table.
+            "dense and hashed levels",
+            FieldConfig {
+                hash_levels: 6,
+                hash_base_resolution: 3,
+                hash_level_scale: 2.25,
+                log2_hash_table_size: 12,
+                ..FieldConfig::small()
+            },
+        ),
+        (
             // Non-power-of-two resolutions and 3 features: cells from a rounded p·res.
             "odd grid",
             FieldConfig {
@@ -102,6 +114,22 @@ fn configs() -> Vec<(&'static str, FieldConfig)> {
             },
         ),
     ]
+}
+
+/// The "dense and hashed levels" config really has levels of both kinds, one dense level
+/// exactly the table's size, and a table shorter than one full table per level.
+#[test]
+fn dense_levels_are_sized_to_their_vertices() {
+    let (_, cfg) = configs()
+        .into_iter()
+        .find(|(name, _)| *name == "dense and hashed levels")
+        .unwrap();
+    let grid = HashGrid::from_config(&cfg);
+    assert_eq!(grid.resolutions, vec![3, 6, 15, 34, 76, 172]);
+    let entries: Vec<usize> = (0..grid.levels).map(|l| grid.level_entries(l)).collect();
+    assert_eq!(entries, vec![64, 343, 4096, 4096, 4096, 4096]);
+    assert!(grid.is_dense(2) && !grid.is_dense(3));
+    assert!(grid.param_count() < grid.levels * grid.table_size * grid.features);
 }
 
 /// Runs the forward of `cfg` on `positions` into a garbage-filled buffer and reads it back.
@@ -256,7 +284,7 @@ fn check_backward(
         assert!(
             relative <= 2e-5,
             "{name}: table gradient {i} (level {}): GPU {g}, reference {e}, Σ|terms| {m}",
-            i / (grid.table_size * grid.features)
+            grid.level_of_value(i)
         );
         worst = worst.max(relative);
     }

@@ -1,16 +1,17 @@
 //! The trainer's checkpoint: its parameters, both Adam moments and its step count, as a
 //! safetensors file (`crate::safetensors`), so any safetensors reader can open it.
 //!
-//! One F32 tensor per range of the parameter layout (`ParamLayout::named_ranges`), in buffer
-//! order: `hash_table` of shape `[levels, entries, features]` (absent without a hash grid), then
-//! `density.0`, `density.1`, ..., `semantic.1`, each `[out, in]` (row-major, as the layout stores
-//! them). The moments follow under the same names prefixed `adam.first_moment.` and
+//! One F32 tensor per range of the parameter layout, in buffer order: a tensor per hash-grid
+//! level, `hash_table.0`, `hash_table.1`, ..., each `[entries, features]` with entries
+//! `min((res+1)³, 2^log2_hash_table_size)` (`ParamLayout::hash_levels`; none without a hash
+//! grid), then `density.0`, `density.1`, ..., `semantic.1`, each `[out, in]` (row-major, as the
+//! layout stores them). The moments follow under the same names prefixed `adam.first_moment.` and
 //! `adam.second_moment.`. The header's `__metadata__` says what the file is:
 //!
 //! | key | value |
 //! |---|---|
 //! | `format` | `scribblefield-trainer` |
-//! | `version` | `1` |
+//! | `version` | `2` (version 1 had one `hash_table` tensor `[levels, 2^log2, features]`, every level a full table; it is refused with a message saying so) |
 //! | `step` | the trainer's step count (seeds the ray batches, sets Adam's bias corrections) |
 //! | `config` | the `FieldConfig` as JSON (the layout follows from it) |
 //!
@@ -30,7 +31,7 @@ use crate::safetensors::{SafeTensors, to_bytes_with_metadata};
 use crate::scene::Scene;
 
 pub const FORMAT: &str = "scribblefield-trainer";
-pub const VERSION: &str = "1";
+pub const VERSION: &str = "2";
 /// The first bytes of the private format this one replaced.
 const OLD_MAGIC: &[u8; 8] = b"SFTRAIN1";
 const MOMENTS: [&str; 2] = ["adam.first_moment.", "adam.second_moment."];
@@ -57,17 +58,19 @@ pub struct Checkpoint {
 /// Every parameter tensor of `layout`: name, shape, range in the flat buffer.
 fn tensors(cfg: &FieldConfig, layout: &ParamLayout) -> Vec<(String, Vec<usize>, Range<usize>)> {
     let mut out = Vec::new();
+    let features = cfg.hash_features_per_level as usize;
+    for (level, range) in layout.hash_levels.iter().enumerate() {
+        out.push((
+            format!("hash_table.{level}"),
+            vec![range.len() / features, features],
+            range.clone(),
+        ));
+    }
     for (name, range) in layout.named_ranges() {
-        if range.is_empty() {
+        if range.is_empty() || name == "hash_table" {
             continue;
         }
-        let shape = if name == "hash_table" {
-            vec![
-                cfg.hash_levels as usize,
-                cfg.hash_table_size(),
-                cfg.hash_features_per_level as usize,
-            ]
-        } else {
+        let shape = {
             let (mlp, k) = name.split_once('.').expect("MLP ranges are named mlp.k");
             let k: usize = k.parse().expect("layer index");
             let dims = &layout
@@ -140,6 +143,12 @@ impl Checkpoint {
             return Err(bad(format!("`__metadata__` format is {format:?}, expected {FORMAT:?}")));
         }
         let version = get("version")?;
+        if version == "1" {
+            return Err(bad(format!(
+                "{FORMAT} version \"1\": its hash table gives every level a full table, this version \
+                 sizes a coarse level to its dense grid (version {VERSION:?}) and cannot read it: train again"
+            )));
+        }
         if version != VERSION {
             return Err(bad(format!(
                 "{FORMAT} version {version:?}; this version reads version {VERSION:?}"
@@ -541,19 +550,20 @@ mod tests {
 
     #[test]
     fn it_is_a_plain_safetensors_file_with_one_tensor_per_layout_range() {
-        let ck = sample(tiny());
+        // `small`: level 0 (16 cells, 17³ vertices) is dense, the 7 others hashed (2^14).
+        let ck = sample(Preset::Small.config());
         let st = SafeTensors::from_bytes("t.safetensors", ck.to_bytes()).unwrap();
         let cfg = &ck.config;
         let layout = ParamLayout::new(cfg);
-        let table = [
-            cfg.hash_levels as usize,
-            cfg.hash_table_size(),
-            cfg.hash_features_per_level as usize,
-        ];
         assert_eq!(
-            st.f32("hash_table", &table).unwrap(),
-            ck.state.params[layout.hash_table.clone()]
+            st.f32("hash_table.0", &[17 * 17 * 17, 2]).unwrap(),
+            ck.state.params[layout.hash_levels[0].clone()]
         );
+        assert_eq!(
+            st.f32("adam.first_moment.hash_table.7", &[1 << 14, 2]).unwrap(),
+            ck.state.first_moment[layout.hash_levels[7].clone()]
+        );
+        assert!(st.f32("hash_table", &[8, 1 << 14, 2]).is_err());
         let d = &layout.density.dims;
         assert_eq!(
             st.f32("adam.second_moment.density.1", &[d[2], d[1]]).unwrap(),
@@ -562,7 +572,37 @@ mod tests {
         assert_eq!(st.metadata()["format"], FORMAT);
         assert_eq!(st.metadata()["step"], "17");
         assert_eq!(st.metadata()["round"], "4");
-        assert_eq!(st.names().count(), 3 * layout.named_ranges().len());
+        // The one `hash_table` range is a tensor per level.
+        assert_eq!(st.names().count(), 3 * (layout.named_ranges().len() - 1 + 8));
+    }
+
+    #[test]
+    fn a_version_1_checkpoint_with_full_tables_per_level_is_refused() {
+        // What version 1 wrote: one `hash_table` tensor [levels, 2^log2, features].
+        let cfg = Preset::Small.config();
+        let layout = ParamLayout::new(&cfg);
+        let full = vec![0.5f32; 8 * (1 << 14) * 2];
+        let mut metadata = BTreeMap::new();
+        for (k, v) in [("format", FORMAT), ("version", "1"), ("step", "3")] {
+            metadata.insert(k.to_string(), v.to_string());
+        }
+        metadata.insert("config".into(), serde_json::to_string(&cfg).unwrap());
+        let params = vec![0.25f32; layout.total];
+        let mut entries: Vec<(&str, &[usize], &[f32])> = vec![("hash_table", &[8, 1 << 14, 2], &full)];
+        let list = tensors(&cfg, &layout);
+        entries.extend(
+            list.iter()
+                .filter(|(n, ..)| !n.starts_with("hash_table"))
+                .map(|(n, s, r)| (n.as_str(), &s[..], &params[r.clone()])),
+        );
+        let m = message(Checkpoint::from_bytes(
+            "old.safetensors",
+            to_bytes_with_metadata(&entries, &metadata),
+        ));
+        assert!(
+            m.starts_with("old.safetensors: ") && m.contains("version \"1\"") && m.contains("train again"),
+            "{m}"
+        );
     }
 
     #[test]

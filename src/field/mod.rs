@@ -3,9 +3,10 @@
 //! `reference` is the plain-Rust spec of every stage of the training step (forward and
 //! backward); the GPU kernels are tested against it, and it is proved by finite differences.
 //!
-//! Size of the default model (`FieldConfig::default()`, C classes): hash table 16 × 2^19 × 2 =
-//! 16,777,216 values + MLPs 24,064 (density) + 20,736 (colour) + 9,152 (feature) +
-//! 5,056 + 64·C (semantic), i.e. 16,836,352 f32 (≈ 64 MiB) for C = 2. The trainer keeps four
+//! Size of the default model (`FieldConfig::default()`, C classes): hash table
+//! (17³ + 33³ + 65³ + 13 × 2^19) × 2 = 14,262,438 values (the three coarse levels are dense,
+//! sized to their vertices) + MLPs 24,064 (density) + 20,736 (colour) + 9,152 (feature) +
+//! 5,056 + 64·C (semantic), i.e. 14,321,574 f32 (≈ 55 MiB) for C = 2. The trainer keeps four
 //! buffers of that length (parameters, gradient, Adam m and v).
 #[cfg(not(target_arch = "wasm32"))]
 pub mod checkpoint;

@@ -56,7 +56,8 @@ pub struct HashGridUniforms {
     /// Backward: workgroups covering the samples of one level.
     pub groups_per_level: u32,
     pub _pad: [u32; 3],
-    /// Per level: [cells per axis, vertices per axis if indexed densely else 0, 0, 0].
+    /// Per level: [cells per axis, vertices per axis if indexed densely else 0, the level's first
+    /// entry in the table (`HashGrid::level_offsets`), 0].
     pub level_geometry: [[u32; 4]; MAX_HASH_LEVELS],
 }
 
@@ -80,7 +81,8 @@ impl HashGridUniforms {
         for (level, geometry) in level_geometry.iter_mut().enumerate().take(grid.levels) {
             let resolution = grid.resolutions[level];
             let dense_side = if grid.is_dense(level) { resolution + 1 } else { 0 };
-            *geometry = [resolution, dense_side, 0, 0];
+            let first_entry = index_u32("hash level offset", grid.level_offsets[level])?;
+            *geometry = [resolution, dense_side, first_entry, 0];
         }
         let groups_per_level = samples.div_ceil(WORKGROUP_SIZE as usize);
         Ok(HashGridUniforms {
@@ -492,9 +494,15 @@ mod tests {
         // 16, 32, 64 cells are dense (65³ ≤ 2^19); 128 is hashed.
         assert_eq!(
             &u.level_geometry[..4],
-            &[[16, 17, 0, 0], [32, 33, 0, 0], [64, 65, 0, 0], [128, 0, 0, 0]]
+            &[
+                [16, 17, 0, 0],
+                [32, 33, 4913, 0],
+                [64, 65, 4913 + 35_937, 0],
+                [128, 0, 315_475, 0]
+            ]
         );
         assert_eq!(u.level_geometry[15][0], 16 << 15);
+        assert_eq!(u.level_geometry[15][2], 315_475 + 12 * (1 << 19));
         assert_eq!(u.level_geometry[16], [0; 4]);
 
         let freq = FieldConfig {

@@ -9,8 +9,11 @@
 //! - the spatial hash `(x·1 ⊕ y·2654435761 ⊕ z·805459861) mod table_size` in wrapping u32
 //!   arithmetic (table_size is a power of two, so the mod is a mask).
 //!
-//! The table layout is described in `field::params`: `(level · table_size + entry) · F + f`.
-//! Positions are data, not parameters, so the backward pass only produces table gradients.
+//! Each level holds `min((res+1)³, table_size)` entries (instant-ngp's sizing): a dense level
+//! has exactly one entry per vertex, a hashed one the whole table. The levels follow each other
+//! in the flat table, so value `f` of entry `e` of level `l` is at
+//! `(level_offset(l) + e) · F + f` (`field::params`). Positions are data, not parameters, so
+//! the backward pass only produces table gradients.
 use super::real::Real;
 use crate::field::config::FieldConfig;
 
@@ -21,10 +24,13 @@ pub const HASH_PRIMES: [u32; 3] = [1, 2_654_435_761, 805_459_861];
 pub struct HashGrid {
     pub levels: usize,
     pub features: usize,
-    /// Entries per level (a power of two).
+    /// Entries of a hashed level (a power of two); a dense level holds fewer.
     pub table_size: usize,
     /// Cells per axis of every level.
     pub resolutions: Vec<u32>,
+    /// Entry where each level starts in the flat table, and the total after the last level
+    /// (`levels + 1` values).
+    pub level_offsets: Vec<usize>,
 }
 
 /// One corner of the cell containing a position: its table slot and trilinear weight.
@@ -37,14 +43,21 @@ pub struct Corner<R> {
 
 impl HashGrid {
     pub fn new(levels: usize, features: usize, log2_table_size: u32, base_resolution: u32, scale: f32) -> HashGrid {
-        let resolutions = (0..levels)
+        let resolutions: Vec<u32> = (0..levels)
             .map(|l| ((base_resolution as f64 * (scale as f64).powi(l as i32)).floor() as u32).max(1))
             .collect();
+        let table_size = 1usize << log2_table_size;
+        let mut level_offsets = vec![0usize];
+        for &res in &resolutions {
+            let entries = level_entries(res, table_size);
+            level_offsets.push(level_offsets.last().copied().unwrap_or(0) + entries);
+        }
         HashGrid {
             levels,
             features,
-            table_size: 1 << log2_table_size,
+            table_size,
             resolutions,
+            level_offsets,
         }
     }
 
@@ -68,15 +81,25 @@ impl HashGrid {
         self.levels * self.features
     }
 
-    /// Length of the table: levels × table_size × features.
+    /// Length of the table: the entries of every level × features.
     pub fn param_count(&self) -> usize {
-        self.levels * self.table_size * self.features
+        self.level_offsets[self.levels] * self.features
     }
 
     /// Whether the level's vertex grid fits its table, so it is indexed densely.
     pub fn is_dense(&self, level: usize) -> bool {
-        let v = self.resolutions[level] as u64 + 1;
-        v * v * v <= self.table_size as u64
+        is_dense(self.resolutions[level], self.table_size)
+    }
+
+    /// Entries the level holds: `(res+1)³` when dense, else `table_size`.
+    pub fn level_entries(&self, level: usize) -> usize {
+        self.level_offsets[level + 1] - self.level_offsets[level]
+    }
+
+    /// The level a value of the flat table belongs to.
+    pub fn level_of_value(&self, index: usize) -> usize {
+        let entry = index / self.features.max(1);
+        self.level_offsets[1..].partition_point(|&end| end <= entry)
     }
 
     /// Entry of an integer vertex within the level's table.
@@ -104,7 +127,7 @@ impl HashGrid {
             cell[d] = c;
             frac[d] = x - R::of(c as f64);
         }
-        let level_base = level * self.table_size;
+        let level_base = self.level_offsets[level];
         std::array::from_fn(|c| {
             let mut vertex = cell;
             let mut weight = R::ONE;
@@ -121,6 +144,20 @@ impl HashGrid {
                 weight,
             }
         })
+    }
+}
+
+fn is_dense(resolution: u32, table_size: usize) -> bool {
+    let v = resolution as u64 + 1;
+    v * v * v <= table_size as u64
+}
+
+/// Entries of a level of `resolution` cells per axis: min((res+1)³, table_size).
+fn level_entries(resolution: u32, table_size: usize) -> usize {
+    if is_dense(resolution, table_size) {
+        (resolution as usize + 1).pow(3)
+    } else {
+        table_size
     }
 }
 
@@ -172,6 +209,40 @@ mod tests {
         let default = HashGrid::from_config(&FieldConfig::default());
         assert_eq!(default.resolutions[15], 16 << 15);
         assert!(default.is_dense(2) && !default.is_dense(3)); // 65³ ≤ 2^19 < 129³
+    }
+
+    #[test]
+    fn dense_levels_hold_their_vertices_and_hashed_levels_the_table() {
+        let g = tiny_grid();
+        assert_eq!(g.level_offsets, vec![0, 27, 91, 155, 219]);
+        assert_eq!(g.param_count(), 219 * 2);
+        assert_eq!(
+            (0..4).map(|l| g.level_entries(l)).collect::<Vec<_>>(),
+            vec![27, 64, 64, 64]
+        );
+        assert_eq!(
+            [0, 53, 54, 181, 182, 437].map(|i| g.level_of_value(i)),
+            [0, 0, 1, 1, 2, 3]
+        );
+        // A dense grid exactly the table's size is dense, and holds the whole table.
+        let exact = HashGrid::new(2, 1, 12, 15, 2.0);
+        assert!(exact.is_dense(0) && !exact.is_dense(1));
+        assert_eq!(exact.level_offsets, vec![0, 4096, 8192]);
+        // The default: 17³ + 33³ + 65³ dense entries, then 13 tables of 2^19.
+        let default = HashGrid::from_config(&FieldConfig::default());
+        assert_eq!(default.level_offsets[3], 4913 + 35_937 + 274_625);
+        assert_eq!(default.param_count(), (315_475 + 13 * (1 << 19)) * 2);
+        // Every corner of every level lands inside its own level.
+        let mut rng = SplitMix64::new(4);
+        for _ in 0..200 {
+            let p = [rng.next_f64(), rng.next_f64(), rng.next_f64()];
+            for level in 0..g.levels {
+                for c in g.corners(level, p) {
+                    let entry = c.offset / g.features;
+                    assert!((g.level_offsets[level]..g.level_offsets[level + 1]).contains(&entry));
+                }
+            }
+        }
     }
 
     #[test]
