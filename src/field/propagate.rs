@@ -303,6 +303,15 @@ impl PropagationCache {
                 }
                 (walked, _) => walked,
             };
+            // Next to the object's points the far pixels' class came through the walk alone,
+            // across edges too faint to stop it: the field decides those pixels.
+            let walked = match (walked, &carried, self.sparse.as_ref().and_then(|s| s.regions.as_ref())) {
+                (Some(mut map), Some(Carried::Walks(_)), Some(regions)) => {
+                    regions.keep_far_class_off_points(&mut map, strokes.as_deref(), frame as usize);
+                    Some(map)
+                }
+                (walked, _, _) => walked,
+            };
             // Only what the user drew or what reaches two classes walks. The points of a frame
             // may all be one object's, and a walk from those alone would paint the whole frame
             // with it; where they have a label it is more often right than the walk's, so it
@@ -366,9 +375,33 @@ struct SparseCapture {
     /// point's class (the page asks again after every edit, most of which leave the seeds as
     /// they were).
     last: Option<LastPointWalk>,
-    /// The far class and the points' classes the outlines were found for, and per frame the
-    /// outline of the points of the other classes (`View::outline_of_points_not_in`).
-    outlines: Option<(u16, Vec<u16>, Vec<Vec<bool>>)>,
+    /// Where the points of the classes other than the far pixels' lie in each frame, for the
+    /// far class and points' classes they were found for.
+    regions: Option<PointRegions>,
+}
+
+/// Per frame, the pixels the points not of the far pixels' class mark.
+struct PointRegions {
+    far_class: u16,
+    point_classes: Vec<u16>,
+    /// Inside their outline (`View::outline_of_points_not_in`).
+    outline: Vec<Vec<bool>>,
+    /// Near one of them (`View::near_points_not_in`).
+    near: Vec<Vec<bool>>,
+}
+
+impl PointRegions {
+    /// Unlabels the far class in `map` (frame `frame`'s walk) near the other classes' points,
+    /// except where the user drew it.
+    fn keep_far_class_off_points(&self, map: &mut [u16], strokes: Option<&[u16]>, frame: usize) {
+        let Some(near) = self.near.get(frame) else { return };
+        for (i, (m, &near)) in map.iter_mut().zip(near).enumerate() {
+            let drawn = strokes.and_then(|s| s.get(i)).is_some_and(|&d| d != UNLABELLED);
+            if near && *m == self.far_class && !drawn {
+                *m = UNLABELLED;
+            }
+        }
+    }
 }
 
 /// Per frame (by index), a label map.
@@ -393,22 +426,29 @@ impl SparseCapture {
             views,
             far,
             last: None,
-            outlines: None,
+            regions: None,
         }
     }
 
-    /// Finds each frame's outline of the points not of class `class`, unless it is known for
-    /// these points' classes.
-    async fn find_outlines(&mut self, point_classes: &[u16], class: u16, pause: &mut impl Pause) {
-        if matches!(&self.outlines, Some((c, seen, _)) if *c == class && seen == point_classes) {
+    /// Finds where each frame's points not of class `class` lie, unless it is known for these
+    /// points' classes.
+    async fn find_regions(&mut self, point_classes: &[u16], class: u16, pause: &mut impl Pause) {
+        if matches!(&self.regions, Some(r) if r.far_class == class && r.point_classes == point_classes) {
             return;
         }
-        let mut outlines = Vec::with_capacity(self.views.len());
+        let mut outline = Vec::with_capacity(self.views.len());
+        let mut near = Vec::with_capacity(self.views.len());
         for view in &self.views {
             pause.pause().await;
-            outlines.push(view.outline_of_points_not_in(point_classes, class));
+            outline.push(view.outline_of_points_not_in(point_classes, class));
+            near.push(view.near_points_not_in(point_classes, class));
         }
-        self.outlines = Some((class, point_classes.to_vec(), outlines));
+        self.regions = Some(PointRegions {
+            far_class: class,
+            point_classes: point_classes.to_vec(),
+            outline,
+            near,
+        });
     }
 
     /// Each point's class from the walk over the points seeded by `walked`.
@@ -511,7 +551,7 @@ async fn frame_seeds(
         .collect();
     let unreconstructed = region_class(&drawn, classes);
     if let Some(class) = unreconstructed {
-        sparse.find_outlines(&point_classes, class, pause).await;
+        sparse.find_regions(&point_classes, class, pause).await;
     }
     let (views, far) = (&sparse.views, &sparse.far);
     for (f, view) in views.iter().enumerate() {
@@ -520,7 +560,7 @@ async fn frame_seeds(
             Some(class) => {
                 // A far pixel inside the outline of the other classes' points is more likely a
                 // hole in the object's reconstruction than the room: it is left to the walk.
-                let outline = sparse.outlines.as_ref().map_or(&[][..], |(_, _, o)| o[f].as_slice());
+                let outline = sparse.regions.as_ref().map_or(&[][..], |r| r.outline[f].as_slice());
                 for (i, (c, &far)) in carried.iter_mut().zip(&far[f]).enumerate() {
                     let inside = outline.get(i).copied().unwrap_or(false);
                     if far && !inside && *c == UNLABELLED {

@@ -20,6 +20,8 @@ pub const FAR_FROM_POINTS: f64 = 0.03;
 /// many points land within the far radius of it, itself included: a lone point is more often a
 /// wrong match than an object's edge.
 const OUTLINE_NEIGHBOURS: u32 = 10;
+/// A pixel is near a point ([`View::near_points_not_in`]) within this share of the far radius.
+const NEAR_SHARE_OF_FAR: f64 = 0.5;
 /// The class the strokes give a region (pixels far from every point, a support plane) must hold
 /// at least this share of the region's stroked pixels to be trusted with all of it...
 const REGION_SHARE: f64 = 0.75;
@@ -104,6 +106,24 @@ impl View {
                     .into_iter()
                     .all(|(a, b)| (b.0 - a.0) * (y - a.1) - (b.1 - a.1) * (x - a.0) >= 0)
             })
+            .collect()
+    }
+
+    /// True for each pixel within half the far radius of a point not labelled `class` (`labels`
+    /// per point, unlabelled points included). Next to the object's points, the far pixels'
+    /// class only arrives through the frame's walk, which crosses a faint edge as easily as none;
+    /// the points the walk over the points left unlabelled are mostly the object's.
+    pub fn near_points_not_in(&self, labels: &[u16], class: u16) -> Vec<bool> {
+        let mut occupied = vec![false; self.width * self.height];
+        for &(pixel, _, point) in &self.hits {
+            if labels[point as usize] != class {
+                occupied[pixel as usize] = true;
+            }
+        }
+        let radius = NEAR_SHARE_OF_FAR * self.far_radius();
+        distance_to_nearest(&occupied, self.width, self.height)
+            .into_iter()
+            .map(|d| d <= radius)
             .collect()
     }
 
@@ -340,6 +360,29 @@ mod tests {
         assert!(!outline[55 * width + 30]);
         // Points of the far class itself draw no outline.
         assert!(view.outline_of_points_not_in(&labels, 1).iter().all(|&inside| !inside));
+    }
+
+    /// Near means within half the far radius (1.27 px at 60 x 60) of a point not of the class:
+    /// points the walk left unlabelled count, points of the class itself do not.
+    #[test]
+    fn pixels_near_the_points_of_the_other_classes() {
+        let (width, height) = (60usize, 60usize);
+        let hits = vec![
+            ((10 * width + 10) as u32, 1.0, 0),
+            ((40 * width + 40) as u32, 1.0, 1),
+            ((5 * width + 50) as u32, 1.0, 2),
+        ];
+        let labels = [1u16, UNLABELLED, 0];
+        let view = View { width, height, hits };
+        let near = view.near_points_not_in(&labels, 0);
+        assert!(near[10 * width + 10] && near[10 * width + 11] && near[11 * width + 10]);
+        assert!(!near[11 * width + 11], "a diagonal step (1.41 px) is not near");
+        assert!(near[40 * width + 41], "an unlabelled point counts");
+        assert!(
+            !near[5 * width + 50] && !near[5 * width + 51],
+            "a point of the class itself does not"
+        );
+        assert_eq!(near.iter().filter(|&&n| n).count(), 10);
     }
 
     #[test]
