@@ -236,20 +236,6 @@ pub fn survey_capture<'a>(files: impl IntoIterator<Item = (&'a str, u64)>) -> Ca
     }
 }
 
-/// The frames' size after `--max-size` (the importers' rule: only ever smaller, aspect kept).
-pub fn packed_size(source: (u32, u32), max_side: Option<u32>) -> (u32, u32) {
-    let (w, h) = source;
-    let longest = w.max(h);
-    match max_side {
-        Some(m) if m > 0 && longest > m => {
-            let s = m as f64 / longest as f64;
-            let side = |v: u32| ((v as f64 * s).round() as u32).clamp(1, m);
-            (side(w), side(h))
-        }
-        _ => (w, h),
-    }
-}
-
 /// What packing a capture will cost, worked out before it starts ([`estimate_pack`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct PackEstimate {
@@ -335,7 +321,7 @@ pub fn estimate_pack(survey: &CaptureSurvey, source: (u32, u32), opts: &PackOpti
     if let Some(m) = opts.import.max_frames {
         frames = frames.min(m as usize);
     }
-    let size = packed_size(source, opts.import.max_size);
+    let size = crate::scene::import::target_size(source, opts.import.max_size);
     let pixels = size.0 as f64 * size.1 as f64;
     let source_pixels = source.0 as f64 * source.1 as f64;
     let n = frames as f64;

@@ -24,6 +24,7 @@ mod nerf_splits;
 mod options;
 mod register;
 mod resize;
+pub use resize::target_size;
 mod scannet;
 mod seven_scenes;
 mod text;
