@@ -7,6 +7,7 @@
 //! the labels go wrong.
 use std::path::Path;
 
+use scribblefield::field::pause::run_to_end;
 use scribblefield::field::propagate::{PropagationOptions, propagate_labels};
 use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
 use scribblefield::scene::Scene;
@@ -109,7 +110,8 @@ fn labels_before_training() {
 
 /// Not a check: how long the labels take on the COLMAP capture (52 photos at 200x200) when the
 /// page sends them after each edit: the first time (the points' graph is built), again unchanged,
-/// and after one more stroke on a drawn photo (`--ignored --nocapture`; docs/quality.md).
+/// and after one more stroke on a drawn photo, and the longest stretch between two pauses (what
+/// holds the page's thread at once) (`--ignored --nocapture`; docs/quality.md).
 #[test]
 #[ignore]
 fn time_per_edit_on_a_sparse_capture() {
@@ -131,11 +133,37 @@ fn time_per_edit_on_a_sparse_capture() {
     let mut cache = PropagationCache::default();
     for (what, labels) in [("first", &labels), ("unchanged", &labels), ("after an edit", &more)] {
         let clock = Instant::now();
-        let maps = cache.maps(&scene, labels, 2, &options);
+        let mut pause = LongestStretch::new();
+        let maps = run_to_end(cache.maps_pausing(&scene, labels, 2, &options, &mut pause));
         eprintln!(
-            "{what}: {:.2} s for {} frames",
+            "{what}: {:.2} s for {} frames, at most {:.3} s between pauses",
             clock.elapsed().as_secs_f64(),
-            maps.len()
+            maps.len(),
+            pause.longest.as_secs_f64()
         );
+    }
+}
+
+/// A pause that never waits and remembers the longest time between two pauses.
+struct LongestStretch {
+    last: std::time::Instant,
+    longest: std::time::Duration,
+}
+
+impl LongestStretch {
+    fn new() -> LongestStretch {
+        LongestStretch {
+            last: std::time::Instant::now(),
+            longest: std::time::Duration::ZERO,
+        }
+    }
+}
+
+impl scribblefield::field::pause::Pause for LongestStretch {
+    fn pause(&mut self) -> impl std::future::Future<Output = ()> {
+        let now = std::time::Instant::now();
+        self.longest = self.longest.max(now - self.last);
+        self.last = now;
+        std::future::ready(())
     }
 }

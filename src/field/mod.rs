@@ -20,6 +20,7 @@ pub mod presets;
 pub mod propagate;
 pub mod reference;
 pub mod refine;
+pub mod sparse_solve;
 pub mod support_plane;
 pub mod view_seeds;
 

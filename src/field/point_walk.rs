@@ -13,6 +13,7 @@ use glam::DVec3;
 
 use super::pause::{NoPause, Pause, run_to_end};
 use super::pixel_walk::{conjugate_gradient, srgb_to_lab};
+use super::sparse_solve::Factored;
 use crate::labels::UNLABELLED;
 use crate::scene::Scene;
 
@@ -126,9 +127,12 @@ impl PointGraph {
         PointGraph { edges }
     }
 
-    /// The probability that a walk from each point reaches a seed of `class` before a seed of
-    /// another class (seeds fixed at 1 or 0; see `propagate`'s walk, here without fading).
-    async fn walk(&self, seeds: &[u16], class: u16, pause: &mut impl Pause) -> Vec<f64> {
+    /// For each class of `classes`, the probability that a walk from each point reaches a seed
+    /// of that class before a seed of another (seeds fixed at 1 or 0; see `propagate`'s walk,
+    /// here without fading). The system is the same for every class (only its right-hand side
+    /// differs), so it is factored once and solved exactly; should the factorization fail,
+    /// conjugate gradients solve it as they did before.
+    async fn walk(&self, seeds: &[u16], classes: &[u16], pause: &mut impl Pause) -> Vec<Vec<f64>> {
         let n = seeds.len();
         let free: Vec<usize> = (0..n).filter(|&i| seeds[i] == UNLABELLED).collect();
         let mut slot = vec![u32::MAX; n];
@@ -138,15 +142,15 @@ impl PointGraph {
         // The system over the free points in one flat list (each free point's free neighbours,
         // by slot), so each iteration reads memory in order.
         let mut degree = vec![0f64; free.len()];
-        let mut rhs = vec![0f64; free.len()];
+        let mut rhs = vec![vec![0f64; free.len()]; classes.len()];
         let mut starts = Vec::with_capacity(free.len() + 1);
         let mut links: Vec<(u32, f64)> = Vec::new();
         for (k, &i) in free.iter().enumerate() {
             starts.push(links.len());
             for &(j, w) in &self.edges[i] {
                 degree[k] += w;
-                if seeds[j as usize] == class {
-                    rhs[k] += w;
+                if let Some(c) = classes.iter().position(|&c| c == seeds[j as usize]) {
+                    rhs[c][k] += w;
                 }
                 if slot[j as usize] != u32::MAX {
                     links.push((slot[j as usize], w));
@@ -154,21 +158,34 @@ impl PointGraph {
             }
         }
         starts.push(links.len());
-        let apply = |x: &[f64], out: &mut [f64]| {
-            for (k, out) in out.iter_mut().enumerate() {
-                let mut sum = degree[k] * x[k];
-                for &(j, w) in &links[starts[k]..starts[k + 1]] {
-                    sum -= w * x[j as usize];
+        pause.pause().await;
+        let negated: Vec<(u32, f64)> = links.iter().map(|&(j, w)| (j, -w)).collect();
+        let factored = Factored::new(&degree, &starts, &negated);
+        let mut out = Vec::with_capacity(classes.len());
+        for (rhs, &class) in rhs.iter().zip(classes) {
+            pause.pause().await;
+            let x = match &factored {
+                Ok(factored) => factored.solve(rhs),
+                Err(_) => {
+                    let apply = |x: &[f64], out: &mut [f64]| {
+                        for (k, out) in out.iter_mut().enumerate() {
+                            let mut sum = degree[k] * x[k];
+                            for &(j, w) in &links[starts[k]..starts[k + 1]] {
+                                sum -= w * x[j as usize];
+                            }
+                            *out = sum;
+                        }
+                    };
+                    conjugate_gradient(apply, rhs, &degree, 2000, pause).await
                 }
-                *out = sum;
+            };
+            let mut p: Vec<f64> = seeds.iter().map(|&s| if s == class { 1.0 } else { 0.0 }).collect();
+            for (k, &i) in free.iter().enumerate() {
+                p[i] = x[k].clamp(0.0, 1.0);
             }
-        };
-        let x = conjugate_gradient(apply, &rhs, &degree, 2000, pause).await;
-        let mut p: Vec<f64> = seeds.iter().map(|&s| if s == class { 1.0 } else { 0.0 }).collect();
-        for (k, &i) in free.iter().enumerate() {
-            p[i] = x[k].clamp(0.0, 1.0);
+            out.push(p);
         }
-        p
+        out
     }
 }
 
@@ -249,10 +266,7 @@ impl PointLabeller {
         if present.len() < 2 {
             return vec![UNLABELLED; seeds.len()];
         }
-        let mut probabilities: Vec<Vec<f64>> = Vec::with_capacity(present.len());
-        for &class in &present {
-            probabilities.push(self.graph.walk(&seeds, class, pause).await);
-        }
+        let probabilities = self.graph.walk(&seeds, &present, pause).await;
         (0..seeds.len())
             .map(|p| {
                 let (mut best, mut first, mut second) = (0, f64::MIN, f64::MIN);
@@ -411,8 +425,14 @@ mod tests {
         let mut seeds = vec![UNLABELLED; points.xyz.len()];
         seeds[3] = 0;
         seeds[260] = 1;
-        let p = run_to_end(graph.walk(&seeds, 1, &mut NoPause));
-        assert!(p[..200].iter().all(|&v| v < 0.1), "the first blob is class 0");
-        assert!(p[200..].iter().all(|&v| v > 0.9), "the second blob is class 1");
+        let p = run_to_end(graph.walk(&seeds, &[0, 1], &mut NoPause));
+        assert!(p[1][..200].iter().all(|&v| v < 0.1), "the first blob is class 0");
+        assert!(p[1][200..].iter().all(|&v| v > 0.9), "the second blob is class 1");
+        for (zero, one) in p[0].iter().zip(&p[1]) {
+            assert!(
+                (zero + one - 1.0).abs() < 1e-9,
+                "a converged walk reaches one class or the other: {zero} + {one}"
+            );
+        }
     }
 }

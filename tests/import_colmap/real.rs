@@ -235,8 +235,9 @@ fn strokes_on_two_photos_reach_the_others_through_the_points() {
     assert!(labelled > 20 * labelled_within, "{labelled} against {labelled_within}");
     // Far pixels inside the outline of the head's points are left to the walk, not given the
     // room's class (docs/quality.md, "Holes in the object's reconstruction"); near the points
-    // of the head the room's class is not taken from the walk (0.960 right without, 0.972 with).
-    assert!(right > 0.965 && right > right_within, "{right} against {right_within}");
+    // of the head the room's class is not taken from the walk (0.960 right without, 0.972 with;
+    // 0.966 since the walk over the points is solved exactly and labels more of the head).
+    assert!(right > 0.96 && right > right_within, "{right} against {right_within}");
 
     // Other strokes on the same photos, whose background strokes cover no point of the model:
     // the walk inside the drawn photos carries the background to the pedestal's points, so both
@@ -252,9 +253,12 @@ fn strokes_on_two_photos_reach_the_others_through_the_points() {
         let (_, _, right) = right_share(&scene, &maps);
         eprintln!("scribbles {seed}: IoU of the labels per class {iou:?}, {right:.4} right");
         assert!(iou.iter().all(|&v| v > 0.7), "scribbles {seed}: {iou:?}");
+        // The head's labels: 0.726 and 0.780 when conjugate gradients stopped the walk over the
+        // points early, 0.768 and 0.862 solved exactly (docs/quality.md).
+        assert!(iou[1] > 0.75, "scribbles {seed}: the head's labels {iou:?}");
         // 0.945 and 0.960 before the room's class was kept off the head's points, 0.967 and
-        // 0.971 after.
-        assert!(right > 0.962, "scribbles {seed}: {right} of the labels right");
+        // 0.971 after, 0.965 solved exactly.
+        assert!(right > 0.96, "scribbles {seed}: {right} of the labels right");
     }
 }
 
