@@ -10,6 +10,7 @@ pub mod composite;
 pub mod dense;
 pub mod encoding;
 pub mod head_glue;
+pub mod keep;
 pub mod rays;
 pub mod refine;
 pub mod row_view;
