@@ -169,9 +169,9 @@ fn one_step_gradient_matches_the_reference_with_every_sample_at_the_heads() {
     );
 }
 
-/// A threshold that keeps the band's samples of the untrained field (about 0.004 of weight
-/// each) from the heads and the coarse ones (about 0.4) at them: the packed rows, the
-/// indirect dispatches and the zeros of the dropped samples against the reference's rule.
+/// A threshold above the weights of the untrained field's closely spaced band samples and below
+/// those of its coarse ones, so that many samples skip the heads: the packed rows, the indirect
+/// dispatches and the zeros of the dropped samples against the reference's rule.
 #[test]
 fn one_step_gradient_matches_the_reference_with_most_samples_kept_from_the_heads() {
     check_one_step_gradient(
