@@ -32,6 +32,17 @@ struct DenseDims {
     _pad: u32,
 }
 
+// One word: the rows actually present (at most dims.rows, the capacity the dispatch and the
+// buffers were sized for). The heads run on the samples the keep pass kept (keep.wgsl), whose
+// count is only known on the GPU; layers over a fixed batch bind a word holding dims.rows.
+@group(0) @binding(7) var<storage, read> row_count: array<u32>;
+
+// Rows to compute; a value read from a read-only binding, so uniform across a workgroup (the
+// tiled kernels return on it before their barriers).
+fn active_rows() -> u32 {
+    return min(dims.rows, row_count[0]);
+}
+
 override TX: u32 = 16u;
 override TY: u32 = 16u;
 override KC: u32 = 16u;

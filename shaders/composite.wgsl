@@ -9,8 +9,13 @@
 //   [losses: B x (loss rgb, loss depth, loss semantic, loss feature)]
 //   [rendered: B x k] [dL/drendered: B x k]
 // so that reading the losses back is one contiguous range, and so is reading a render.
-// Per sample n = ray * S + s a row of `grad_heads` (stride k):
-//   [dL/dh0, dL/d(colour pre-sigmoid) (3), dL/dlogits (C), dL/dfeature (D)].
+// Per sample n = ray * S + s a row of `grad_heads` (stride k) whose first word is dL/dh0, and
+// per kept sample a row of `head_grads` (stride k, at the sample's packed row `slot[n]`):
+//   [unused, dL/d(colour pre-sigmoid) (3), dL/dlogits (C), dL/dfeature (D)].
+// The heads ran on the kept samples alone (keep.wgsl): their outputs are read at the packed
+// row, and a sample that was not kept renders 0 for colour, logits and feature (its density
+// still counts, and its depth).
+// The rest of a `grad_heads` row is scratch (the second word holds the transmittance).
 // Losses are weighted and divided by the whole batch B. Rays that miss the scene box render
 // nothing and contribute no loss and no gradient (the reference never builds them).
 //
@@ -58,6 +63,11 @@ const LOSS_WORDS: u32 = 4u;
 @group(0) @binding(7) var<storage, read> targets: array<u32>;
 @group(0) @binding(8) var<storage, read_write> grad_heads: array<f32>;
 @group(0) @binding(9) var<storage, read_write> ray_outputs: array<f32>;
+// Per sample: its packed row in the head outputs and `head_grads`, or NOT_KEPT.
+@group(0) @binding(10) var<storage, read> slot: array<u32>;
+@group(0) @binding(11) var<storage, read_write> head_grads: array<f32>;
+
+const NOT_KEPT: u32 = 0xffffffffu;
 
 fn density(h0: f32) -> f32 {
     return exp(clamp(h0, -DENSITY_LOG_CLAMP, DENSITY_LOG_CLAMP));
@@ -72,15 +82,27 @@ fn sign_or_zero(x: f32) -> f32 {
 }
 
 fn colour_of(n: u32, c: u32) -> f32 {
-    return sigmoid(color_source[n * params.color_stride + params.color_offset + c]);
+    let h = slot[n];
+    if h == NOT_KEPT {
+        return 0.0;
+    }
+    return sigmoid(color_source[h * params.color_stride + params.color_offset + c]);
 }
 
 fn logit_of(n: u32, c: u32) -> f32 {
-    return logits_source[n * params.logits_stride + params.logits_offset + c];
+    let h = slot[n];
+    if h == NOT_KEPT {
+        return 0.0;
+    }
+    return logits_source[h * params.logits_stride + params.logits_offset + c];
 }
 
 fn feature_of(n: u32, d: u32) -> f32 {
-    return feature_source[n * params.feature_stride + params.feature_offset + d];
+    let h = slot[n];
+    if h == NOT_KEPT {
+        return 0.0;
+    }
+    return feature_source[h * params.feature_stride + params.feature_offset + d];
 }
 
 fn target_f32(row: u32, word: u32) -> f32 {
@@ -216,8 +238,14 @@ fn composite(
         ray_outputs[grad_at + c] = 0.0;
     }
     if (flags & RAY_HITS_BOX) == 0u {
-        for (var e = 0u; e < samples * k; e++) {
-            grad_heads[first * k + e] = 0.0;
+        for (var s = 0u; s < samples; s++) {
+            let h = slot[first + s];
+            for (var c = 0u; c < k; c++) {
+                grad_heads[(first + s) * k + c] = 0.0;
+                if h != NOT_KEPT {
+                    head_grads[h * k + c] = 0.0;
+                }
+            }
         }
         return;
     }
@@ -305,17 +333,22 @@ fn composite(
         let grad_sigma = interval.x * (t_after * u - suffix);
         suffix += w * u;
 
-        let row = n * k;
-        grad_heads[row] = grad_sigma * density(h0_source[n * params.h0_stride + params.h0_offset]);
+        grad_heads[n * k] = grad_sigma * density(h0_source[n * params.h0_stride + params.h0_offset]);
+        let h = slot[n];
+        if h == NOT_KEPT {
+            continue;
+        }
+        let row = h * k;
         let grad_colour = w * grad_rgb;
-        grad_heads[row + 1u] = grad_colour.x * colour.x * (1.0 - colour.x);
-        grad_heads[row + 2u] = grad_colour.y * colour.y * (1.0 - colour.y);
-        grad_heads[row + 3u] = grad_colour.z * colour.z * (1.0 - colour.z);
+        head_grads[row] = 0.0;
+        head_grads[row + 1u] = grad_colour.x * colour.x * (1.0 - colour.x);
+        head_grads[row + 2u] = grad_colour.y * colour.y * (1.0 - colour.y);
+        head_grads[row + 3u] = grad_colour.z * colour.z * (1.0 - colour.z);
         for (var c = 0u; c < classes; c++) {
-            grad_heads[row + semantic_at + c] = w * ray_outputs[grad_at + semantic_at + c];
+            head_grads[row + semantic_at + c] = w * ray_outputs[grad_at + semantic_at + c];
         }
         for (var d = 0u; d < feature_dim; d++) {
-            grad_heads[row + feature_at + d] = w * ray_outputs[grad_at + feature_at + d];
+            head_grads[row + feature_at + d] = w * ray_outputs[grad_at + feature_at + d];
         }
     }
 }

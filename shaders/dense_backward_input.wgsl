@@ -13,7 +13,7 @@
 
 // Writes the 4 values of one block row (columns col + c·TX) that lie inside dX.
 fn store_row(row: u32, col: u32, values: vec4<f32>) {
-    if row >= dims.rows {
+    if row >= active_rows() {
         return;
     }
     for (var c = 0u; c < RN; c++) {
@@ -35,7 +35,8 @@ fn backward_input(
     let tn = tile_n();
     let row_tile = linear_item_index(workgroup_id, num_workgroups, 0u, 1u);
     let row0 = row_tile * tm;
-    if row0 >= dims.rows {
+    let rows = active_rows();
+    if row0 >= rows {
         return;
     }
     let col0 = workgroup_id.z * tn;
@@ -49,7 +50,7 @@ fn backward_input(
             let row = row0 + m;
             let o = k0 + k;
             var value = 0.0;
-            if row < dims.rows && o < dims.out_dim {
+            if row < rows && o < dims.out_dim {
                 let g = dy[row * dims.dy_stride + dims.dy_offset + o];
                 value = output_gradient(g, row * dims.y_stride + dims.y_offset + o);
             }

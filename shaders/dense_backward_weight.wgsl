@@ -41,9 +41,21 @@ fn partial_sums(
     let i0 = workgroup_id.x * tn;
     let chunk = workgroup_id.z;
     let first_row = chunk * dims.chunk_rows;
-    let end_row = min(first_row + dims.chunk_rows, dims.rows);
-    let threads = TX * TY;
+    let rows = active_rows();
     var block: Block;
+    // A chunk past the rows present sums nothing: its partial is zero (reduce_chunks adds
+    // every chunk). Uniform per workgroup, so returning before the barriers is allowed.
+    if first_row >= rows {
+        let o = o0 + local_id.y;
+        let i = i0 + local_id.x;
+        store_row(chunk, o, i, block.r0);
+        store_row(chunk, o + TY, i, block.r1);
+        store_row(chunk, o + 2u * TY, i, block.r2);
+        store_row(chunk, o + 3u * TY, i, block.r3);
+        return;
+    }
+    let end_row = min(first_row + dims.chunk_rows, rows);
+    let threads = TX * TY;
     for (var k0 = 0u; k0 < dims.chunk_rows; k0 += KC) {
         // A[m][k] = dZ[row k][output m]: consecutive invocations read along a row of dY.
         for (var e = local_index; e < tm * KC; e += threads) {

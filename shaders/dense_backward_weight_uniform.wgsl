@@ -31,7 +31,7 @@ fn mask_output_gradient(
     @builtin(local_invocation_index) local_index: u32,
 ) {
     let e = linear_item_index(workgroup_id, num_workgroups, local_index, WORKGROUP);
-    if e >= dims.rows * dims.out_dim {
+    if e >= active_rows() * dims.out_dim {
         return;
     }
     let n = e / dims.out_dim;
@@ -64,7 +64,11 @@ fn chunk_partial_sums(
     let i = workgroup_id.x * COLUMNS + local_index;
     let o0 = workgroup_id.y * BLOCK;
     let first_row = chunk.index * dims.chunk_rows;
-    let count = min(dims.chunk_rows, dims.rows - first_row);
+    let rows = active_rows();
+    var count = 0u;
+    if first_row < rows {
+        count = min(dims.chunk_rows, rows - first_row);
+    }
     // Lanes past the last column read a valid column and discard the result.
     let column = dims.x_offset + min(i, dims.in_dim - 1u);
     var a0 = vec4<f32>();

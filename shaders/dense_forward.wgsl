@@ -12,7 +12,7 @@
 
 // Writes the 4 outputs of one block row (columns col + c·TX) that lie inside Y, activated.
 fn store_row(row: u32, col: u32, values: vec4<f32>) {
-    if row >= dims.rows {
+    if row >= active_rows() {
         return;
     }
     for (var c = 0u; c < RN; c++) {
@@ -38,8 +38,9 @@ fn forward(
     let tn = tile_n();
     let row_tile = linear_item_index(workgroup_id, num_workgroups, 0u, 1u);
     let row0 = row_tile * tm;
+    let rows = active_rows();
     // Uniform per workgroup, so returning before the barriers is allowed.
-    if row0 >= dims.rows {
+    if row0 >= rows {
         return;
     }
     let col0 = workgroup_id.z * tn;
@@ -53,7 +54,7 @@ fn forward(
             let row = row0 + m;
             let i = k0 + k;
             var value = 0.0;
-            if row < dims.rows && i < dims.in_dim {
+            if row < rows && i < dims.in_dim {
                 value = x[row * dims.x_stride + dims.x_offset + i];
             }
             a_tile[k * tm + m] = value;

@@ -15,7 +15,7 @@ fn forward(
     @builtin(local_invocation_index) local_index: u32,
 ) {
     let n = linear_item_index(vec3<u32>(workgroup_id.xy, 0u), num_workgroups, local_index, WORKGROUP);
-    if n >= dims.rows {
+    if n >= active_rows() {
         return;
     }
     let o0 = workgroup_id.z * BLOCK;

@@ -2,7 +2,11 @@
 //   colour input   = [SH(d) (written by sh_encode) | g]
 //   semantic input = [relu(f) | g], or [relu(f)] alone (FieldConfig::semantic_geometry_dim() = 0)
 // and, backwards, the sums that route the heads' input gradients to f and to the density output
-// [h0 | g]. One invocation per sample; rows are sample-major.
+// [h0 | g]. One invocation per row. The heads run on the samples the keep pass kept
+// (keep.wgsl), packed: `assemble` and `gather_feature` work on the first row_count[0] packed
+// rows (density_out is then the packed copy of the density rows), `gather_geometry` on every
+// sample, reading the heads' gradients from the sample's packed row (`slot`) and 0 for a
+// sample that was not kept.
 //!include _dispatch.wgsl
 
 const WORKGROUP_SIZE: u32 = 128u;
@@ -44,6 +48,18 @@ struct GlueDims {
 @group(0) @binding(8) var<storage, read> color_in_grad: array<f32>;
 // The feature MLP's input gradient dL/dg, row stride geometry.
 @group(0) @binding(9) var<storage, read> feature_in_grad: array<f32>;
+// One word: the packed rows present (keep.wgsl).
+@group(0) @binding(10) var<storage, read> row_count: array<u32>;
+// Per sample: its packed row, or NOT_KEPT.
+@group(0) @binding(11) var<storage, read> slot: array<u32>;
+// The composite's per-sample rows, for dL/dh0 (grad_heads holds the packed heads' rows).
+@group(0) @binding(12) var<storage, read> grad_h0_source: array<f32>;
+
+const NOT_KEPT: u32 = 0xffffffffu;
+
+fn packed_rows() -> u32 {
+    return min(dims.samples, row_count[0]);
+}
 
 fn sample_index(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
     return linear_item_index(wid, nwg, lid, WORKGROUP_SIZE);
@@ -57,7 +73,7 @@ fn assemble(
     @builtin(local_invocation_index) lid: u32,
 ) {
     let n = sample_index(wid, nwg, lid);
-    if n >= dims.samples {
+    if n >= packed_rows() {
         return;
     }
     let g = dims.geometry;
@@ -85,7 +101,7 @@ fn gather_feature(
     @builtin(local_invocation_index) lid: u32,
 ) {
     let n = sample_index(wid, nwg, lid);
-    if n >= dims.samples {
+    if n >= packed_rows() {
         return;
     }
     let d = dims.feature;
@@ -114,13 +130,20 @@ fn gather_geometry(
     let g = dims.geometry;
     let d = dims.feature;
     let sg = dims.semantic_geometry;
-    density_out_grad[n * (1u + g)] = grad_heads[n * dims.grad_stride + dims.grad_h0];
+    density_out_grad[n * (1u + g)] = grad_h0_source[n * dims.grad_stride + dims.grad_h0];
+    let k = slot[n];
+    if k == NOT_KEPT {
+        for (var j = 0u; j < g; j++) {
+            density_out_grad[n * (1u + g) + 1u + j] = 0.0;
+        }
+        return;
+    }
     for (var j = 0u; j < g; j++) {
         var semantic = 0.0;
         if j < sg {
-            semantic = dims.semantic_trunk_scale * semantic_in_grad[n * (d + sg) + d + j];
+            semantic = dims.semantic_trunk_scale * semantic_in_grad[k * (d + sg) + d + j];
         }
-        density_out_grad[n * (1u + g) + 1u + j] = color_in_grad[n * (dims.sh + g) + dims.sh + j] + semantic
-            + feature_in_grad[n * g + j];
+        density_out_grad[n * (1u + g) + 1u + j] = color_in_grad[k * (dims.sh + g) + dims.sh + j] + semantic
+            + feature_in_grad[k * g + j];
     }
 }

@@ -4,6 +4,15 @@ use std::process::Command;
 
 use scribblefield::gpu::test_support::gpu_for_tests;
 
+fn names_of(v: &serde_json::Value) -> Vec<&str> {
+    v["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["name"].as_str().unwrap())
+        .collect()
+}
+
 #[test]
 fn bench_json_is_one_object_with_every_field() {
     // Only to skip loudly where there is no adapter; the command finds its own.
@@ -43,7 +52,10 @@ fn bench_json_is_one_object_with_every_field() {
         assert!(number(key) > 0.0, "`{key}` in {v}");
     }
     assert_eq!(number("rays"), 64.0);
-    assert_eq!(number("samples_to_heads_per_step"), 64.0 * number("samples_per_ray"));
+    // Measured: the mean the keep stage kept over the timed steps, at most every sample.
+    let to_heads = number("samples_to_heads_per_step");
+    assert!(to_heads > 0.0 && to_heads <= 64.0 * number("samples_per_ray"), "{v}");
+    assert!(names_of(&v).contains(&"keep"), "{v}");
     assert!(v["adapter"].is_string() && v["config"] == "tiny", "{v}");
     let stages = v["stages"].as_array().unwrap();
     let names: Vec<&str> = stages.iter().map(|s| s["name"].as_str().unwrap()).collect();

@@ -8,6 +8,7 @@ use scribblefield::field::FieldConfig;
 use scribblefield::field::gpu::composite::{
     CompositeInputs, CompositeLayout, CompositePass, CompositeUniforms, RowView,
 };
+use scribblefield::field::gpu::keep::NOT_KEPT;
 use scribblefield::field::gpu::rays::{
     NO_LABEL, RAY_HAS_CODE, RAY_HITS_BOX, StepUniforms, TARGET_DEPTH, TARGET_FLAGS, TARGET_HEADER_WORDS, TARGET_LABEL,
     TARGET_RGB,
@@ -35,6 +36,9 @@ struct Batch {
     intervals: Vec<[f32; 2]>,
     /// B rows of TARGET_HEADER_WORDS + D.
     targets: Vec<u32>,
+    /// Per sample, its packed row in the head outputs, or NOT_KEPT (about a fifth dropped, as
+    /// the keep pass drops samples of low weight).
+    slot: Vec<u32>,
 }
 
 impl Batch {
@@ -48,6 +52,18 @@ impl Batch {
 
     fn target_stride(&self) -> usize {
         TARGET_HEADER_WORDS + self.cfg.feature_dim as usize
+    }
+
+    /// `values` (`width` per sample) moved to the kept samples' packed rows, garbage after.
+    fn packed(&self, values: &[f32], width: usize) -> Vec<f32> {
+        let mut out = vec![f32::NAN; values.len()];
+        for (n, &p) in self.slot.iter().enumerate() {
+            if p != NOT_KEPT {
+                let p = p as usize;
+                out[p * width..(p + 1) * width].copy_from_slice(&values[n * width..(n + 1) * width]);
+            }
+        }
+        out
     }
 
     fn random(cfg: FieldConfig, seed: u64) -> Batch {
@@ -110,6 +126,17 @@ impl Batch {
             targets.extend_from_slice(&header);
             targets.extend((0..d).map(|_| if has_code { rng.uniform(-1.5, 1.5) as f32 } else { 0.0 }.to_bits()));
         }
+        let mut kept = 0u32;
+        let slot = (0..n)
+            .map(|_| {
+                if rng.next_f64() < 0.2 {
+                    NOT_KEPT
+                } else {
+                    kept += 1;
+                    kept - 1
+                }
+            })
+            .collect();
         Batch {
             cfg,
             density,
@@ -117,6 +144,7 @@ impl Batch {
             logits_and_feature,
             intervals,
             targets,
+            slot,
         }
     }
 }
@@ -158,14 +186,22 @@ fn reference_ray(batch: &Batch, ray: usize) -> Expected {
         h0s.push(h0);
         sigmas.push(activations::density(h0));
         deltas.push(f64::from(batch.intervals[n][0]));
-        let rgb: [f64; 3] = std::array::from_fn(|i| activations::sigmoid(f64::from(batch.color[n * 3 + i])));
+        // A sample kept from the heads renders 0 for colour, logits and feature.
+        let kept = batch.slot[n] != NOT_KEPT;
+        let rgb: [f64; 3] = std::array::from_fn(|i| {
+            if kept {
+                activations::sigmoid(f64::from(batch.color[n * 3 + i]))
+            } else {
+                0.0
+            }
+        });
         colours.push(rgb);
         values.extend_from_slice(&rgb);
         values.push(f64::from(batch.intervals[n][1]));
         values.extend(
             batch.logits_and_feature[n * hs..n * hs + c + d]
                 .iter()
-                .map(|v| f64::from(*v)),
+                .map(|v| if kept { f64::from(*v) } else { 0.0 }),
         );
     }
     let forward = render::composite(&sigmas, &deltas, &values, k);
@@ -205,6 +241,7 @@ fn reference_ray(batch: &Batch, ray: usize) -> Expected {
 
 struct GpuRun {
     grad_heads: Vec<f32>,
+    head_grads: Vec<f32>,
     ray_outputs: Vec<f32>,
 }
 
@@ -217,10 +254,16 @@ fn run_entry(ctx: &GpuContext, batch: &Batch, render: bool) -> GpuRun {
     let cfg = &batch.cfg;
     let step = uniform_buffer_from(ctx, "step", &StepUniforms::for_step(cfg, 1, 0, 1e-3));
     let density = storage_buffer_from(ctx, "density out", &batch.density).unwrap();
-    let color = storage_buffer_from(ctx, "colour out", &batch.color).unwrap();
-    let heads = storage_buffer_from(ctx, "logits and feature", &batch.logits_and_feature).unwrap();
+    let color = storage_buffer_from(ctx, "colour out", &batch.packed(&batch.color, 3)).unwrap();
+    let heads = storage_buffer_from(
+        ctx,
+        "logits and feature",
+        &batch.packed(&batch.logits_and_feature, batch.heads_stride()),
+    )
+    .unwrap();
     let intervals = storage_buffer_from(ctx, "intervals", &batch.intervals).unwrap();
     let targets = storage_buffer_from(ctx, "targets", &batch.targets).unwrap();
+    let slot = storage_buffer_from(ctx, "slot", &batch.slot).unwrap();
     let hs = batch.heads_stride() as u32;
     let inputs = CompositeInputs {
         step_uniforms: &step,
@@ -246,9 +289,11 @@ fn run_entry(ctx: &GpuContext, batch: &Batch, render: bool) -> GpuRun {
         },
         intervals: &intervals,
         targets: &targets,
+        slot: &slot,
     };
     let pass = pollster::block_on(CompositePass::new(ctx, cfg, &inputs)).unwrap();
     fill_with_garbage(ctx, &pass.grad_heads);
+    fill_with_garbage(ctx, &pass.head_grads);
     fill_with_garbage(ctx, &pass.ray_outputs);
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     {
@@ -262,6 +307,7 @@ fn run_entry(ctx: &GpuContext, batch: &Batch, render: bool) -> GpuRun {
     ctx.queue.submit([encoder.finish()]);
     GpuRun {
         grad_heads: read_buffer_blocking(ctx, &pass.grad_heads).unwrap(),
+        head_grads: read_buffer_blocking(ctx, &pass.head_grads).unwrap(),
         ray_outputs: read_buffer_blocking(ctx, &pass.ray_outputs).unwrap(),
     }
 }
@@ -318,24 +364,31 @@ fn check_batch(ctx: &GpuContext, batch: &Batch) {
             grad_rendered,
             &expected.grad_rendered,
         );
-        // Per kind of head gradient over the ray's samples: h₀, colour, logits, feature.
-        let rows = &gpu.grad_heads[ray * s_count * k..(ray + 1) * s_count * k];
+        // Per kind of gradient over the ray's samples: h₀ (every sample, in its own row), then
+        // colour, logits and feature (the kept samples, at their packed rows).
+        let first = ray * s_count;
+        let dh0: Vec<f32> = (0..s_count).map(|s| gpu.grad_heads[(first + s) * k]).collect();
+        let expected_dh0: Vec<f64> = (0..s_count).map(|s| expected.grad_heads[s * k]).collect();
+        assert_group_close(&format!("ray {ray} dh0"), &dh0, &expected_dh0);
+        let kept: Vec<(usize, usize)> = (0..s_count)
+            .filter(|&s| batch.slot[first + s] != NOT_KEPT)
+            .map(|s| (s, batch.slot[first + s] as usize))
+            .collect();
         let kinds = [
-            ("dh0", 0..1),
             ("dcolour", 1..4),
             ("dlogits", layout.grad_logits_offset()..layout.grad_feature_offset()),
             ("dfeature", layout.grad_feature_offset()..k),
         ];
         for (name, columns) in kinds {
-            let pick = |values: &[f64]| -> Vec<f64> {
-                (0..s_count)
-                    .flat_map(|s| values[s * k + columns.start..s * k + columns.end].to_vec())
-                    .collect()
-            };
-            let gpu_values: Vec<f32> = (0..s_count)
-                .flat_map(|s| rows[s * k + columns.start..s * k + columns.end].to_vec())
+            let want: Vec<f64> = kept
+                .iter()
+                .flat_map(|&(s, _)| expected.grad_heads[s * k + columns.start..s * k + columns.end].to_vec())
                 .collect();
-            assert_group_close(&format!("ray {ray} {name}"), &gpu_values, &pick(&expected.grad_heads));
+            let gpu_values: Vec<f32> = kept
+                .iter()
+                .flat_map(|&(_, p)| gpu.head_grads[p * k + columns.start..p * k + columns.end].to_vec())
+                .collect();
+            assert_group_close(&format!("ray {ray} {name}"), &gpu_values, &want);
         }
     }
     // The inputs exercise every term (a case where one is silently zero proves nothing).
@@ -478,6 +531,7 @@ fn composite_rejects_head_sources_too_small() {
         },
         intervals: &small,
         targets: &small,
+        slot: &small,
     };
     let error = pollster::block_on(CompositePass::new(&ctx, &batch.cfg, &inputs))
         .err()
@@ -508,6 +562,7 @@ fn composite_throughput_report() {
     let heads = storage_buffer_from(&ctx, "logits and feature", &batch.logits_and_feature).unwrap();
     let intervals = storage_buffer_from(&ctx, "intervals", &batch.intervals).unwrap();
     let targets = storage_buffer_from(&ctx, "targets", &batch.targets).unwrap();
+    let slot = storage_buffer_from(&ctx, "slot", &batch.slot).unwrap();
     let hs = batch.heads_stride() as u32;
     let inputs = CompositeInputs {
         step_uniforms: &step,
@@ -533,6 +588,7 @@ fn composite_throughput_report() {
         },
         intervals: &intervals,
         targets: &targets,
+        slot: &slot,
     };
     let pass = pollster::block_on(CompositePass::new(&ctx, &cfg, &inputs)).unwrap();
     // The training entry point and the render one (forward alone), on the same inputs.

@@ -10,6 +10,7 @@
 use scribblefield::field::gpu::dense::{
     DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView, UNIFORM_WEIGHT_FLOATS,
 };
+use scribblefield::field::gpu::keep::{HeadRows, workgroup_counts};
 use scribblefield::field::params::{MlpLayout, ParamLayout};
 use scribblefield::field::reference::mlp::{MlpTrace, backward, forward};
 use scribblefield::field::{Encoding, FieldConfig};
@@ -148,6 +149,24 @@ struct MlpCase<'a> {
     /// Write the output into a slice of a wider row instead of the pass's own buffer.
     output_view: bool,
     seed: u64,
+    /// Run on the first this many rows alone, as the heads run on the kept samples: the row
+    /// count read from a buffer and the kernels launched indirectly (the counts written here
+    /// as the keep pass writes them).
+    kept: Option<usize>,
+}
+
+/// Every element of rows `from..rows` of `view` must still hold the garbage pattern.
+fn assert_rows_untouched(what: &str, view: ViewLayout, data: &[f32], from: usize, rows: usize) {
+    for n in from..rows {
+        for j in 0..view.width {
+            let index = n * view.stride + view.offset + j;
+            assert_eq!(
+                data[index].to_bits(),
+                GARBAGE_WORDS[index % GARBAGE_WORDS.len()],
+                "{what}: row {n} past the kept rows was written"
+            );
+        }
+    }
 }
 
 fn check_mlp(case: MlpCase<'_>) {
@@ -161,7 +180,10 @@ fn check_mlp(case: MlpCase<'_>) {
         input_grad,
         output_view,
         seed,
+        kept,
     } = case;
+    let active = kept.unwrap_or(rows);
+    let head_rows = kept.map(|_| HeadRows::new(ctx, rows as u32).unwrap());
     let dims = &layout.dims;
     let (in_dim, out_dim) = (layout.input_dim(), layout.output_dim());
     let mut rng = SplitMix64::new(seed);
@@ -196,8 +218,21 @@ fn check_mlp(case: MlpCase<'_>) {
             output_grad: output_grad_layout.view(&output_grad_buffer),
             input_grad: input_grad.then(|| input_grad_layout.view(&input_grad_buffer)),
         }),
+        kept: head_rows.as_ref(),
     };
     let mlp = pollster::block_on(MlpPass::new(ctx, pipelines, desc)).unwrap();
+    if let Some(head_rows) = &head_rows {
+        let most = ctx.limits.max_compute_workgroups_per_dimension;
+        let counts: Vec<u32> = head_rows
+            .shapes()
+            .into_iter()
+            .flat_map(|shape| workgroup_counts(shape, active as u32, most))
+            .collect();
+        ctx.queue
+            .write_buffer(&head_rows.dispatch_args, 0, bytemuck::cast_slice(&counts));
+        ctx.queue
+            .write_buffer(&head_rows.row_count, 0, bytemuck::bytes_of(&(active as u32)));
+    }
     let families: Vec<DenseFamily> = mlp.layer_families().collect();
     let windows = mlp.weight_gradient_windows();
     if pipelines.family() == DenseFamily::Tiled {
@@ -241,6 +276,10 @@ fn check_mlp(case: MlpCase<'_>) {
     if output_view {
         output_layout.assert_gaps_untouched(&format!("{name} output"), &gpu_outputs[layers - 1], rows);
     }
+    for k in 0..layers {
+        let what = format!("{name} layer {k} output");
+        assert_rows_untouched(&what, output_views[k], &gpu_outputs[k], active, rows);
+    }
 
     let weights = to_f64(&params[layout.range()]);
     let abs_weights = abs(&weights);
@@ -253,7 +292,7 @@ fn check_mlp(case: MlpCase<'_>) {
         Vec::new()
     };
     let mut worst_input_grad = 0.0f64;
-    for n in 0..rows {
+    for n in 0..active {
         let x = to_f64(input_layout.row(&input, n));
         let reference = forward(dims, &weights, &x);
         let magnitude = forward(dims, &abs_weights, &abs(&x));
@@ -288,6 +327,19 @@ fn check_mlp(case: MlpCase<'_>) {
     }
     if input_grad {
         input_grad_layout.assert_gaps_untouched(&format!("{name} input gradient"), &gpu_input_grad, rows);
+        let what = format!("{name} input gradient");
+        assert_rows_untouched(&what, input_grad_layout, &gpu_input_grad, active, rows);
+        for (k, &width) in dims.iter().enumerate().take(layers).skip(1) {
+            let hidden: Vec<f32> = read_buffer_blocking(ctx, mlp.hidden_gradient(k).unwrap()).unwrap();
+            let packed = ViewLayout::padded(width, 0, 0);
+            assert_rows_untouched(
+                &format!("{name} layer {k} input gradient"),
+                packed,
+                &hidden,
+                active,
+                rows,
+            );
+        }
     } else {
         let untouched: Vec<f32> = read_buffer_blocking(ctx, &input_grad_buffer).unwrap();
         assert!(
@@ -323,7 +375,7 @@ fn check_mlp(case: MlpCase<'_>) {
         WEIGHT_GRAD_TOLERANCE,
     );
     eprintln!(
-        "{name} {dims:?} × {rows} rows, kernels {families:?}: worst error / magnitude: forward {worst_forward:.2e}, \
+        "{name} {dims:?} × {active} of {rows} rows, kernels {families:?}: worst error / magnitude: forward {worst_forward:.2e}, \
          input gradient {worst_input_grad:.2e}, weight gradient {worst_weight:.2e}"
     );
 }
@@ -358,6 +410,7 @@ fn every_mlp_matches_the_reference_with_uniform_weights() {
         input: RowView::packed(&input, layout.density.input_dim() as u32),
         output: None,
         gradients: None,
+        kept: None,
     };
     let mut pipelines = DensePipelines::with_family(DenseFamily::UniformWeights);
     let mlp = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc)).unwrap();
@@ -382,6 +435,7 @@ fn check_every_mlp(ctx: &GpuContext, mut pipelines: DensePipelines) {
                 input_grad: mlp_name != "color",
                 output_view: index % 2 == 1,
                 seed: 100 + index as u64,
+                kept: None,
             });
         }
     }
@@ -409,7 +463,41 @@ fn tiny_and_multi_chunk_row_counts_match_the_reference() {
                 input_grad: true,
                 output_view: rows > 1,
                 seed,
+                kept: None,
             });
+        }
+    }
+}
+
+/// The heads' case: the rows present are fewer than the buffers hold, their count read from a
+/// buffer and every row-parallel kernel launched indirectly. Rows past the count keep their
+/// garbage, and the weight gradient sums the rows present alone; none, one, and all of them.
+#[test]
+fn kept_row_counts_match_the_reference() {
+    let Some(ctx) = gpu_for_tests("kept_row_counts_match_the_reference") else {
+        return;
+    };
+    let cfg = FieldConfig::small();
+    let layout = ParamLayout::new(&cfg);
+    let params = layout.init(7);
+    for family in [DenseFamily::Tiled, DenseFamily::UniformWeights] {
+        let mut pipelines = DensePipelines::with_family(family);
+        for (kept, seed) in [(0, 11), (1, 12), (1500, 13), (3000, 14)] {
+            for (mlp_name, mlp, input_grad) in [("colour", &layout.color, false), ("semantic", &layout.semantic, true)]
+            {
+                check_mlp(MlpCase {
+                    ctx: &ctx,
+                    pipelines: &mut pipelines,
+                    name: format!("small {mlp_name} ({family:?}), {kept} of 3000 rows kept"),
+                    layout: mlp,
+                    params: &params,
+                    rows: 3000,
+                    input_grad,
+                    output_view: true,
+                    seed,
+                    kept: Some(kept),
+                });
+            }
         }
     }
 }
@@ -432,6 +520,7 @@ fn forward_only_pass_refuses_backward_and_bad_views_are_errors() {
         input,
         output: None,
         gradients: None,
+        kept: None,
     };
     let width = layout.density.input_dim() as u32;
     let mlp = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc(RowView::packed(&input, width)))).unwrap();
@@ -500,6 +589,7 @@ fn density_mlp_throughput_report() {
             output_grad: RowView::packed(&output_grad, out_dim as u32),
             input_grad: Some(RowView::packed(&input_grad, in_dim as u32)),
         }),
+        kept: None,
     };
     let mlp = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc)).unwrap();
     let weights: f64 = mlp_layout.layers.iter().map(|r| r.len() as f64).sum();

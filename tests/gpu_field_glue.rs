@@ -1,5 +1,8 @@
-//! The head glue against the per-sample arithmetic of `reference::model`.
-use scribblefield::field::gpu::head_glue::{GlueBuffers, GlueDims, HeadGluePass};
+//! The head glue against the per-sample arithmetic of `reference::model`, on the packed rows of
+//! the samples kept for the heads (a third of them dropped): the forward and the feature gather
+//! on the packed rows alone, the geometry gather on every sample.
+use scribblefield::field::gpu::head_glue::{GlueBuffers, GlueDims, GlueRows, HeadGluePass, WORKGROUP_SIZE};
+use scribblefield::field::gpu::keep::{HeadRows, NOT_KEPT, workgroup_counts};
 use scribblefield::gpu::buffers::{read_buffer_blocking, storage_buffer_from, storage_buffer_garbage};
 use scribblefield::gpu::test_support::gpu_for_tests;
 
@@ -34,6 +37,16 @@ fn check_glue(name: &str, semantic_sees_geometry: bool) {
     let feature_out = values(n * d, 0.2);
     let semantic_in_grad = values(n * (d + sg), 0.3);
     let grad_heads0 = values(n * stride, 0.4);
+    let grad_h0 = values(n * stride, 0.8);
+    // Every third sample dropped; the rest packed in order.
+    let mut slot = vec![NOT_KEPT; n];
+    let mut kept = 0usize;
+    for (s, slot) in slot.iter_mut().enumerate() {
+        if s % 3 != 1 {
+            *slot = kept as u32;
+            kept += 1;
+        }
+    }
     let color_in_grad = values(n * (sh + g), 0.5);
     let feature_in_grad = values(n * g, 0.6);
     let color_sh = values(n * (sh + g), 0.7);
@@ -48,6 +61,19 @@ fn check_glue(name: &str, semantic_sees_geometry: bool) {
     let density_out_grad_b = storage_buffer_garbage::<f32>(&ctx, "density out grad", n * (1 + g)).unwrap();
     let color_in_grad_b = buf("color in grad", &color_in_grad);
     let feature_in_grad_b = buf("feature in grad", &feature_in_grad);
+    let grad_h0_b = buf("grad h0", &grad_h0);
+    let rows = HeadRows::new(&ctx, n as u32).unwrap();
+    let dispatch = rows.dispatch(1, WORKGROUP_SIZE, 1).unwrap();
+    let counts = workgroup_counts(
+        rows.shapes()[0],
+        kept as u32,
+        ctx.limits.max_compute_workgroups_per_dimension,
+    );
+    ctx.queue
+        .write_buffer(&rows.dispatch_args, 0, bytemuck::cast_slice(&counts));
+    ctx.queue
+        .write_buffer(&rows.row_count, 0, bytemuck::bytes_of(&(kept as u32)));
+    ctx.queue.write_buffer(&rows.slot, 0, bytemuck::cast_slice(&slot));
     let dims = GlueDims {
         samples: n as u32,
         geometry: g as u32,
@@ -67,11 +93,17 @@ fn check_glue(name: &str, semantic_sees_geometry: bool) {
         semantic_in: &semantic_in_b,
         semantic_in_grad: &semantic_in_grad_b,
         grad_heads: &grad_heads_b,
+        grad_h0_source: &grad_h0_b,
         density_out_grad: &density_out_grad_b,
         color_in_grad: &color_in_grad_b,
         feature_in_grad: &feature_in_grad_b,
     };
-    let glue = pollster::block_on(HeadGluePass::new(&ctx, dims, &buffers)).unwrap();
+    let glue_rows = GlueRows {
+        row_count: &rows.row_count,
+        slot: &rows.slot,
+        dispatch: Some(dispatch),
+    };
+    let glue = pollster::block_on(HeadGluePass::new(&ctx, dims, &buffers, &glue_rows)).unwrap();
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     {
         let mut pass = encoder.begin_compute_pass(&Default::default());
@@ -85,45 +117,62 @@ fn check_glue(name: &str, semantic_sees_geometry: bool) {
     let semantic_in: Vec<f32> = read_buffer_blocking(&ctx, &semantic_in_b).unwrap();
     let grad_heads: Vec<f32> = read_buffer_blocking(&ctx, &grad_heads_b).unwrap();
     let density_grad: Vec<f32> = read_buffer_blocking(&ctx, &density_out_grad_b).unwrap();
-    for s in 0..n {
-        let geo = &density_out[s * (1 + g) + 1..(s + 1) * (1 + g)];
-        let f = &feature_out[s * d..(s + 1) * d];
-        let row = s * (sh + g);
+    for p in 0..n {
+        let geo = &density_out[p * (1 + g) + 1..(p + 1) * (1 + g)];
+        let f = &feature_out[p * d..(p + 1) * d];
+        let row = p * (sh + g);
         assert_eq!(
             &color_in[row..row + sh],
             &color_sh[row..row + sh],
             "SH columns untouched"
         );
+        if p >= kept {
+            // Past the packed rows nothing is written.
+            assert_eq!(&color_in[row..row + sh + g], &color_sh[row..row + sh + g], "row {p}");
+            assert_eq!(
+                &grad_heads[p * stride..(p + 1) * stride],
+                &grad_heads0[p * stride..(p + 1) * stride]
+            );
+            continue;
+        }
         assert_eq!(&color_in[row + sh..row + sh + g], geo);
         let relu: Vec<f32> = f.iter().map(|v| v.max(0.0)).collect();
-        assert_eq!(&semantic_in[s * (d + sg)..s * (d + sg) + d], &relu[..]);
-        assert_eq!(&semantic_in[s * (d + sg) + d..(s + 1) * (d + sg)], &geo[..sg]);
+        assert_eq!(&semantic_in[p * (d + sg)..p * (d + sg) + d], &relu[..]);
+        assert_eq!(&semantic_in[p * (d + sg) + d..(p + 1) * (d + sg)], &geo[..sg]);
         for k in 0..d {
-            let at = s * stride + f_at + k;
+            let at = p * stride + f_at + k;
             let via_semantic = if f[k] > 0.0 {
-                semantic_in_grad[s * (d + sg) + k]
+                semantic_in_grad[p * (d + sg) + k]
             } else {
                 0.0
             };
             assert_eq!(grad_heads[at], grad_heads0[at] + via_semantic);
         }
         assert_eq!(
-            &grad_heads[s * stride..s * stride + f_at],
-            &grad_heads0[s * stride..s * stride + f_at]
+            &grad_heads[p * stride..p * stride + f_at],
+            &grad_heads0[p * stride..p * stride + f_at]
         );
+    }
+    for (s, &p) in slot.iter().enumerate() {
         assert_eq!(
             density_grad[s * (1 + g)],
-            grad_heads0[s * stride + h0_at],
-            "dL/dh0 copied"
+            grad_h0[s * stride + h0_at],
+            "dL/dh0 copied for every sample"
         );
         for j in 0..g {
+            let got = density_grad[s * (1 + g) + 1 + j];
+            if p == NOT_KEPT {
+                assert_eq!(got, 0.0, "no head gradient for a dropped sample");
+                continue;
+            }
+            let p = p as usize;
             let via_semantic = if j < sg {
-                semantic_in_grad[s * (d + sg) + d + j]
+                semantic_in_grad[p * (d + sg) + d + j]
             } else {
                 0.0
             };
-            let want = color_in_grad[row + sh + j] + via_semantic + feature_in_grad[s * g + j];
-            assert!((density_grad[s * (1 + g) + 1 + j] - want).abs() <= 1e-6 * want.abs().max(1.0));
+            let want = color_in_grad[p * (sh + g) + sh + j] + via_semantic + feature_in_grad[p * g + j];
+            assert!((got - want).abs() <= 1e-6 * want.abs().max(1.0));
         }
     }
 }

@@ -155,6 +155,29 @@ fn one_step_gradient_matches_the_reference() {
     check_one_step_gradient(
         "one_step_gradient_matches_the_reference",
         SemanticInput::FeatureAndGeometry,
+        FieldConfig::default().head_weight_threshold,
+    );
+}
+
+/// Every sample through the heads (`head_weight_threshold` 0), as before the keep stage.
+#[test]
+fn one_step_gradient_matches_the_reference_with_every_sample_at_the_heads() {
+    check_one_step_gradient(
+        "one_step_gradient_matches_the_reference_with_every_sample_at_the_heads",
+        SemanticInput::FeatureAndGeometry,
+        0.0,
+    );
+}
+
+/// A threshold above the weights of the untrained field's closely spaced band samples and below
+/// those of its coarse ones, so that many samples skip the heads: the packed rows, the indirect
+/// dispatches and the zeros of the dropped samples against the reference's rule.
+#[test]
+fn one_step_gradient_matches_the_reference_with_most_samples_kept_from_the_heads() {
+    check_one_step_gradient(
+        "one_step_gradient_matches_the_reference_with_most_samples_kept_from_the_heads",
+        SemanticInput::FeatureAndGeometry,
+        0.02,
     );
 }
 
@@ -164,10 +187,11 @@ fn one_step_gradient_matches_the_reference_with_the_feature_only_semantic_head()
     check_one_step_gradient(
         "one_step_gradient_matches_the_reference_with_the_feature_only_semantic_head",
         SemanticInput::Feature,
+        FieldConfig::default().head_weight_threshold,
     );
 }
 
-fn check_one_step_gradient(name: &str, semantic_input: SemanticInput) {
+fn check_one_step_gradient(name: &str, semantic_input: SemanticInput, head_weight_threshold: f32) {
     use scribblefield::field::gpu::rays::{StepUniforms, pick_pixel, sample_jitter};
     use scribblefield::field::gpu::scene_buffers::LabelIndex;
     use scribblefield::field::propagate::propagate_labels;
@@ -208,12 +232,14 @@ fn check_one_step_gradient(name: &str, semantic_input: SemanticInput) {
         // reference does (1 is the same code with a factor of one).
         semantic_trunk_gradient: 0.5,
         semantic_input,
+        head_weight_threshold,
         ..FieldConfig::small()
     };
     let seed = 3;
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, seed)).unwrap();
     let params = pollster::block_on(trainer.read_params()).unwrap();
     let gpu = pollster::block_on(trainer.step_gradient()).unwrap();
+    let kept_on_gpu = pollster::block_on(trainer.kept_tally()).unwrap();
     let losses = trainer.losses_blocking().unwrap();
     assert_eq!(losses.step, 1);
     assert_eq!(
@@ -268,6 +294,25 @@ fn check_one_step_gradient(name: &str, semantic_input: SemanticInput) {
     let mut reference = vec![0.0f64; params.len()];
     let params64: Vec<f64> = params.iter().map(|&p| f64::from(p)).collect();
     let reference_losses = model.loss_and_gradient(&params64, &batch, &mut reference);
+    let kept: usize = batch
+        .iter()
+        .map(|ray| {
+            let trace = model.forward_ray(&params64, &ray.samples);
+            trace.samples.iter().filter(|s| s.kept).count()
+        })
+        .sum();
+    let samples = batch.len() * cfg.samples_per_ray();
+    eprintln!("samples at the heads: GPU {kept_on_gpu:?}, reference {kept} of {samples}");
+    assert_eq!(
+        kept_on_gpu,
+        [kept as u32, 1],
+        "the samples kept for the heads in one step"
+    );
+    if head_weight_threshold == 0.0 {
+        assert_eq!(kept, samples);
+    } else if head_weight_threshold > 0.01 {
+        assert!(kept * 4 < samples * 3 && kept > 0, "{kept} of {samples} kept");
+    }
 
     // The losses the trainer reads back (the loss block of the ray outputs alone) are the
     // batch's: each term within f32 rounding of the f64 reference.

@@ -94,6 +94,16 @@ fn train_and_score(
     let clock = std::time::Instant::now();
     train_schedule(&mut trainer, scene, labels, WARMUP, steps, |_, _, _| {}).unwrap();
     let trained = clock.elapsed().as_secs_f64();
+    // Samples that reached the heads (FieldConfig::head_weight_threshold), per step over the
+    // whole run: what the keep stage saves at this quality.
+    let tally = pollster::block_on(trainer.kept_tally()).unwrap();
+    let samples = cfg.batch_rays as usize * cfg.samples_per_ray();
+    eprintln!(
+        "samples to the heads: {:.0} of {samples} per step, mean over {} steps (threshold {})",
+        f64::from(tally[0]) / f64::from(tally[1].max(1)),
+        tally[1],
+        cfg.head_weight_threshold
+    );
     let names: Vec<String> = labels.classes.iter().map(|c| c.name.clone()).collect();
     let mut refined = Confusion::new(names.len());
     let mut refine_seconds = 0.0;

@@ -20,7 +20,7 @@ use super::page_status;
 use super::status::PageStatus;
 use super::training::batches::{Batches, MAX_BATCH, stage_wall_ms};
 use super::training::device::gpu_done;
-use crate::eval::bench::{bench_scene, step_report};
+use crate::eval::bench::{bench_scene, mean_kept, step_report};
 use crate::field::Preset;
 use crate::field::gpu::trainer::Trainer;
 use crate::gpu::GpuContext;
@@ -150,6 +150,7 @@ async fn run(
     }
     batches.drain().await;
     batches.rate.reset();
+    let tally_before = trainer.kept_tally().await.ok();
 
     stage(shown, egui_ctx, "timed");
     {
@@ -197,6 +198,10 @@ async fn run(
         (s.frames, s.paint_ms)
     };
     let losses = trainer.poll_losses().map_err(|e| format!("reading the losses: {e}"))?;
+    let tally_after = trainer.kept_tally().await.ok();
+    let samples_to_heads = tally_before
+        .zip(tally_after)
+        .and_then(|(before, after)| mean_kept(&before, &after));
 
     // Where a step's time goes, by the wall clock: one step alone, then each stage alone.
     stage(shown, egui_ctx, "stages");
@@ -210,7 +215,15 @@ async fn run(
     let matmul = matmul_bench(&gpu, MATMUL_N, 3)
         .await
         .map_err(|e| format!("the plain matmul: {e}"))?;
-    let mut report = step_report(&gpu, &trainer, plan.steps, seconds, Some(&matmul), None);
+    let mut report = step_report(
+        &gpu,
+        &trainer,
+        plan.steps,
+        seconds,
+        Some(&matmul),
+        None,
+        samples_to_heads,
+    );
     // Each stage's wall-clock time alone (summed where a name repeats), beside its `gpu_ms`.
     if let Some(Value::Array(stages)) = report.get_mut("stages") {
         for entry in stages.iter_mut() {

@@ -1,7 +1,7 @@
 //! `scribblefield bench`: throughput of the training step on whatever adapter is found, next to
 //! a plain tiled matmul on the same adapter in the same run, and where a step's time goes.
 use clap::Args;
-use scribblefield::eval::bench::{bench_scene, mlp_gflop_per_step, step_report};
+use scribblefield::eval::bench::{bench_scene, mean_kept, mlp_gflop_per_step, step_report};
 use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::gpu::matmul_bench::matmul_bench;
 use scribblefield::gpu::timing::Stopwatch;
@@ -51,20 +51,30 @@ pub fn run(mut args: BenchArgs) -> CliResult {
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, 0))?;
     trainer.train(args.warmup);
     ctx.wait_idle()?;
+    let tally_before = pollster::block_on(trainer.kept_tally())?;
     let clock = Stopwatch::start();
     trainer.train(args.steps);
     ctx.wait_idle()?;
     let elapsed = clock.elapsed_seconds();
+    let samples_to_heads = mean_kept(&tally_before, &pollster::block_on(trainer.kept_tally())?);
     let seconds = elapsed / f64::from(args.steps.max(1));
     let rays = f64::from(cfg.batch_rays);
     let samples = rays * cfg.samples_per_ray() as f64;
-    let gflop = mlp_gflop_per_step(&trainer);
+    let gflop = mlp_gflop_per_step(&trainer, samples_to_heads.unwrap_or(samples));
     let matmul = pollster::block_on(matmul_bench(&ctx, args.matmul, 3))?;
     let times: StageTimes = pollster::block_on(trainer.profile_step())?
         .map(|times| times.into_iter().map(|t| (t.name, t.seconds * 1e3)).collect());
-    let shape = trainer.step_shape();
+    let shape = trainer.step_shape(samples_to_heads.unwrap_or(samples).round() as u64);
     if args.json {
-        let mut report = step_report(&ctx, &trainer, args.steps, elapsed, Some(&matmul), times.as_deref());
+        let mut report = step_report(
+            &ctx,
+            &trainer,
+            args.steps,
+            elapsed,
+            Some(&matmul),
+            times.as_deref(),
+            samples_to_heads,
+        );
         report.insert("config".into(), args.field.describe().into());
         let report = serde_json::Value::Object(report);
         println!("{report}");
@@ -85,6 +95,10 @@ pub fn run(mut args: BenchArgs) -> CliResult {
     println!("step:             {:.4} s  ({:.2} steps/s)", seconds, 1.0 / seconds);
     println!("rays/s:           {:.0}", rays / seconds);
     println!("samples/s:        {:.0}", samples / seconds);
+    println!(
+        "to the heads:     {:.0} samples per step (of {samples:.0})",
+        samples_to_heads.unwrap_or(samples)
+    );
     println!(
         "MLP GFLOP/s:      {:.3}  ({gflop:.3} GFLOP of MLP products per step)",
         gflop / seconds

@@ -36,17 +36,31 @@ pub fn mlp_macs_per_sample(trainer: &Trainer) -> f64 {
 }
 
 /// MLP products of one step, GFLOP: forward, input gradient and weight gradient, three products
-/// of the same size.
-pub fn mlp_gflop_per_step(trainer: &Trainer) -> f64 {
+/// of the same size; the density MLP over every sample, the heads over the
+/// `samples_to_heads` that reach them.
+pub fn mlp_gflop_per_step(trainer: &Trainer, samples_to_heads: f64) -> f64 {
     let cfg = trainer.config();
     let samples = f64::from(cfg.batch_rays) * cfg.samples_per_ray() as f64;
-    3.0 * 2.0 * mlp_macs_per_sample(trainer) * samples / 1e9
+    let density: f64 = trainer.layout().density.layers.iter().map(|r| r.len() as f64).sum();
+    let heads = mlp_macs_per_sample(trainer) - density;
+    3.0 * 2.0 * (density * samples + heads * samples_to_heads) / 1e9
+}
+
+/// Mean samples that reached the heads per batch between two reads of
+/// `Trainer::kept_tally` (`None` when no batch ran between them).
+pub fn mean_kept(before: &[u32], after: &[u32]) -> Option<f64> {
+    let (sum0, runs0) = (*before.first()?, *before.get(1)?);
+    let (sum1, runs1) = (*after.first()?, *after.get(1)?);
+    let runs = runs1.wrapping_sub(runs0);
+    (runs > 0).then(|| f64::from(sum1.wrapping_sub(sum0)) / f64::from(runs))
 }
 
 /// The report's fields for `steps` steps timed over `seconds` (wall clock), in `bench --json`'s
 /// names: the batch, the rates, the step's estimated traffic and dispatches, the MLP rate, and,
 /// when given, the plain matmul's rate and the ratio to it. `stage_ms` are GPU milliseconds per
-/// stage name where timestamp queries measured them. With the adapter and the dense kernels'
+/// stage name where timestamp queries measured them. `samples_to_heads`: the mean samples per
+/// step that reached the heads over the timed steps ([`mean_kept`]; `None`: all of them), which
+/// the traffic and the MLP products are counted for. With the adapter and the dense kernels'
 /// family (`uniform` on CPU devices, `tiled` on GPUs); the caller adds `config`.
 pub fn step_report(
     ctx: &GpuContext,
@@ -55,13 +69,15 @@ pub fn step_report(
     seconds: f64,
     matmul: Option<&MatmulBenchReport>,
     stage_ms: Option<&[(String, f64)]>,
+    samples_to_heads: Option<f64>,
 ) -> Map<String, Value> {
     let cfg = trainer.config();
     let step_s = seconds / f64::from(steps.max(1));
     let rays = f64::from(cfg.batch_rays);
     let samples = rays * cfg.samples_per_ray() as f64;
-    let gflop = mlp_gflop_per_step(trainer);
-    let shape = trainer.step_shape();
+    let to_heads = samples_to_heads.unwrap_or(samples).min(samples);
+    let gflop = mlp_gflop_per_step(trainer, to_heads);
+    let shape = trainer.step_shape(to_heads.round() as u64);
     let stages: Vec<Value> = stage_names(&shape)
         .into_iter()
         .map(|name| {
@@ -85,8 +101,8 @@ pub fn step_report(
         "steps_per_s": 1.0 / step_s,
         "rays_per_s": rays / step_s,
         "samples_per_s": samples / step_s,
-        // Every sample goes through every head today.
-        "samples_to_heads_per_step": samples,
+        // The mean kept by the keep stage over the timed steps (FieldConfig::head_weight_threshold).
+        "samples_to_heads_per_step": to_heads,
         "bytes_per_step": shape.iter().map(|s| s.bytes).sum::<u64>() + trainer.gradient_clear_bytes(),
         "gradient_clear_bytes": trainer.gradient_clear_bytes(),
         "dispatches_per_step": shape.iter().map(|s| s.dispatches).sum::<u64>(),

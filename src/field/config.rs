@@ -155,6 +155,13 @@ pub struct FieldConfig {
     /// field (the feature MLP, the density MLP and the encoding): 1 is the paper's model, 0 trains
     /// the head alone on features shaped by colour, depth and feature codes.
     pub semantic_trunk_gradient: f32,
+    /// Compositing weight (α·T, as the composite computes it from the density alone) below
+    /// which a sample skips the colour, feature and semantic heads: its head outputs count as 0
+    /// in the render and it gets no head gradient, while its density still shapes the
+    /// transmittance and the depth. Samples far behind a surface or in empty space have weights
+    /// far below it, so the heads run on a fraction of the samples. 0 keeps every sample (the
+    /// heads see exactly what they would without the rule).
+    pub head_weight_threshold: f32,
     /// What the semantic head sees (see `SemanticInput`).
     pub semantic_input: SemanticInput,
     /// How strokes spread inside their own frame before training (`field::propagate`).
@@ -188,6 +195,7 @@ impl Default for FieldConfig {
             adam: AdamConfig::default(),
             batch_rays: 4096,
             semantic_trunk_gradient: 1.0,
+            head_weight_threshold: 1e-4,
             semantic_input: SemanticInput::Auto,
             scribble_propagation: PropagationOptions::default(),
         }
@@ -347,6 +355,13 @@ impl FieldConfig {
                 "semantic_trunk_gradient",
                 c.semantic_trunk_gradient,
                 "must be in [0, 1]",
+            ));
+        }
+        if !(c.head_weight_threshold.is_finite() && (0.0..1.0).contains(&c.head_weight_threshold)) {
+            return Err(bad(
+                "head_weight_threshold",
+                c.head_weight_threshold,
+                "must be in [0, 1)",
             ));
         }
         let weights = [

@@ -30,7 +30,19 @@ pub(crate) fn count_dispatch() {
 pub struct Dispatch {
     pub pipeline: wgpu::ComputePipeline,
     pub bind_group: wgpu::BindGroup,
+    /// The workgroup counts; with [`Dispatch::indirect`] the most it can launch.
     pub workgroups: [u32; 3],
+    /// Where the counts are read from at run time instead (`dispatch_workgroups_indirect`:
+    /// three u32 at a byte offset of a buffer with INDIRECT usage), for work whose size a
+    /// kernel earlier in the step decides.
+    pub indirect: Option<IndirectArgs>,
+}
+
+/// Three u32 workgroup counts in a buffer made with INDIRECT usage, at `offset` bytes.
+#[derive(Debug, Clone)]
+pub struct IndirectArgs {
+    pub buffer: wgpu::Buffer,
+    pub offset: u64,
 }
 
 impl Dispatch {
@@ -39,7 +51,13 @@ impl Dispatch {
             pipeline,
             bind_group,
             workgroups: workgroups.into(),
+            indirect: None,
         }
+    }
+
+    /// The same dispatch with its workgroup counts read from `args` when it runs.
+    pub fn with_indirect(self, args: Option<IndirectArgs>) -> Self {
+        Dispatch { indirect: args, ..self }
     }
 
     /// Compiles `spec`'s pipeline (or takes it from the device's cache) and binds its group 0
@@ -63,8 +81,13 @@ impl Dispatch {
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.bind_group, &[]);
-        let [x, y, z] = self.workgroups;
-        pass.dispatch_workgroups(x, y, z);
+        match &self.indirect {
+            Some(args) => pass.dispatch_workgroups_indirect(&args.buffer, args.offset),
+            None => {
+                let [x, y, z] = self.workgroups;
+                pass.dispatch_workgroups(x, y, z);
+            }
+        }
         count_dispatch();
     }
 }

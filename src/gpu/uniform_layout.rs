@@ -73,6 +73,7 @@ pub const MIRRORS: &[Mirror] = &[
         "ShUniforms",
     ),
     mirror("src/field/gpu/head_glue.rs", "GlueDims", "head_glue.wgsl", "GlueDims"),
+    mirror("src/field/gpu/keep.rs", "KeepUniforms", "keep.wgsl", "KeepUniforms"),
     mirror(
         "src/field/gpu/rays.rs",
         "StepUniforms",

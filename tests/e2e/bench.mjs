@@ -88,7 +88,8 @@ await runBrowserTest("bench", { checks, consoleLog }, async (context) => {
     assert(close(report.steps_per_s * report.step_s, 1), `steps/s ${report.steps_per_s} x step ${report.step_s}`);
     assert(close(report.rays_per_s, report.steps_per_s * report.rays), `rays/s ${report.rays_per_s}`);
     assert(close(report.samples_per_s, report.rays_per_s * report.samples_per_ray), `samples/s ${report.samples_per_s}`);
-    assert(close(report.samples_to_heads_per_step, report.rays * report.samples_per_ray), `samples to the heads ${report.samples_to_heads_per_step}`);
+    // The keep stage's mean over the timed steps: some, at most every sample of the batch.
+    assert(positive(report.samples_to_heads_per_step) && report.samples_to_heads_per_step <= report.rays * report.samples_per_ray, `samples to the heads ${report.samples_to_heads_per_step}`);
   });
   await check("the stages add up to the step's dispatches and bytes", async () => {
     assert(Array.isArray(report.stages) && report.stages.length > 0, "no stages");

@@ -1,14 +1,17 @@
 //! Volume rendering, the four losses and the backward of both on the GPU
 //! (`shaders/composite.wgsl`): one invocation per ray, looping over its S samples.
 //!
-//! Reads per sample the raw head outputs (density pre-activation h₀, colour pre-sigmoid (3),
-//! semantic logits (C), feature (D)) from buffers other passes own, each at
-//! `row · stride + offset`, plus the sample's (δ, z-depth) and the ray's targets from
-//! [`super::rays`]. Writes:
+//! Reads per sample the density pre-activation h₀ and, at the sample's packed row
+//! (`slot`, see [`super::keep`]), the raw head outputs (colour pre-sigmoid (3), semantic
+//! logits (C), feature (D)) from buffers other passes own, each at `row · stride + offset`,
+//! plus the sample's (δ, z-depth) and the ray's targets from [`super::rays`]. A sample the
+//! keep pass dropped renders 0 for colour, logits and feature. Writes:
 //! - `grad_heads`, per sample `n = ray·S + s` a row of [`CompositeLayout::grad_stride`] values
-//!   `[∂L/∂h₀, ∂L/∂colour pre-sigmoid (3), ∂L/∂logits (C), ∂L/∂feature (D)]`: what the MLP
-//!   backward passes start from (σ = exp(clamp(h₀)) and the sigmoid are undone here, as
-//!   `reference::activations`);
+//!   whose first is ∂L/∂h₀ (σ = exp(clamp(h₀)) undone here, as `reference::activations`); the
+//!   rest of the row is scratch;
+//! - `head_grads`, per kept sample at its packed row, a row of the same stride
+//!   `[unused, ∂L/∂colour pre-sigmoid (3), ∂L/∂logits (C), ∂L/∂feature (D)]`: what the heads'
+//!   backward passes start from (the sigmoid undone here);
 //! - `ray_outputs`, three blocks of B rows: the losses `[rgb, depth, semantic, feature]` per ray
 //!   ([`CompositeLayout::losses`]), the rendered channels (k per ray,
 //!   [`CompositeLayout::rendered`]) and ∂L/∂rendered (k per ray,
@@ -73,6 +76,9 @@ pub struct CompositeInputs<'a> {
     pub intervals: &'a wgpu::Buffer,
     /// `RayBatchPass::targets`.
     pub targets: &'a wgpu::Buffer,
+    /// Per sample, its packed row in the head outputs (`keep::HeadRows::slot`), or
+    /// `keep::NOT_KEPT`.
+    pub slot: &'a wgpu::Buffer,
 }
 
 /// Shapes of the pass's outputs.
@@ -138,8 +144,10 @@ pub struct CompositePass {
     /// The forward alone (`composite_render`).
     render: Dispatch,
     pub layout: CompositeLayout,
-    /// B·S rows of [`CompositeLayout::grad_stride`] f32.
+    /// B·S rows of [`CompositeLayout::grad_stride`] f32: ∂L/∂h₀ first.
     pub grad_heads: wgpu::Buffer,
+    /// B·S rows of [`CompositeLayout::grad_stride`] f32, the heads' gradients at packed rows.
+    pub head_grads: wgpu::Buffer,
     /// [`CompositeLayout::ray_output_words`] f32 in three blocks (see the module docs).
     pub ray_outputs: wgpu::Buffer,
 }
@@ -189,7 +197,8 @@ impl CompositePass {
             weight_semantic: cfg.loss.semantic,
             weight_feature: cfg.loss.feature,
         };
-        let grad_heads = storage_buffer_zeroed::<f32>(ctx, "head gradients", samples * layout.grad_stride())?;
+        let grad_heads = storage_buffer_zeroed::<f32>(ctx, "density gradients", samples * layout.grad_stride())?;
+        let head_grads = storage_buffer_zeroed::<f32>(ctx, "head gradients", samples * layout.grad_stride())?;
         let ray_outputs = storage_buffer_zeroed::<f32>(ctx, "ray losses and renders", layout.ray_output_words())?;
         let uniform = uniform_buffer_from(ctx, "composite uniforms", &uniforms);
         let spec = KernelSpec::new("composite", shaders::COMPOSITE, "composite");
@@ -205,15 +214,23 @@ impl CompositePass {
             ("targets", inputs.targets),
             ("grad_heads", &grad_heads),
             ("ray_outputs", &ray_outputs),
+            ("slot", inputs.slot),
+            ("head_grads", &head_grads),
         ]);
         let dispatch = Dispatch::build(ctx, &spec, &bindings, groups).await?;
         let render_spec = KernelSpec::new("composite (render)", shaders::COMPOSITE, "composite_render");
-        let render = Dispatch::build(ctx, &render_spec, &bindings, groups).await?;
+        let render_bindings: Vec<_> = bindings
+            .iter()
+            .filter(|(name, _)| *name != "head_grads")
+            .cloned()
+            .collect();
+        let render = Dispatch::build(ctx, &render_spec, &render_bindings, groups).await?;
         Ok(CompositePass {
             dispatch,
             render,
             layout,
             grad_heads,
+            head_grads,
             ray_outputs,
         })
     }

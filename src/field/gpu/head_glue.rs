@@ -1,14 +1,17 @@
 //! The glue between the density MLP and the heads (`shaders/head_glue.wgsl`): builds the colour
 //! and semantic inputs from the geometry feature and f, and routes the heads' input gradients
-//! back to f and to the density output, exactly as `reference::model` does per sample.
+//! back to f and to the density output, exactly as `reference::model` does per sample. The
+//! heads' rows are the kept samples, packed (`super::keep`): the forward glue and the feature
+//! gather run on those rows (indirect dispatches), the geometry gather on every sample.
 use bytemuck::{Pod, Zeroable};
 
 use crate::gpu::buffers::uniform_buffer_from;
-use crate::gpu::dispatch::{Dispatch, whole};
+use crate::gpu::dispatch::{Dispatch, IndirectArgs, whole};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
-const WORKGROUP_SIZE: u32 = 128;
+/// Invocations per workgroup of the glue's kernels.
+pub const WORKGROUP_SIZE: u32 = 128;
 
 /// Mirrors `GlueDims` in shaders/head_glue.wgsl.
 #[repr(C)]
@@ -30,9 +33,10 @@ pub struct GlueDims {
     pub _pad: [u32; 3],
 }
 
-/// The per-sample buffers the glue reads and writes (row strides in `GlueDims` terms).
+/// The buffers the glue reads and writes (row strides in `GlueDims` terms); all but
+/// `density_out_grad`, `grad_h0_source` and `slot` hold packed rows.
 pub struct GlueBuffers<'a> {
-    /// [h0 | g], stride 1 + geometry.
+    /// [h0 | g], stride 1 + geometry (the packed copy `keep.wgsl` gathers).
     pub density_out: &'a wgpu::Buffer,
     /// f, stride feature.
     pub feature_out: &'a wgpu::Buffer,
@@ -41,13 +45,27 @@ pub struct GlueBuffers<'a> {
     /// [relu(f) | g], stride feature + semantic_geometry.
     pub semantic_in: &'a wgpu::Buffer,
     pub semantic_in_grad: &'a wgpu::Buffer,
-    /// The composite's gradient rows; `gather_feature` adds the semantic path into dL/df.
+    /// The composite's packed head-gradient rows; `gather_feature` adds the semantic path into
+    /// dL/df.
     pub grad_heads: &'a wgpu::Buffer,
+    /// The composite's per-sample gradient rows, read for dL/dh0.
+    pub grad_h0_source: &'a wgpu::Buffer,
     /// [dL/dh0 | dL/dg], stride 1 + geometry: written whole by `gather_geometry`.
     pub density_out_grad: &'a wgpu::Buffer,
     pub color_in_grad: &'a wgpu::Buffer,
     /// The feature MLP's input gradient, stride geometry.
     pub feature_in_grad: &'a wgpu::Buffer,
+}
+
+/// The kept rows the glue works on (from `super::keep::HeadRows`).
+pub struct GlueRows<'a> {
+    /// One word: the packed rows present.
+    pub row_count: &'a wgpu::Buffer,
+    /// Per sample, its packed row or `keep::NOT_KEPT`.
+    pub slot: &'a wgpu::Buffer,
+    /// Workgroup counts of a pass over the packed rows (1 item per row, [`WORKGROUP_SIZE`] per
+    /// workgroup); `None` launches for all `samples` rows.
+    pub dispatch: Option<IndirectArgs>,
 }
 
 pub struct HeadGluePass {
@@ -72,7 +90,12 @@ async fn stage(
 }
 
 impl HeadGluePass {
-    pub async fn new(ctx: &GpuContext, dims: GlueDims, b: &GlueBuffers<'_>) -> Result<Self, GpuError> {
+    pub async fn new(
+        ctx: &GpuContext,
+        dims: GlueDims,
+        b: &GlueBuffers<'_>,
+        rows: &GlueRows<'_>,
+    ) -> Result<Self, GpuError> {
         let uniform = uniform_buffer_from(ctx, "head glue dims", &dims);
         let groups = Dispatch1d::for_device(ctx, dims.samples.into(), WORKGROUP_SIZE)?;
         let assemble = stage(
@@ -85,9 +108,11 @@ impl HeadGluePass {
                 ("feature_out", b.feature_out),
                 ("color_in", b.color_in),
                 ("semantic_in", b.semantic_in),
+                ("row_count", rows.row_count),
             ],
         )
-        .await?;
+        .await?
+        .with_indirect(rows.dispatch.clone());
         let gather_feature = stage(
             ctx,
             "gather_feature",
@@ -97,9 +122,11 @@ impl HeadGluePass {
                 ("feature_out", b.feature_out),
                 ("semantic_in_grad", b.semantic_in_grad),
                 ("grad_heads", b.grad_heads),
+                ("row_count", rows.row_count),
             ],
         )
-        .await?;
+        .await?
+        .with_indirect(rows.dispatch.clone());
         let gather_geometry = stage(
             ctx,
             "gather_geometry",
@@ -107,7 +134,8 @@ impl HeadGluePass {
             &[
                 ("dims", &uniform),
                 ("semantic_in_grad", b.semantic_in_grad),
-                ("grad_heads", b.grad_heads),
+                ("grad_h0_source", b.grad_h0_source),
+                ("slot", rows.slot),
                 ("density_out_grad", b.density_out_grad),
                 ("color_in_grad", b.color_in_grad),
                 ("feature_in_grad", b.feature_in_grad),

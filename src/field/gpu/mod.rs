@@ -2,14 +2,17 @@
 //! pipeline and bind groups, and tested against the CPU reference on lavapipe.
 //!
 //! Buffers shared between passes are sample-major: with B rays of S samples, sample `n = ray·S + s`
-//! owns row `n` of every per-sample buffer (positions, encodings, MLP activations, head outputs
-//! and their gradients). Parameters, gradients and Adam moments are the flat layout of
+//! owns row `n` of every per-sample buffer (positions, encodings, the density MLP's activations
+//! and gradients), except the heads' buffers: those hold the samples `keep` kept, packed in
+//! sample order (`keep::HeadRows`: `rows` maps a packed row to its sample, `slot` a sample to its
+//! packed row). Parameters, gradients and Adam moments are the flat layout of
 //! `field::params::ParamLayout`, bound whole; a pass is told the offset of its range.
 pub mod adam;
 pub mod composite;
 pub mod dense;
 pub mod encoding;
 pub mod head_glue;
+pub mod keep;
 pub mod rays;
 pub mod refine;
 pub mod row_view;

@@ -9,7 +9,9 @@
 //! s   = semantic_mlp([relu(f), g]) or semantic_mlp(relu(f))  (C logits; `semantic_input`)
 //! value = [rgb, z-depth of the sample, s, f]                (render::Channels order)
 //! ```
-//! then all values are rendered with one set of weights (`render`), and `loss::ray_loss`
+//! then all values are rendered with one set of weights (`render`); a sample whose weight is
+//! below `FieldConfig::head_weight_threshold` (`render::kept_samples`) renders 0 for rgb, s and
+//! f and its heads get no gradient. `loss::ray_loss`
 //! scores the rendered channels. The backward pass runs the same chain in reverse and adds
 //! every parameter's gradient at its place in the `params::ParamLayout` buffer.
 use super::activations;
@@ -65,6 +67,9 @@ pub struct SampleTrace<R> {
     pub semantic: MlpTrace<R>,
     /// The rendered value vector of this sample (`Channels::count()` values).
     pub value: Vec<R>,
+    /// Whether the sample reaches the heads (`render::kept_samples`): when not, its colour,
+    /// logits and feature render as 0 and the heads get no gradient from it.
+    pub kept: bool,
 }
 
 /// Everything one ray's backward pass needs.
@@ -181,6 +186,7 @@ impl FieldModel {
             feature,
             semantic,
             value,
+            kept: true,
         }
     }
 
@@ -188,12 +194,24 @@ impl FieldModel {
     pub fn forward_ray<R: Real>(&self, params: &[R], ray: &SampledRay) -> RayTrace<R> {
         let mut view_sh = [R::ZERO; sh::SH_COEFFS];
         sh::encode(ray.dir.map(R::of_f32), &mut view_sh);
-        let samples: Vec<SampleTrace<R>> = ray
+        let mut samples: Vec<SampleTrace<R>> = ray
             .positions
             .iter()
             .zip(&ray.depths)
             .map(|(p, d)| self.forward_sample(params, p.map(R::of_f32), &view_sh, R::of_f32(*d)))
             .collect();
+        let h0: Vec<f32> = samples.iter().map(|s| s.density.output()[0].to_f64() as f32).collect();
+        let kept = render::kept_samples(&h0, &ray.deltas, self.config.head_weight_threshold);
+        for (sample, kept) in samples.iter_mut().zip(kept) {
+            if !kept {
+                sample.kept = false;
+                for (c, v) in sample.value.iter_mut().enumerate() {
+                    if c != Channels::DEPTH {
+                        *v = R::ZERO;
+                    }
+                }
+            }
+        }
         let sigmas: Vec<R> = samples.iter().map(|s| s.sigma).collect();
         let deltas: Vec<R> = ray.deltas.iter().map(|d| R::of_f32(*d)).collect();
         let values: Vec<R> = samples.iter().flat_map(|s| s.value.iter().copied()).collect();
@@ -243,57 +261,11 @@ impl FieldModel {
         grad: &mut [R],
     ) {
         let l = &self.layout;
-        let ch = &self.channels;
         let geometry_dim = self.config.geometry_dim as usize;
-        let feature_dim = ch.feature_dim;
         let mut grad_geometry = vec![R::ZERO; geometry_dim];
-
-        // Semantic head → [relu(f), g].
-        let grad_logits = &grad_value[Channels::SEMANTIC..Channels::SEMANTIC + ch.classes];
-        let grad_semantic_in = mlp::backward(
-            &l.semantic.dims,
-            &params[l.semantic.range()],
-            &sample.semantic,
-            grad_logits,
-            &mut grad[l.semantic.range()],
-        );
-        // Only a share of it reaches the shared field (FieldConfig::semantic_trunk_gradient).
-        let trunk = R::of_f32(self.config.semantic_trunk_gradient);
-        let grad_semantic_in: Vec<R> = grad_semantic_in.iter().map(|&v| v * trunk).collect();
-        let mut grad_f: Vec<R> = grad_value[ch.feature()..ch.feature() + feature_dim].to_vec();
-        for ((gf, gs), f) in grad_f
-            .iter_mut()
-            .zip(&grad_semantic_in[..feature_dim])
-            .zip(sample.feature.output())
-        {
-            if *f > R::ZERO {
-                *gf += *gs;
-            }
+        if sample.kept {
+            self.backward_heads(params, sample, grad_value, &mut grad_geometry, grad);
         }
-        add_into(&mut grad_geometry, &grad_semantic_in[feature_dim..]);
-
-        // Feature MLP → g.
-        let grad_feature_in = mlp::backward(
-            &l.feature.dims,
-            &params[l.feature.range()],
-            &sample.feature,
-            &grad_f,
-            &mut grad[l.feature.range()],
-        );
-        add_into(&mut grad_geometry, &grad_feature_in);
-
-        // Colour: sigmoid, then the MLP → [sh, g] (the SH part is data).
-        let grad_color_out: Vec<R> = (0..3)
-            .map(|c| activations::sigmoid_backward(sample.rgb[c], grad_value[Channels::RGB + c]))
-            .collect();
-        let grad_color_in = mlp::backward(
-            &l.color.dims,
-            &params[l.color.range()],
-            &sample.color,
-            &grad_color_out,
-            &mut grad[l.color.range()],
-        );
-        add_into(&mut grad_geometry, &grad_color_in[sh::SH_COEFFS..]);
 
         // Density MLP: output [h₀, g] → encoding.
         let mut grad_density_out = Vec::with_capacity(1 + geometry_dim);
@@ -317,6 +289,68 @@ impl FieldModel {
                 &mut grad[l.hash_table.clone()],
             );
         }
+    }
+
+    /// Backward of the three heads of a kept sample: adds their parameters' gradients to
+    /// `grad` and ∂L/∂g to `grad_geometry`.
+    fn backward_heads<R: Real>(
+        &self,
+        params: &[R],
+        sample: &SampleTrace<R>,
+        grad_value: &[R],
+        grad_geometry: &mut [R],
+        grad: &mut [R],
+    ) {
+        let l = &self.layout;
+        let ch = &self.channels;
+        let feature_dim = ch.feature_dim;
+
+        // Semantic head → [relu(f), g].
+        let grad_logits = &grad_value[Channels::SEMANTIC..Channels::SEMANTIC + ch.classes];
+        let grad_semantic_in = mlp::backward(
+            &l.semantic.dims,
+            &params[l.semantic.range()],
+            &sample.semantic,
+            grad_logits,
+            &mut grad[l.semantic.range()],
+        );
+        // Only a share of it reaches the shared field (FieldConfig::semantic_trunk_gradient).
+        let trunk = R::of_f32(self.config.semantic_trunk_gradient);
+        let grad_semantic_in: Vec<R> = grad_semantic_in.iter().map(|&v| v * trunk).collect();
+        let mut grad_f: Vec<R> = grad_value[ch.feature()..ch.feature() + feature_dim].to_vec();
+        for ((gf, gs), f) in grad_f
+            .iter_mut()
+            .zip(&grad_semantic_in[..feature_dim])
+            .zip(sample.feature.output())
+        {
+            if *f > R::ZERO {
+                *gf += *gs;
+            }
+        }
+        add_into(grad_geometry, &grad_semantic_in[feature_dim..]);
+
+        // Feature MLP → g.
+        let grad_feature_in = mlp::backward(
+            &l.feature.dims,
+            &params[l.feature.range()],
+            &sample.feature,
+            &grad_f,
+            &mut grad[l.feature.range()],
+        );
+        add_into(grad_geometry, &grad_feature_in);
+
+        // Colour: sigmoid, then the MLP → [sh, g] (the SH part is data).
+        let grad_color_out: Vec<R> = (0..3)
+            .map(|c| activations::sigmoid_backward(sample.rgb[c], grad_value[Channels::RGB + c]))
+            .collect();
+        let grad_color_in = mlp::backward(
+            &l.color.dims,
+            &params[l.color.range()],
+            &sample.color,
+            &grad_color_out,
+            &mut grad[l.color.range()],
+        );
+        add_into(grad_geometry, &grad_color_in[sh::SH_COEFFS..]);
     }
 
     /// Loss of a batch and its gradient: `grad` (`layout.total` values) is overwritten with

@@ -71,6 +71,28 @@ pub fn composite<R: Real>(sigmas: &[R], deltas: &[R], values: &[R], k: usize) ->
     }
 }
 
+/// Which samples of a ray reach the colour, feature and semantic heads
+/// (`FieldConfig::head_weight_threshold`): those whose compositing weight w_i, computed from
+/// the density pre-activations `h0` alone, is at least `threshold`; 0 keeps every sample.
+/// Always in f32 and in the order of `composite` (and of `shaders/keep.wgsl`), whatever the
+/// reference's scalar type, so that the reference and the GPU make the same choice.
+pub fn kept_samples(h0: &[f32], deltas: &[f32], threshold: f32) -> Vec<bool> {
+    debug_assert_eq!(h0.len(), deltas.len());
+    if threshold <= 0.0 {
+        return vec![true; h0.len()];
+    }
+    let mut optical_depth = 0.0f32;
+    h0.iter()
+        .zip(deltas)
+        .map(|(&h, &delta)| {
+            let t_before = (-optical_depth).exp();
+            optical_depth += super::activations::density(h) * delta;
+            let t_after = (-optical_depth).exp();
+            t_before - t_after >= threshold
+        })
+        .collect()
+}
+
 /// Vector-Jacobian product of `composite`. Given `grad_output` = ∂L/∂R (k values) returns
 /// (∂L/∂σ, n values; ∂L/∂h, n × k values):
 /// - ∂L/∂h_i = w_i · g
@@ -116,6 +138,16 @@ mod tests {
         // Weights of a constant-density ray sum to 1 − e^(−σ·length).
         let c = composite(&[2.0f64; 4], &[0.25; 4], &[1.0; 4], 1);
         assert!((c.output[0] - (1.0 - (-2.0f64).exp())).abs() < 1e-12);
+    }
+
+    #[test]
+    fn samples_behind_an_opaque_one_are_not_kept() {
+        let h0 = [-30.0, 12.0, 1.0, 1.0];
+        let deltas = [0.1; 4];
+        // exp(-15) * 0.1 is below 1e-4: the empty first sample is dropped, the surface kept,
+        // nothing behind it survives.
+        assert_eq!(kept_samples(&h0, &deltas, 1e-4), [false, true, false, false]);
+        assert_eq!(kept_samples(&h0, &deltas, 0.0), [true; 4]);
     }
 
     #[test]

@@ -7,8 +7,9 @@ use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
 use super::tiled::{REDUCE_SHAPE, REDUCE_WORKGROUP, TileShape, weight_chunks};
 use super::uniform::{UniformWeightPartials, WindowedLayer, uniform_weight_chunks};
 use super::{Activation, DenseFamily, RowView};
-use crate::gpu::buffers::{storage_buffer_zeroed, uniform_buffer_from};
-use crate::gpu::dispatch::{Dispatch, bind_named};
+use crate::field::gpu::keep::HeadRows;
+use crate::gpu::buffers::{storage_buffer_from, storage_buffer_zeroed, uniform_buffer_from};
+use crate::gpu::dispatch::{Dispatch, IndirectArgs, bind_named};
 use crate::gpu::pipeline::Dispatch1d;
 use crate::gpu::{GpuContext, GpuError};
 
@@ -130,6 +131,31 @@ fn check_binding(ctx: &GpuContext, what: &str, buffer: &wgpu::Buffer) -> Result<
     ctx.ensure_storage_binding_fits(what, buffer.size())
 }
 
+/// The word the kernels read the rows present from (`row_count` in `_dense_tile.wgsl`): the
+/// kept rows' count, or a word holding all of `spec.rows`.
+fn row_count(ctx: &GpuContext, spec: &DenseLayerSpec, kept: Option<&HeadRows>) -> Result<wgpu::Buffer, GpuError> {
+    match kept {
+        Some(kept) if kept.capacity < spec.rows => Err(GpuError::invalid_argument(
+            &spec.label,
+            format!("{} rows, but the kept rows hold at most {}", spec.rows, kept.capacity),
+        )),
+        Some(kept) => Ok(kept.row_count.clone()),
+        None => storage_buffer_from(ctx, &format!("{} rows", spec.label), &[spec.rows]),
+    }
+}
+
+/// The indirect workgroup counts of a row-parallel kernel over the kept rows (`None`: a fixed
+/// batch, launched as recorded).
+fn kept_dispatch(
+    kept: Option<&HeadRows>,
+    items_per_row: u32,
+    per_workgroup: u32,
+    z: u32,
+) -> Result<Option<IndirectArgs>, GpuError> {
+    kept.map(|kept| kept.dispatch(items_per_row, per_workgroup, z))
+        .transpose()
+}
+
 /// The forward of one layer, bound to its buffers.
 pub struct DenseForward {
     spec: DenseLayerSpec,
@@ -139,7 +165,7 @@ pub struct DenseForward {
 
 impl DenseForward {
     /// `input` must hold `spec.rows` rows of `in_dim` values, `output` of `out_dim`; the output
-    /// is overwritten.
+    /// is overwritten. With `kept`, only the first kept rows are computed (see [`HeadRows`]).
     pub async fn new(
         ctx: &GpuContext,
         pipelines: &mut DensePipelines,
@@ -147,6 +173,7 @@ impl DenseForward {
         params: &wgpu::Buffer,
         input: &RowView,
         output: &RowView,
+        kept: Option<&HeadRows>,
     ) -> Result<DenseForward, GpuError> {
         spec.check()?;
         let label = format!("{} forward", spec.label);
@@ -154,9 +181,10 @@ impl DenseForward {
         output.check(&format!("{label} output"), spec.rows, spec.out_dim)?;
         check_binding(ctx, &label, &input.buffer)?;
         check_binding(ctx, &label, &output.buffer)?;
-        let (kernel, (weights, weight_offset), workgroups, family) = pipelines
+        let (kernel, (weights, weight_offset), workgroups, family, rows_per_workgroup) = pipelines
             .product_kernel(ctx, &label, params, spec, ProductKind::Forward)
             .await?;
+        let rows = row_count(ctx, spec, kept)?;
         let dims = DenseDims {
             x_stride: input.stride,
             x_offset: input.offset,
@@ -174,9 +202,11 @@ impl DenseForward {
                 ("x", input.buffer.as_entire_binding()),
                 ("weights", weights),
                 ("y", output.buffer.as_entire_binding()),
+                ("row_count", rows.as_entire_binding()),
             ],
             workgroups,
-        )?;
+        )?
+        .with_indirect(kept_dispatch(kept, 1, rows_per_workgroup, workgroups[2])?);
         Ok(DenseForward {
             spec: spec.clone(),
             dispatch,
@@ -207,6 +237,8 @@ pub struct DenseGradients<'a> {
     pub output_grad: &'a RowView,
     /// Where dL/dX goes (`in_dim` values per row, overwritten); `None` skips it.
     pub input_grad: Option<&'a RowView>,
+    /// As the forward's `kept`: the rows present are the kept samples (see [`HeadRows`]).
+    pub kept: Option<&'a HeadRows>,
 }
 
 /// The backward of one layer, bound to its buffers; owns the per-chunk partial sums of dW.
@@ -245,6 +277,7 @@ impl DenseBackward {
         output: &RowView,
         gradients: &DenseGradients<'_>,
     ) -> Result<DenseBackward, GpuError> {
+        let kept = gradients.kept;
         spec.check()?;
         let label = format!("{} backward", spec.label);
         input.check(&format!("{label} input"), spec.rows, spec.in_dim)?;
@@ -263,6 +296,7 @@ impl DenseBackward {
             dy_offset: output_grad.offset,
             ..spec.base_dims()
         };
+        let rows = row_count(ctx, spec, kept)?;
 
         let input_grad = match gradients.input_grad {
             None => None,
@@ -270,7 +304,7 @@ impl DenseBackward {
                 let label = format!("{label} input gradient");
                 input_grad.check(&label, spec.rows, spec.in_dim)?;
                 check_binding(ctx, &label, &input_grad.buffer)?;
-                let (kernel, (weights, weight_offset), workgroups, _) = pipelines
+                let (kernel, (weights, weight_offset), workgroups, _, rows_per_workgroup) = pipelines
                     .product_kernel(ctx, &label, params, spec, ProductKind::BackwardInput)
                     .await?;
                 let dims = DenseDims {
@@ -280,18 +314,22 @@ impl DenseBackward {
                     ..base
                 };
                 let uniform = uniform_buffer_from(ctx, &label, &dims);
-                Some(bound(
-                    ctx,
-                    kernel,
-                    &[
-                        ("dims", uniform.as_entire_binding()),
-                        ("dy", output_grad.buffer.as_entire_binding()),
-                        ("y", output.buffer.as_entire_binding()),
-                        ("weights", weights),
-                        ("dx", input_grad.buffer.as_entire_binding()),
-                    ],
-                    workgroups,
-                )?)
+                Some(
+                    bound(
+                        ctx,
+                        kernel,
+                        &[
+                            ("dims", uniform.as_entire_binding()),
+                            ("dy", output_grad.buffer.as_entire_binding()),
+                            ("y", output.buffer.as_entire_binding()),
+                            ("weights", weights),
+                            ("dx", input_grad.buffer.as_entire_binding()),
+                            ("row_count", rows.as_entire_binding()),
+                        ],
+                        workgroups,
+                    )?
+                    .with_indirect(kept_dispatch(kept, 1, rows_per_workgroup, workgroups[2])?),
+                )
             }
         };
 
@@ -331,6 +369,8 @@ impl DenseBackward {
                         partials: &partials,
                         chunk_rows,
                         chunks,
+                        row_count: &rows,
+                        mask_dispatch: kept_dispatch(kept, spec.out_dim, super::uniform::UNIFORM_WORKGROUP, 1)?,
                     },
                 )
                 .await?,
@@ -351,6 +391,7 @@ impl DenseBackward {
                         ("y", output.buffer.as_entire_binding()),
                         ("x", input.buffer.as_entire_binding()),
                         ("partials", partials.as_entire_binding()),
+                        ("row_count", rows.as_entire_binding()),
                     ],
                     workgroups,
                 )?)

@@ -1,6 +1,7 @@
 //! Whole MLPs on the dense layers: the twin of `reference::mlp`.
 use super::layer::{DenseBackward, DenseForward, DenseGradients, DenseLayerSpec};
 use super::{Activation, DenseFamily, DensePipelines, RowView};
+use crate::field::gpu::keep::HeadRows;
 use crate::field::params::MlpLayout;
 use crate::gpu::buffers::storage_buffer_zeroed;
 use crate::gpu::{GpuContext, GpuError};
@@ -29,6 +30,9 @@ pub struct MlpPassDesc<'a> {
     pub output: Option<RowView>,
     /// `None` builds a forward-only pass (rendering).
     pub gradients: Option<MlpGradients>,
+    /// `Some`: the rows are the samples the keep pass kept, only the first `row_count` of the
+    /// `rows` are computed, and the kernels launch for those alone (indirect dispatches).
+    pub kept: Option<&'a HeadRows>,
 }
 
 /// A whole MLP (ReLU after every hidden layer, linear output, as `reference::mlp`): the forward
@@ -56,6 +60,7 @@ impl MlpPass {
             input,
             output,
             gradients,
+            kept,
         } = desc;
         let dims: Vec<u32> = layout
             .dims
@@ -99,7 +104,7 @@ impl MlpPass {
         let mut forward = Vec::with_capacity(layers);
         for (k, spec) in specs.iter().enumerate() {
             let layer_input = if k == 0 { &input } else { &outputs[k - 1] };
-            forward.push(DenseForward::new(ctx, pipelines, spec, params, layer_input, &outputs[k]).await?);
+            forward.push(DenseForward::new(ctx, pipelines, spec, params, layer_input, &outputs[k], kept).await?);
         }
 
         let mut hidden_grads = Vec::new();
@@ -136,6 +141,7 @@ impl MlpPass {
                         grads: &gradients.grads,
                         output_grad,
                         input_grad,
+                        kept,
                     };
                     backward.push(
                         DenseBackward::new(ctx, pipelines, spec, params, layer_input, &outputs[k], &layer_gradients)

@@ -141,12 +141,13 @@ pub(super) enum ProductKind {
 }
 
 /// A pipeline and the kernel it runs, the weights' binding (and where the layer starts in it),
-/// the workgroup counts and the family actually used.
+/// the workgroup counts, the family actually used and the rows one workgroup covers.
 pub(super) type ProductKernel<'a> = (
     (wgpu::ComputePipeline, DenseKernel),
     (wgpu::BindingResource<'a>, u32),
     [u32; 3],
     DenseFamily,
+    u32,
 );
 
 impl DensePipelines {
@@ -176,12 +177,19 @@ impl DensePipelines {
                 binding,
                 workgroups,
                 DenseFamily::UniformWeights,
+                super::uniform::UNIFORM_WORKGROUP,
             ));
         }
         let shape = TileShape::for_product(columns, None);
         let pipeline = self.get(ctx, tiled_kernel, shape).await?;
         let binding = range_binding(ctx, label, params, &spec.weights)?;
         let workgroups = row_tile_dispatch(ctx, spec.rows, shape, columns.div_ceil(shape.tile_columns()))?;
-        Ok(((pipeline, tiled_kernel), binding, workgroups, DenseFamily::Tiled))
+        Ok((
+            (pipeline, tiled_kernel),
+            binding,
+            workgroups,
+            DenseFamily::Tiled,
+            shape.tile_rows(),
+        ))
     }
 }

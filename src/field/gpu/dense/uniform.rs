@@ -7,7 +7,7 @@ use std::ops::Range;
 use super::layer::{DenseLayerSpec, bound};
 use super::pipelines::{DenseKernel, DensePipelines};
 use super::{DenseFamily, RowView};
-use crate::gpu::dispatch::{Dispatch, bind_named};
+use crate::gpu::dispatch::{Dispatch, IndirectArgs, bind_named};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError};
 
@@ -53,6 +53,10 @@ pub(super) struct WindowedLayer<'a> {
     /// From [`uniform_weight_chunks`].
     pub chunk_rows: u32,
     pub chunks: u32,
+    /// The word holding the rows present (`row_count` in `_dense_tile.wgsl`).
+    pub row_count: &'a wgpu::Buffer,
+    /// The masking kernel's workgroup counts when the rows are the kept ones.
+    pub mask_dispatch: Option<IndirectArgs>,
 }
 
 pub(super) struct UniformWeightPartials {
@@ -85,6 +89,8 @@ impl UniformWeightPartials {
             partials,
             chunk_rows,
             chunks,
+            row_count,
+            mask_dispatch,
         } = layer;
         let window_floats = chunk_rows as usize * spec.out_dim as usize;
         // Every chunk's window is UNIFORM_WEIGHT_FLOATS long from its start, the last included.
@@ -122,9 +128,11 @@ impl UniformWeightPartials {
                 ("dy", output_grad.buffer.as_entire_binding()),
                 ("y", output.buffer.as_entire_binding()),
                 ("dz_out", dz.as_entire_binding()),
+                ("row_count", row_count.as_entire_binding()),
             ],
             groups,
-        )?;
+        )?
+        .with_indirect(mask_dispatch);
 
         let block = uniform_block(spec.out_dim);
         let columns = spec.in_dim.next_power_of_two().clamp(8, UNIFORM_WORKGROUP);
@@ -139,6 +147,7 @@ impl UniformWeightPartials {
                 ("dims", dims.as_entire_binding()),
                 ("x", input.buffer.as_entire_binding()),
                 ("partials", partials.as_entire_binding()),
+                ("row_count", row_count.as_entire_binding()),
             ],
         )?;
         let windows = bind_named(
@@ -246,6 +255,7 @@ impl DensePipelines {
             entry(0, wgpu::BufferBindingType::Uniform, false, None),
             entry(3, storage(true), false, None),
             entry(4, storage(false), false, None),
+            entry(7, storage(true), false, None),
         ];
         let windows = [
             entry(

@@ -3,7 +3,8 @@
 //!
 //! Order of one step (sample-major buffers, see the module docs of `field::gpu`):
 //! ```text
-//! rays → samples → encoding, SH → density MLP → feature MLP → glue (colour/semantic inputs)
+//! rays → samples → encoding, SH → density MLP → keep (which samples reach the heads, packed)
+//!   → feature MLP → glue (colour/semantic inputs)
 //!   → colour MLP, semantic MLP → composite + losses + their backward
 //!   → semantic⁻¹ → glue (df) → feature⁻¹ → colour⁻¹ → glue (dg) → density⁻¹ → hash grid⁻¹ → Adam
 //! ```
@@ -29,7 +30,8 @@ use super::encoding::{
     DirectionLayout, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
     PositionEncodeBuffers, PositionEncodePass, ShOutputLayout,
 };
-use super::head_glue::{GlueBuffers, GlueDims, HeadGluePass};
+use super::head_glue::{GlueBuffers, GlueDims, GlueRows, HeadGluePass};
+use super::keep::{HeadRows, KeepBuffers, KeepPass, KeepShape};
 use super::rays::{FrameTilePass, RayBatchPass, SamplePointsPass, StepUniforms};
 use super::rays::{NO_LABEL, RayGeometry, TARGET_FLAGS, TARGET_HEADER_WORDS, TARGET_LABEL, TARGET_PIXEL};
 use super::scene_buffers::{LabelIndex, SceneBuffers};
@@ -59,12 +61,16 @@ pub struct TrainerState {
     pub second_moment: Vec<f32>,
 }
 
-/// The per-sample buffers between passes, owned here so passes can share them.
+/// The per-sample buffers between passes, owned here so passes can share them. From
+/// `density_packed` on they hold the kept samples' packed rows (`super::keep`), sized for all.
 struct SampleBuffers {
     encoding: wgpu::Buffer,
     encoding_grad: wgpu::Buffer,
     density_out: wgpu::Buffer,
     density_out_grad: wgpu::Buffer,
+    /// The view's SH coefficients per sample, gathered into `color_in`'s packed rows.
+    sh: wgpu::Buffer,
+    density_packed: wgpu::Buffer,
     feature_out: wgpu::Buffer,
     feature_in_grad: wgpu::Buffer,
     color_in: wgpu::Buffer,
@@ -88,6 +94,8 @@ impl SampleBuffers {
             encoding_grad: make("encoding gradient", e)?,
             density_out: make("density output", 1 + g)?,
             density_out_grad: make("density output gradient", 1 + g)?,
+            sh: make("view SH", sh)?,
+            density_packed: make("kept density output", 1 + g)?,
             feature_out: make("feature output", d)?,
             feature_in_grad: make("feature input gradient", g)?,
             color_in: make("colour input", sh + g)?,
@@ -130,6 +138,8 @@ pub struct Trainer {
     color: MlpPass,
     semantic: MlpPass,
     glue: HeadGluePass,
+    keep: KeepPass,
+    head_rows: HeadRows,
     composite: CompositePass,
     hash_backward: HashGridBackwardPass,
     adam: AdamPass,
@@ -200,13 +210,13 @@ impl Trainer {
             n as usize,
             ShOutputLayout {
                 samples_per_ray: cfg.samples_per_ray(),
-                row_stride: (SH + g) as usize,
+                row_stride: SH as usize,
                 column_offset: 0,
             },
             DirectionLayout::RAY_GEOMETRY,
             DirectionShBuffers {
                 directions: &ray_batch.rays,
-                output: &samples.color_in,
+                output: &samples.sh,
             },
         )
         .await?;
@@ -214,6 +224,7 @@ impl Trainer {
         // The composite's gradient rows exist only once it is built, but the MLPs' backward
         // passes read them: build the forward-facing pieces first, then the composite, then the
         // MLPs with their gradients.
+        let head_rows = HeadRows::new(ctx, n)?;
         let composite_layout = CompositeLayout::new(cfg);
         let grad_stride = composite_layout.grad_stride() as u32;
         let mut pipelines = DensePipelines::with_family(DenseFamily::for_device(ctx));
@@ -246,11 +257,12 @@ impl Trainer {
                 },
                 intervals: &sample_points.intervals,
                 targets: &ray_batch.targets,
+                slot: &head_rows.slot,
             },
         )
         .await?;
         let grad_view = |offset: usize| RowView {
-            buffer: composite.grad_heads.clone(),
+            buffer: composite.head_grads.clone(),
             stride: grad_stride,
             offset: offset as u32,
         };
@@ -273,6 +285,7 @@ impl Trainer {
                         .uses_hash_grid()
                         .then(|| RowView::packed(&samples.encoding_grad, cfg.encoding_dim() as u32)),
                 }),
+                kept: None,
             },
         )
         .await?;
@@ -285,7 +298,7 @@ impl Trainer {
                 rows: n,
                 params: &optimizer.params,
                 input: RowView {
-                    buffer: samples.density_out.clone(),
+                    buffer: samples.density_packed.clone(),
                     stride: 1 + g,
                     offset: 1,
                 },
@@ -295,6 +308,7 @@ impl Trainer {
                     output_grad: grad_view(composite_layout.grad_feature_offset()),
                     input_grad: Some(RowView::packed(&samples.feature_in_grad, g)),
                 }),
+                kept: Some(&head_rows),
             },
         )
         .await?;
@@ -313,6 +327,7 @@ impl Trainer {
                     output_grad: grad_view(CompositeLayout::GRAD_COLOR),
                     input_grad: Some(RowView::packed(&samples.color_in_grad, SH + g)),
                 }),
+                kept: Some(&head_rows),
             },
         )
         .await?;
@@ -331,6 +346,7 @@ impl Trainer {
                     output_grad: grad_view(composite_layout.grad_logits_offset()),
                     input_grad: Some(RowView::packed(&samples.semantic_in_grad, d + sg)),
                 }),
+                kept: Some(&head_rows),
             },
         )
         .await?;
@@ -349,15 +365,45 @@ impl Trainer {
                 _pad: [0; 3],
             },
             &GlueBuffers {
-                density_out: &samples.density_out,
+                density_out: &samples.density_packed,
                 feature_out: &samples.feature_out,
                 color_in: &samples.color_in,
                 semantic_in: &samples.semantic_in,
                 semantic_in_grad: &samples.semantic_in_grad,
-                grad_heads: &composite.grad_heads,
+                grad_heads: &composite.head_grads,
+                grad_h0_source: &composite.grad_heads,
                 density_out_grad: &samples.density_out_grad,
                 color_in_grad: &samples.color_in_grad,
                 feature_in_grad: &samples.feature_in_grad,
+            },
+            &GlueRows {
+                row_count: &head_rows.row_count,
+                slot: &head_rows.slot,
+                dispatch: Some(head_rows.dispatch(1, super::head_glue::WORKGROUP_SIZE, 1)?),
+            },
+        )
+        .await?;
+        // Last of the head passes' builders: it writes the workgroup counts all of them asked for.
+        let keep = KeepPass::new(
+            ctx,
+            KeepShape {
+                batch_rays: cfg.batch_rays,
+                samples_per_ray: cfg.samples_per_ray() as u32,
+                threshold: cfg.head_weight_threshold,
+                density_stride: 1 + g,
+                sh_width: SH,
+                color_stride: SH + g,
+                target_stride: TARGET_HEADER_WORDS as u32 + d,
+            },
+            &head_rows,
+            &KeepBuffers {
+                step_uniforms: &step_uniforms,
+                density_out: &samples.density_out,
+                intervals: &sample_points.intervals,
+                targets: &ray_batch.targets,
+                sh_rows: &samples.sh,
+                density_packed: &samples.density_packed,
+                color_packed: &samples.color_in,
             },
         )
         .await?;
@@ -409,6 +455,8 @@ impl Trainer {
             color,
             semantic,
             glue,
+            keep,
+            head_rows,
             composite,
             hash_backward,
             adam,
@@ -624,6 +672,13 @@ impl Trainer {
         }
         self.last_losses
             .ok_or_else(|| GpuError::invalid_argument("losses", "no step has been trained yet"))
+    }
+
+    /// Reads back two wrapping u32: the samples that reached the heads, summed over every
+    /// batch since the trainer was made (training steps and rendered tiles), and the batches.
+    /// Two reads around some steps give the mean kept samples per step (`bench`).
+    pub fn kept_tally(&self) -> PendingRead<u32> {
+        read_buffer_async::<u32>(&self.ctx, &self.head_rows.kept_tally)
     }
 
     /// Reads the parameters back (tests, checkpoints).

@@ -15,6 +15,7 @@ pub(super) enum StepStage {
     Encoding,
     Sh,
     DensityForward,
+    Keep,
     FeatureForward,
     GlueAssemble,
     ColorForward,
@@ -31,12 +32,13 @@ pub(super) enum StepStage {
 }
 
 /// A training step, in order.
-pub(super) const TRAINING_STEP: [StepStage; 18] = [
+pub(super) const TRAINING_STEP: [StepStage; 19] = [
     StepStage::Rays,
     StepStage::Samples,
     StepStage::Encoding,
     StepStage::Sh,
     StepStage::DensityForward,
+    StepStage::Keep,
     StepStage::FeatureForward,
     StepStage::GlueAssemble,
     StepStage::ColorForward,
@@ -53,10 +55,10 @@ pub(super) const TRAINING_STEP: [StepStage; 18] = [
 ];
 
 /// The stages from the sampled rays to the heads' outputs: what rendering a tile of rays runs
-/// (after its own ray pass).
+/// (after its own ray pass). The heads see the kept samples alone here too.
 pub(super) const FIELD_STAGES: &[StepStage] = {
     let (_, after_rays) = TRAINING_STEP.split_at(1);
-    after_rays.split_at(8).0
+    after_rays.split_at(9).0
 };
 
 impl StepStage {
@@ -68,6 +70,7 @@ impl StepStage {
             StepStage::Encoding => "encoding",
             StepStage::Sh => "sh",
             StepStage::DensityForward => "density mlp",
+            StepStage::Keep => "keep",
             StepStage::FeatureForward => "feature mlp",
             StepStage::GlueAssemble => "glue",
             StepStage::ColorForward => "colour mlp",
@@ -124,8 +127,10 @@ impl StepStage {
     /// Bytes the stage moves through global memory in one step, estimated from the kernels'
     /// shapes: every element a dispatch reads or writes counted once (caches, workgroup
     /// memory and re-reads of a tile by several workgroups ignored, so it is a lower bound of
-    /// what a kernel without reuse moves). With R rays of S samples (N = R·S), encoding width E,
-    /// geometry g, feature f, classes C and P parameters:
+    /// what a kernel without reuse moves). With R rays of S samples (N = R·S) of which K reach
+    /// the heads (`kept`, at most N: what the keep stage kept, e.g. measured by `bench`),
+    /// encoding width E, geometry g, feature f, classes C, heads' row h = 4 + C + f and P
+    /// parameters:
     ///
     /// | stage | reads | writes |
     /// |---|---|---|
@@ -133,21 +138,24 @@ impl StepStage {
     /// | samples | R ray geometries | N positions and intervals (24 B) |
     /// | encoding | N positions, 8 corners × levels × features of the hash table per sample | N·E |
     /// | sh | R ray geometries | N·16 |
-    /// | an MLP forward, per layer in→out | N·in + in·out | N·out |
-    /// | glue | density (N·(1+g)) and feature (N·f) rows | colour input's g, semantic input (N·(f + sg)) |
-    /// | composite | N head values (h₀, colour, logits, features) and intervals, R targets | N head gradients, R ray outputs |
-    /// | an MLP backward, per layer | ReLU mask: N·out twice; dX: N·out + in·out; dW: N·in + N·out | N·out; N·in; in·out |
-    /// | glue backward (feature) | N·f semantic-input and N·f feature-loss gradients | N·f |
-    /// | glue backward (geometry) | N·(g + g + sg + 1) gradients | N·(1 + g) |
+    /// | density mlp, per layer in→out | N·in + in·out | N·out |
+    /// | keep | N h₀ and intervals twice, R flags and counts, K·(1 + g + 16) gathered | R counts, N slots, K rows, K·(1 + g + 16) |
+    /// | a head MLP forward, per layer in→out | K·in + in·out | K·out |
+    /// | glue | density (K·(1+g)) and feature (K·f) rows | colour input's g, semantic input (K·(f + sg)) |
+    /// | composite | N h₀, intervals and slots, K head values, R targets | N·3 (∂L/∂h₀ and scratch), K head gradients, R ray outputs |
+    /// | an MLP backward, per layer (K rows for the heads, N for density) | ReLU mask: rows·out twice; dX: rows·out + in·out; dW: rows·in + rows·out | rows·out; rows·in; in·out |
+    /// | glue backward (feature) | K·f semantic-input and K·f feature-loss gradients | K·f |
+    /// | glue backward (geometry) | N slots and ∂L/∂h₀, K·(g + g + sg) gradients | N·(1 + g) |
     /// | encoding backward | N hash-grid gradients and positions | an atomic add (read and write) per corner, level and feature |
     /// | adam | parameters, gradients, both moments: 4·P | parameters, gradients (zeroed), both moments: 4·P |
     ///
     /// Adam zeroes the gradient it consumed, so there is no separate clear of the gradient
     /// buffer before a step ([`gradient_clear_bytes`] is 0).
-    pub(super) fn global_bytes(self, cfg: &FieldConfig) -> u64 {
+    pub(super) fn global_bytes(self, cfg: &FieldConfig, kept: u64) -> u64 {
         let layout = ParamLayout::new(cfg);
         let r = u64::from(cfg.batch_rays);
         let n = r * cfg.samples_per_ray() as u64;
+        let k = kept.min(n);
         let (g, f) = (u64::from(cfg.geometry_dim), u64::from(cfg.feature_dim));
         let sg = cfg.semantic_geometry_dim() as u64;
         let targets = r * WORD * (TARGET_HEADER_WORDS as u64 + f);
@@ -165,19 +173,25 @@ impl StepStage {
             StepStage::Encoding => n * 16 + n * corners * WORD + n * cfg.encoding_dim() as u64 * WORD,
             StepStage::Sh => r * RAY_GEOMETRY_BYTES + n * 16 * WORD,
             StepStage::DensityForward => mlp_forward_bytes(&layout.density.dims, n),
-            StepStage::FeatureForward => mlp_forward_bytes(&layout.feature.dims, n),
-            StepStage::ColorForward => mlp_forward_bytes(&layout.color.dims, n),
-            StepStage::SemanticForward => mlp_forward_bytes(&layout.semantic.dims, n),
-            StepStage::GlueAssemble => WORD * n * ((1 + g) + f + g + (f + sg)),
+            StepStage::Keep => WORD * (2 * 3 * n + 3 * r + n + k + 2 * k * (1 + g + 16)),
+            StepStage::FeatureForward => mlp_forward_bytes(&layout.feature.dims, k),
+            StepStage::ColorForward => mlp_forward_bytes(&layout.color.dims, k),
+            StepStage::SemanticForward => mlp_forward_bytes(&layout.semantic.dims, k),
+            StepStage::GlueAssemble => WORD * k * ((1 + g) + f + g + (f + sg)),
             StepStage::Composite => {
-                n * (heads * WORD + 8) + targets + n * heads * WORD + composite.ray_output_words() as u64 * WORD
+                n * (2 * WORD + 8)
+                    + k * (heads - 1) * WORD
+                    + targets
+                    + n * 3 * WORD
+                    + k * heads * WORD
+                    + composite.ray_output_words() as u64 * WORD
             }
-            StepStage::SemanticBackward => mlp_backward_bytes(&layout.semantic.dims, n),
-            StepStage::FeatureBackward => mlp_backward_bytes(&layout.feature.dims, n),
-            StepStage::ColorBackward => mlp_backward_bytes(&layout.color.dims, n),
+            StepStage::SemanticBackward => mlp_backward_bytes(&layout.semantic.dims, k),
+            StepStage::FeatureBackward => mlp_backward_bytes(&layout.feature.dims, k),
+            StepStage::ColorBackward => mlp_backward_bytes(&layout.color.dims, k),
             StepStage::DensityBackward => mlp_backward_bytes(&layout.density.dims, n),
-            StepStage::GlueGatherFeature => WORD * n * 3 * f,
-            StepStage::GlueGatherGeometry => WORD * n * ((g + g + sg + 1) + (1 + g)),
+            StepStage::GlueGatherFeature => WORD * k * 3 * f,
+            StepStage::GlueGatherGeometry => WORD * (2 * n + k * (g + g + sg) + n * (1 + g)),
             StepStage::EncodingBackward if hash => {
                 n * 16 + n * cfg.hash_encoding_dim() as u64 * WORD + 2 * n * corners * WORD
             }
@@ -207,8 +221,10 @@ pub struct StageShape {
 impl Trainer {
     /// Every stage of a training step in order, with its dispatches (counted by recording a step
     /// into a command buffer that is never submitted: nothing runs, the step count stays) and
-    /// its global-memory traffic.
-    pub fn step_shape(&self) -> Vec<StageShape> {
+    /// its global-memory traffic when `samples_to_heads` samples reach the heads (the batch's
+    /// samples at most; `bench` passes the mean it measured). The head kernels' dispatches
+    /// are indirect: they count as one each whatever they launch.
+    pub fn step_shape(&self, samples_to_heads: u64) -> Vec<StageShape> {
         use crate::gpu::dispatch::dispatches_recorded;
         let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("counting a step's dispatches (never submitted)"),
@@ -222,7 +238,7 @@ impl Trainer {
                 StageShape {
                     name: stage.name(),
                     dispatches: dispatches_recorded() - before,
-                    bytes: stage.global_bytes(&self.cfg),
+                    bytes: stage.global_bytes(&self.cfg, samples_to_heads),
                 }
             })
             .collect()
@@ -244,6 +260,7 @@ impl Trainer {
             StepStage::Encoding => self.encode.record(pass),
             StepStage::Sh => self.sh.record(pass),
             StepStage::DensityForward => self.density.record_forward(pass),
+            StepStage::Keep => self.keep.record(pass),
             StepStage::FeatureForward => self.feature.record_forward(pass),
             StepStage::GlueAssemble => self.glue.record_assemble(pass),
             StepStage::ColorForward => self.color.record_forward(pass),
@@ -283,7 +300,7 @@ mod tests {
     fn the_field_stages_run_from_samples_to_the_semantic_head() {
         assert_eq!(FIELD_STAGES.first(), Some(&StepStage::Samples));
         assert_eq!(FIELD_STAGES.last(), Some(&StepStage::SemanticForward));
-        assert_eq!(FIELD_STAGES.len(), 8);
+        assert_eq!(FIELD_STAGES.len(), 9);
     }
 
     #[test]
@@ -291,7 +308,8 @@ mod tests {
         // Issue 15 estimated roughly 8.6 GB per step at the default config (4096 rays x 64
         // samples), MLP backward more than half of it.
         let cfg = FieldConfig::default();
-        let total: u64 = TRAINING_STEP.iter().map(|s| s.global_bytes(&cfg)).sum();
+        let all = u64::from(cfg.batch_rays) * cfg.samples_per_ray() as u64;
+        let total: u64 = TRAINING_STEP.iter().map(|s| s.global_bytes(&cfg, all)).sum();
         let backward: u64 = [
             StepStage::SemanticBackward,
             StepStage::FeatureBackward,
@@ -299,17 +317,27 @@ mod tests {
             StepStage::DensityBackward,
         ]
         .iter()
-        .map(|s| s.global_bytes(&cfg))
+        .map(|s| s.global_bytes(&cfg, all))
         .sum();
         let gb = total as f64 / 1e9;
         assert!((4.0..16.0).contains(&gb), "{gb} GB");
         assert!(backward * 3 > total, "MLP backward {backward} of {total}");
         // No stage is free, and a smaller batch moves less.
-        assert!(TRAINING_STEP.iter().all(|s| s.global_bytes(&cfg) > 0));
+        assert!(TRAINING_STEP.iter().all(|s| s.global_bytes(&cfg, all) > 0));
         let half = FieldConfig {
             batch_rays: 2048,
             ..cfg.clone()
         };
-        assert!(StepStage::DensityForward.global_bytes(&half) < StepStage::DensityForward.global_bytes(&cfg));
+        assert!(StepStage::DensityForward.global_bytes(&half, all) < StepStage::DensityForward.global_bytes(&cfg, all));
+        // Fewer samples at the heads: the heads' stages move less, the density's the same.
+        let tenth: u64 = TRAINING_STEP.iter().map(|s| s.global_bytes(&cfg, all / 10)).sum();
+        assert!(
+            tenth < total,
+            "{tenth} of {total} with a tenth of the samples at the heads"
+        );
+        assert_eq!(
+            StepStage::DensityBackward.global_bytes(&cfg, all / 10),
+            StepStage::DensityBackward.global_bytes(&cfg, all)
+        );
     }
 }
