@@ -29,6 +29,14 @@ fn store_row(chunk: u32, o: u32, i: u32, values: vec4<f32>) {
     }
 }
 
+// Writes this invocation's block (output units o + r·TY, inputs i + c·TX) of a chunk.
+fn store_block(chunk: u32, o: u32, i: u32, block: Block) {
+    store_row(chunk, o, i, block.r0);
+    store_row(chunk, o + TY, i, block.r1);
+    store_row(chunk, o + 2u * TY, i, block.r2);
+    store_row(chunk, o + 3u * TY, i, block.r3);
+}
+
 @compute @workgroup_size(TX, TY)
 fn partial_sums(
     @builtin(workgroup_id) workgroup_id: vec3<u32>,
@@ -46,12 +54,7 @@ fn partial_sums(
     // A chunk past the rows present sums nothing: its partial is zero (reduce_chunks adds
     // every chunk). Uniform per workgroup, so returning before the barriers is allowed.
     if first_row >= rows {
-        let o = o0 + local_id.y;
-        let i = i0 + local_id.x;
-        store_row(chunk, o, i, block.r0);
-        store_row(chunk, o + TY, i, block.r1);
-        store_row(chunk, o + 2u * TY, i, block.r2);
-        store_row(chunk, o + 3u * TY, i, block.r3);
+        store_block(chunk, o0 + local_id.y, i0 + local_id.x, block);
         return;
     }
     let end_row = min(first_row + dims.chunk_rows, rows);
@@ -86,12 +89,7 @@ fn partial_sums(
         multiply_staged(&block, local_id.x, local_id.y);
         workgroupBarrier();
     }
-    let o = o0 + local_id.y;
-    let i = i0 + local_id.x;
-    store_row(chunk, o, i, block.r0);
-    store_row(chunk, o + TY, i, block.r1);
-    store_row(chunk, o + 2u * TY, i, block.r2);
-    store_row(chunk, o + 3u * TY, i, block.r3);
+    store_block(chunk, o0 + local_id.y, i0 + local_id.x, block);
 }
 
 const REDUCE_WORKGROUP: u32 = 256u;
