@@ -25,6 +25,7 @@
 //!include _dispatch.wgsl
 //!include _step.wgsl
 //!include _ray_layout.wgsl
+//!include _density.wgsl
 
 // Mirrors `field::gpu::composite::CompositeUniforms` (64 bytes). Head outputs are read at
 // row * stride + offset from buffers other passes own.
@@ -49,8 +50,6 @@ struct CompositeUniforms {
 }
 
 const WORKGROUP_SIZE: u32 = 64u;
-// reference::activations::DENSITY_LOG_CLAMP
-const DENSITY_LOG_CLAMP: f32 = 15.0;
 const LOSS_WORDS: u32 = 4u;
 
 @group(0) @binding(0) var<uniform> step_info: StepUniforms;
@@ -68,10 +67,6 @@ const LOSS_WORDS: u32 = 4u;
 @group(0) @binding(11) var<storage, read_write> head_grads: array<f32>;
 
 const NOT_KEPT: u32 = 0xffffffffu;
-
-fn density(h0: f32) -> f32 {
-    return exp(clamp(h0, -DENSITY_LOG_CLAMP, DENSITY_LOG_CLAMP));
-}
 
 fn sigmoid(h: f32) -> f32 {
     return 1.0 / (1.0 + exp(-h));
@@ -153,11 +148,9 @@ fn forward(rows: RayRows) -> vec4<f32> {
     for (var s = 0u; s < samples; s++) {
         let n = first + s;
         let interval = intervals[n];
-        let sigma = density(h0_source[n * params.h0_stride + params.h0_offset]);
-        let t_before = exp(-optical_depth);
-        optical_depth += sigma * interval.x;
-        let t_after = exp(-optical_depth);
-        let w = t_before - t_after;
+        let step = transmittance_step(h0_source[n * params.h0_stride + params.h0_offset], interval.x, &optical_depth);
+        let w = step.x;
+        let t_after = step.y;
         rgb += w * vec3<f32>(colour_of(n, 0u), colour_of(n, 1u), colour_of(n, 2u));
         depth += w * interval.y;
         grad_heads[n * k] = w;

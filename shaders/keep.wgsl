@@ -16,6 +16,7 @@
 //!include _dispatch.wgsl
 //!include _step.wgsl
 //!include _ray_layout.wgsl
+//!include _density.wgsl
 
 // Mirrors `field::gpu::keep::KeepUniforms` (32 bytes).
 struct KeepUniforms {
@@ -39,8 +40,6 @@ struct KeepUniforms {
 const WORKGROUP_SIZE: u32 = 64u;
 const SCAN_WORKGROUP: u32 = 256u;
 const NOT_KEPT: u32 = 0xffffffffu;
-// reference::activations::DENSITY_LOG_CLAMP
-const DENSITY_LOG_CLAMP: f32 = 15.0;
 
 @group(0) @binding(0) var<uniform> step_info: StepUniforms;
 @group(0) @binding(1) var<uniform> keep: KeepUniforms;
@@ -73,30 +72,35 @@ fn is_kept(w: f32) -> bool {
     return w >= keep.threshold;
 }
 
-// Kept samples of one ray, walking the samples as the composite does; `compact_kept` repeats
-// the walk with the same arithmetic, so it makes the same decisions.
-fn kept_in_ray(ray: u32) -> u32 {
+// Walks one ray's samples as the composite does and returns how many are kept; with `write`,
+// also packs them from row `first_row` (`rows`, `slot`). `count_kept` and `compact_kept` both
+// call it, so they make the same decisions.
+fn keep_ray(ray: u32, first_row: u32, write: bool) -> u32 {
     let samples = step_info.samples_per_ray;
-    if keep.threshold <= 0.0 {
-        return samples;
-    }
-    if !ray_hits_box(ray) {
-        return 0u;
-    }
     let first = ray * samples;
-    var kept = 0u;
+    let keep_all = keep.threshold <= 0.0;
+    let hits = ray_hits_box(ray);
+    var next = first_row;
     var optical_depth = 0.0;
     for (var s = 0u; s < samples; s++) {
         let n = first + s;
-        let sigma = exp(clamp(density_out[n * keep.density_stride], -DENSITY_LOG_CLAMP, DENSITY_LOG_CLAMP));
-        let t_before = exp(-optical_depth);
-        optical_depth += sigma * intervals[n].x;
-        let t_after = exp(-optical_depth);
-        if is_kept(t_before - t_after) {
-            kept += 1u;
+        var kept = keep_all;
+        if !keep_all && hits {
+            kept = is_kept(transmittance_step(density_out[n * keep.density_stride], intervals[n].x, &optical_depth).x);
+        }
+        if write {
+            if kept {
+                rows[next] = n;
+                slot[n] = next;
+            } else {
+                slot[n] = NOT_KEPT;
+            }
+        }
+        if kept {
+            next += 1u;
         }
     }
-    return kept;
+    return next - first_row;
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
@@ -109,7 +113,7 @@ fn count_kept(
     if ray >= step_info.batch_rays {
         return;
     }
-    ray_kept[ray] = kept_in_ray(ray);
+    ray_kept[ray] = keep_ray(ray, 0u, false);
 }
 
 var<workgroup> partial: array<u32, SCAN_WORKGROUP>;
@@ -174,30 +178,7 @@ fn compact_kept(
     if ray >= step_info.batch_rays {
         return;
     }
-    let samples = step_info.samples_per_ray;
-    let first = ray * samples;
-    var next = ray_first[ray];
-    let keep_all = keep.threshold <= 0.0;
-    let hits = ray_hits_box(ray);
-    var optical_depth = 0.0;
-    for (var s = 0u; s < samples; s++) {
-        let n = first + s;
-        var kept = keep_all;
-        if !keep_all && hits {
-            let sigma = exp(clamp(density_out[n * keep.density_stride], -DENSITY_LOG_CLAMP, DENSITY_LOG_CLAMP));
-            let t_before = exp(-optical_depth);
-            optical_depth += sigma * intervals[n].x;
-            let t_after = exp(-optical_depth);
-            kept = is_kept(t_before - t_after);
-        }
-        if kept {
-            rows[next] = n;
-            slot[n] = next;
-            next += 1u;
-        } else {
-            slot[n] = NOT_KEPT;
-        }
-    }
+    keep_ray(ray, ray_first[ray], true);
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
