@@ -63,6 +63,11 @@ pub struct PropagationOptions {
     /// (`field::normals`), so a crease where a box stands on a table stops the walk even where
     /// the two surfaces share a colour and a depth.
     pub normal_sigma: f32,
+    /// The normal's turn counts only where the surface folds inward between the two pixels (a
+    /// concave crease: where an object stands on its support, `field::normals::folds_outward`);
+    /// an outward fold (a box's own edge, a mug's rim) lies on one object, so the walk crosses
+    /// it and labels the box's other faces too.
+    pub inward_creases_only: bool,
     /// On a capture whose depth is a reconstruction's points (sparse), carry the strokes to
     /// every frame through the points first (`field::point_walk`): each frame walks from the
     /// labels of the points that land in it and, where the strokes name the class of what the
@@ -87,6 +92,7 @@ impl Default for PropagationOptions {
             min_probability: 0.5,
             min_margin: 0.5,
             normal_sigma: 0.15,
+            inward_creases_only: true,
             across_views: true,
             support_plane: true,
         }

@@ -46,13 +46,15 @@ fn two_strokes_fill_their_regions_and_stop_at_the_edge() {
     }
 }
 
-#[test]
-fn a_crease_in_the_depth_stops_the_walk_where_colour_and_depth_change_smoothly() {
-    // One colour; depth falls gently towards x = 12 and rises after it (a fold, no jump):
-    // only the turn of the normal marks the edge.
+/// One colour, and depth that folds at x = 12 with no jump, so only the turn of the normal marks
+/// the edge: `valley` (depth rises towards the fold, as where a box stands on a table) folds
+/// inward, otherwise (a box's own corner towards the camera) outward. The walk under `options`.
+fn walk_over_a_fold(valley: bool, options: &PropagationOptions) -> Vec<u16> {
     let rgb = RgbImage::from_pixel(24, 16, Rgb([150, 150, 150]));
-    let depth: ImageBuffer<Luma<u16>, Vec<u16>> =
-        ImageBuffer::from_fn(24, 16, |x, _| Luma([(1000 + 10 * (2 * x as i32 - 23).abs()) as u16]));
+    let depth: ImageBuffer<Luma<u16>, Vec<u16>> = ImageBuffer::from_fn(24, 16, |x, _| {
+        let away = 10 * (2 * x as i32 - 23).abs();
+        Luma([if valley { 1230 - away } else { 1000 + away } as u16])
+    });
     let camera = Intrinsics {
         fx: 20.0,
         fy: 20.0,
@@ -64,26 +66,64 @@ fn a_crease_in_the_depth_stops_the_walk_where_colour_and_depth_change_smoothly()
         rgb: &rgb,
         depth: Some(&depth),
     };
-    // A loose depth sigma and a long reach, so that neither the slope nor the walk's fading
-    // decides.
-    let no_normals = PropagationOptions {
+    propagate_frame(&strokes, 2, guide, Some(&camera), options)
+}
+
+/// A loose depth sigma and a long reach, so that neither the slope nor the walk's fading
+/// decides, and normals left out.
+fn without_normals() -> PropagationOptions {
+    PropagationOptions {
         depth_sigma: 1.0,
         reach: 4.0,
+        normal_sigma: 0.0,
         ..PropagationOptions::default()
-    };
+    }
+}
+
+#[test]
+fn an_inward_crease_stops_the_walk_where_colour_and_depth_change_smoothly() {
     let with_normals = PropagationOptions {
         normal_sigma: 0.1,
-        ..no_normals
+        ..without_normals()
     };
-    let map = propagate_frame(&strokes, 2, guide, Some(&camera), &with_normals);
-    for x in 4..11 {
-        assert_eq!(map[8 * 24 + x], 0, "({x}, 8)");
+    for outward_too in [false, true] {
+        let options = PropagationOptions {
+            inward_creases_only: !outward_too,
+            ..with_normals
+        };
+        let map = walk_over_a_fold(true, &options);
+        for x in 4..11 {
+            assert_eq!(map[8 * 24 + x], 0, "({x}, 8)");
+        }
+        for x in 13..20 {
+            assert_eq!(map[8 * 24 + x], 1, "({x}, 8)");
+        }
     }
-    for x in 13..20 {
-        assert_eq!(map[8 * 24 + x], 1, "({x}, 8)");
-    }
-    let without = propagate_frame(&strokes, 2, guide, Some(&camera), &no_normals);
+    let without = walk_over_a_fold(true, &without_normals());
     assert_eq!(without[8 * 24 + 11], UNLABELLED, "no normals: unsure next to the fold");
+}
+
+#[test]
+fn an_outward_fold_lets_the_walk_through_unless_every_turn_counts() {
+    let with_normals = PropagationOptions {
+        normal_sigma: 0.1,
+        ..without_normals()
+    };
+    // Every turn counts: the corner stops the walk as the crease does.
+    let every_turn = walk_over_a_fold(
+        false,
+        &PropagationOptions {
+            inward_creases_only: false,
+            ..with_normals
+        },
+    );
+    assert_eq!(every_turn[8 * 24 + 10], 0);
+    assert_eq!(every_turn[8 * 24 + 13], 1);
+    // Inward creases only: the corner is no edge, so next to it the walk is as unsure as
+    // without normals.
+    let inward_only = walk_over_a_fold(false, &with_normals);
+    assert_eq!(inward_only, walk_over_a_fold(false, &without_normals()));
+    assert_eq!(inward_only[8 * 24 + 11], UNLABELLED);
 }
 
 #[test]
