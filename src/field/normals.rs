@@ -33,8 +33,12 @@ pub fn folds_outward(p: [f32; 3], n: [f32; 3], q: [f32; 3], m: [f32; 3]) -> bool
 /// `camera`, from central differences of the back-projected points; `None` where the pixel or
 /// one of its four neighbours has no reading, and on the border.
 pub fn depth_normals(depth: &DepthImage, camera: &Intrinsics) -> Vec<Option<[f32; 3]>> {
-    let (w, h) = (depth.width() as usize, depth.height() as usize);
-    let points = depth_points(depth, camera);
+    normals_of_points(&depth_points(depth, camera), depth.width() as usize)
+}
+
+/// [`depth_normals`] from the points [`depth_points`] gives, `width` to a row.
+pub fn normals_of_points(points: &[Option<[f32; 3]>], width: usize) -> Vec<Option<[f32; 3]>> {
+    let (w, h) = (width, points.len() / width.max(1));
     let mut normals = vec![None; w * h];
     for y in 1..h.saturating_sub(1) {
         for x in 1..w.saturating_sub(1) {

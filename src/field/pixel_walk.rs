@@ -2,7 +2,7 @@
 //! surface normals, and the conjugate-gradient solve that gives, per class, the probability that
 //! a walk from each pixel reaches that class's strokes first (`field::propagate` uses it;
 //! docs/quality.md explains the weights).
-use crate::field::normals::{depth_normals, depth_points, folds_outward};
+use crate::field::normals::{depth_points, folds_outward, normals_of_points};
 use crate::field::pause::Pause;
 use crate::field::propagate::PropagationOptions;
 use crate::field::refine::Guide;
@@ -40,16 +40,11 @@ impl PixelGraph {
         let colour_scale = 0.5 / (options.colour_sigma * options.colour_sigma);
         let depth_scale = 0.5 / (options.depth_sigma * options.depth_sigma);
         let dense_depth = log_depth.iter().filter(|d| d.is_some()).count() * 2 > log_depth.len();
-        let normals = match (guide.depth, camera) {
-            (Some(depth), Some(camera)) if options.normal_sigma > 0.0 && dense_depth => depth_normals(depth, camera),
+        let points = match (guide.depth, camera) {
+            (Some(depth), Some(camera)) if options.normal_sigma > 0.0 && dense_depth => depth_points(depth, camera),
             _ => vec![None; width * height],
         };
-        let points = match guide.depth {
-            Some(depth) if options.inward_creases_only && normals.iter().any(Option::is_some) => {
-                camera.map(|camera| depth_points(depth, camera))
-            }
-            _ => None,
-        };
+        let normals = normals_of_points(&points, width);
         let normal_scale = if options.normal_sigma > 0.0 {
             1.0 / (options.normal_sigma * options.normal_sigma)
         } else {
@@ -63,9 +58,9 @@ impl PixelGraph {
                 (None, None) => (0.0, 1.0),
                 _ => (0.0, hole_factor),
             };
-            let turn = match (normals[a], normals[b], points.as_ref().map(|p| (p[a], p[b]))) {
-                (Some(n), Some(m), Some((Some(p), Some(q)))) if folds_outward(p, n, q, m) => 0.0,
-                (Some(n), Some(m), _) => 1.0 - (n[0] * m[0] + n[1] * m[1] + n[2] * m[2]),
+            let turn = match (normals[a], normals[b], points[a], points[b]) {
+                (Some(n), Some(m), Some(p), Some(q)) if options.inward_creases_only && folds_outward(p, n, q, m) => 0.0,
+                (Some(n), Some(m), _, _) => 1.0 - (n[0] * m[0] + n[1] * m[1] + n[2] * m[2]),
                 _ => 0.0,
             };
             ((-(dc * colour_scale + dd * depth_scale + turn * normal_scale)).exp() * factor).max(MIN_WEIGHT)

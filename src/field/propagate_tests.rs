@@ -80,6 +80,16 @@ fn without_normals() -> PropagationOptions {
     }
 }
 
+/// Each stroke's class holds its side of the fold, up to the pixels next to it.
+fn assert_split_at_the_fold(map: &[u16]) {
+    for x in 4..11 {
+        assert_eq!(map[8 * 24 + x], 0, "({x}, 8)");
+    }
+    for x in 13..20 {
+        assert_eq!(map[8 * 24 + x], 1, "({x}, 8)");
+    }
+}
+
 #[test]
 fn an_inward_crease_stops_the_walk_where_colour_and_depth_change_smoothly() {
     let with_normals = PropagationOptions {
@@ -91,13 +101,7 @@ fn an_inward_crease_stops_the_walk_where_colour_and_depth_change_smoothly() {
             inward_creases_only: !outward_too,
             ..with_normals
         };
-        let map = walk_over_a_fold(true, &options);
-        for x in 4..11 {
-            assert_eq!(map[8 * 24 + x], 0, "({x}, 8)");
-        }
-        for x in 13..20 {
-            assert_eq!(map[8 * 24 + x], 1, "({x}, 8)");
-        }
+        assert_split_at_the_fold(&walk_over_a_fold(true, &options));
     }
     let without = walk_over_a_fold(true, &without_normals());
     assert_eq!(without[8 * 24 + 11], UNLABELLED, "no normals: unsure next to the fold");
@@ -117,8 +121,7 @@ fn an_outward_fold_lets_the_walk_through_unless_every_turn_counts() {
             ..with_normals
         },
     );
-    assert_eq!(every_turn[8 * 24 + 10], 0);
-    assert_eq!(every_turn[8 * 24 + 13], 1);
+    assert_split_at_the_fold(&every_turn);
     // Inward creases only: the corner is no edge, so next to it the walk is as unsure as
     // without normals.
     let inward_only = walk_over_a_fold(false, &with_normals);
