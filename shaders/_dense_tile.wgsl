@@ -43,6 +43,17 @@ fn active_rows() -> u32 {
     return min(dims.rows, row_count[0]);
 }
 
+// `n` rounded up to a multiple of 4: the row length of the uniform-weight kernels' packed
+// matrices, so that they read whole vec4s (`_dense_uniform.wgsl`).
+fn padded_to_vec4(n: u32) -> u32 {
+    return (n + 3u) & ~3u;
+}
+
+// vec4s per packed row of `columns` values.
+fn quads_per_row(columns: u32) -> u32 {
+    return padded_to_vec4(columns) >> 2u;
+}
+
 override TX: u32 = 16u;
 override TY: u32 = 16u;
 override KC: u32 = 16u;

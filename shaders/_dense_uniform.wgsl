@@ -9,9 +9,13 @@
 // reading the weights from storage or the tiled kernels (docs/results/measurements.md).
 //
 // Same uniform block and bindings as the tiled kernels (`_dense_tile.wgsl`), except `weights`:
-// 64 KiB of the parameter buffer bound as uniform from a 256-byte aligned offset, the layer's
-// [out][in] matrix at dims.weight_offset inside it (dense.rs checks it fits). Stages declare
-// `weights: array<vec4<f32>, UNIFORM_WEIGHT_VEC4S>` at their own binding.
+// the layer's matrix copied by `dense_pack_weights.wgsl` into rows padded to whole vec4s (the
+// forward reads it transposed, [in][out], the input gradient as [out][in]), zeros in the
+// padding, bound as a 64 KiB uniform. Every weight is read as part of a whole vec4 at an index
+// the same in every lane: indexing a vector's component by a runtime value made Tint (the
+// browser's compiler) load a whole vec4 per weight and pick the component per lane, which ran
+// the page's MLPs about 3x slower than natively on the same device (docs/results/bench.md).
+// Stages declare `weights: array<vec4<f32>, UNIFORM_WEIGHT_VEC4S>`.
 //!include _dense_tile.wgsl
 //!include _dispatch.wgsl
 
@@ -22,32 +26,11 @@ const WORKGROUP: u32 = 64u;
 // 64 KiB: WebGPU's default maxUniformBufferBindingSize.
 const UNIFORM_WEIGHT_VEC4S: u32 = 4096u;
 
-fn weight(i: u32) -> f32 {
-    return weights[i >> 2u][i & 3u];
-}
-
-// Four weights `stride` apart from `first`.
-fn weights4(first: u32, stride: u32) -> vec4<f32> {
-    return vec4<f32>(weight(first), weight(first + stride), weight(first + 2u * stride), weight(first + 3u * stride));
-}
-
 struct Acc {
     a0: vec4<f32>,
     a1: vec4<f32>,
     a2: vec4<f32>,
     a3: vec4<f32>,
-}
-
-// acc += value · (4·BLOCK/4 weights: element j at first + j·stride).
-fn accumulate(acc: ptr<function, Acc>, value: f32, first: u32, stride: u32) {
-    (*acc).a0 += value * weights4(first, stride);
-    if BLOCK > 4u {
-        (*acc).a1 += value * weights4(first + 4u * stride, stride);
-    }
-    if BLOCK > 8u {
-        (*acc).a2 += value * weights4(first + 8u * stride, stride);
-        (*acc).a3 += value * weights4(first + 12u * stride, stride);
-    }
 }
 
 fn acc_value(acc: ptr<function, Acc>, j: u32) -> f32 {

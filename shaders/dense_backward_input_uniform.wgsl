@@ -22,10 +22,21 @@ fn backward_input(
     let i0 = workgroup_id.z * BLOCK;
     let dy_row = n * dims.dy_stride + dims.dy_offset;
     let y_row = n * dims.y_stride + dims.y_offset;
+    let quads = quads_per_row(dims.in_dim);
     var acc: Acc;
     for (var o = 0u; o < dims.out_dim; o++) {
-        // W[o][i0 + j] is at weight_offset + o·in + i0 + j: consecutive.
-        accumulate(&acc, output_gradient(dy[dy_row + o], y_row + o), dims.weight_offset + o * dims.in_dim + i0, 1u);
+        let g = output_gradient(dy[dy_row + o], y_row + o);
+        // W[o][i0 .. i0 + BLOCK] is the packed row's quads from i0 / 4 (BLOCK is a multiple of 4);
+        // quads past the row's end are never written.
+        let w = o * quads + (i0 >> 2u);
+        acc.a0 += g * weights[w];
+        if BLOCK > 4u {
+            acc.a1 += g * weights[w + 1u];
+        }
+        if BLOCK > 8u {
+            acc.a2 += g * weights[w + 2u];
+            acc.a3 += g * weights[w + 3u];
+        }
     }
     let dx_row = n * dims.dx_stride + dims.dx_offset;
     for (var j = 0u; j < BLOCK; j++) {

@@ -4,7 +4,8 @@
 // `reduce_chunks` in order), but with dZ read through a uniform binding so that a SIMD group of
 // lanes (one input column i each) loads each dZ value once instead of once per lane.
 //
-// `mask_output_gradient` writes dZ packed ([n][o], rows past N stay 0) into `dz_out`; then one
+// `mask_output_gradient` writes dZ packed ([n][o], rows of `padded_to_vec4(out_dim)` so that
+// the windows are read as whole vec4s, zeros in the padding; rows past N stay 0) into `dz_out`; then one
 // `chunk_partial_sums` dispatch per chunk of dims.chunk_rows rows reads that chunk's dZ through
 // the 64 KiB uniform window `dz` (bound at the chunk's offset) and writes partials[chunk].
 //!include _dense_tile.wgsl
@@ -31,12 +32,17 @@ fn mask_output_gradient(
     @builtin(local_invocation_index) local_index: u32,
 ) {
     let e = linear_item_index(workgroup_id, num_workgroups, local_index, WORKGROUP);
-    if e >= active_rows() * dims.out_dim {
+    let out_padded = padded_to_vec4(dims.out_dim);
+    if e >= active_rows() * out_padded {
         return;
     }
-    let n = e / dims.out_dim;
-    let o = e - n * dims.out_dim;
-    dz_out[e] = output_gradient(dy[n * dims.dy_stride + dims.dy_offset + o], n * dims.y_stride + dims.y_offset + o);
+    let n = e / out_padded;
+    let o = e - n * out_padded;
+    var value = 0.0;
+    if o < dims.out_dim {
+        value = output_gradient(dy[n * dims.dy_stride + dims.dy_offset + o], n * dims.y_stride + dims.y_offset + o);
+    }
+    dz_out[e] = value;
 }
 
 // Mirrors `ChunkInfo` in dense.rs: one 256-byte slot per chunk, bound with a dynamic offset.
@@ -46,15 +52,6 @@ struct ChunkInfo {
 
 @group(1) @binding(0) var<uniform> dz: array<vec4<f32>, 4096>;
 @group(1) @binding(1) var<uniform> chunk: ChunkInfo;
-
-fn dz_at(i: u32) -> f32 {
-    return dz[i >> 2u][i & 3u];
-}
-
-// dZ[r][o .. o + 4] of the chunk's window.
-fn dz4(first: u32) -> vec4<f32> {
-    return vec4<f32>(dz_at(first), dz_at(first + 1u), dz_at(first + 2u), dz_at(first + 3u));
-}
 
 @compute @workgroup_size(COLUMNS)
 fn chunk_partial_sums(
@@ -75,16 +72,19 @@ fn chunk_partial_sums(
     var a1 = vec4<f32>();
     var a2 = vec4<f32>();
     var a3 = vec4<f32>();
+    let row_quads = quads_per_row(dims.out_dim);
     for (var r = 0u; r < count; r++) {
         let xv = x[(first_row + r) * dims.x_stride + column];
-        let base = r * dims.out_dim + o0;
-        a0 += xv * dz4(base);
+        // dZ[r][o0 .. o0 + BLOCK] as whole vec4s (o0 is a multiple of 4); quads past the row's
+        // end give outputs that are never written.
+        let base = r * row_quads + (o0 >> 2u);
+        a0 += xv * dz[base];
         if BLOCK > 4u {
-            a1 += xv * dz4(base + 4u);
+            a1 += xv * dz[base + 1u];
         }
         if BLOCK > 8u {
-            a2 += xv * dz4(base + 8u);
-            a3 += xv * dz4(base + 12u);
+            a2 += xv * dz[base + 2u];
+            a3 += xv * dz[base + 3u];
         }
     }
     if i >= dims.in_dim {

@@ -20,11 +20,22 @@ fn forward(
     }
     let o0 = workgroup_id.z * BLOCK;
     let x_row = n * dims.x_stride + dims.x_offset;
-    // W[o0 + j][i] is at w0 + j·in + i.
-    let w0 = dims.weight_offset + o0 * dims.in_dim;
+    // Input i's packed row holds W[0 .. out][i]; outputs o0 .. o0 + BLOCK are its quads from
+    // o0 / 4 (BLOCK is a multiple of 4). Quads past the row's end give outputs never written.
+    let quads = quads_per_row(dims.out_dim);
+    let q0 = o0 >> 2u;
     var acc: Acc;
     for (var i = 0u; i < dims.in_dim; i++) {
-        accumulate(&acc, x[x_row + i], w0 + i, dims.in_dim);
+        let value = x[x_row + i];
+        let w = i * quads + q0;
+        acc.a0 += value * weights[w];
+        if BLOCK > 4u {
+            acc.a1 += value * weights[w + 1u];
+        }
+        if BLOCK > 8u {
+            acc.a2 += value * weights[w + 2u];
+            acc.a3 += value * weights[w + 3u];
+        }
     }
     let y_row = n * dims.y_stride + dims.y_offset;
     for (var j = 0u; j < BLOCK; j++) {

@@ -546,7 +546,8 @@ fn forward_only_pass_refuses_backward_and_bad_views_are_errors() {
 
 /// Measurement, not a check: GFLOP/s of the default density MLP's forward and backward at
 /// N = 262144 rows (4096 rays × 64 samples) next to the plain matmul's, in the same run:
-/// `cargo test --release --test gpu_field_dense -- --ignored --nocapture`.
+/// `cargo test --release --test gpu_field_dense -- --ignored --nocapture`. `DENSE_BENCH_ROWS`,
+/// `DENSE_BENCH_PRESET` and `DENSE_FAMILY=uniform` change the rows, the widths and the kernels.
 #[test]
 #[ignore = "measurement; run explicitly in release mode"]
 fn density_mlp_throughput_report() {
@@ -561,7 +562,13 @@ fn density_mlp_throughput_report() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(262_144);
     let iterations = 3;
-    let cfg = FieldConfig::default();
+    // DENSE_BENCH_PRESET=small measures the widths the page and the CPU devices train.
+    let cfg = match std::env::var("DENSE_BENCH_PRESET") {
+        Ok(name) => scribblefield::field::Preset::parse(&name)
+            .unwrap_or_else(|| panic!("DENSE_BENCH_PRESET={name}: not a preset"))
+            .config(),
+        Err(_) => FieldConfig::default(),
+    };
     let layout = ParamLayout::new(&cfg);
     let mlp_layout = &layout.density;
     let mut rng = SplitMix64::new(9);

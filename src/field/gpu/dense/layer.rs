@@ -72,7 +72,7 @@ impl DenseLayerSpec {
         Ok(())
     }
 
-    fn base_dims(&self) -> DenseDims {
+    pub(super) fn base_dims(&self) -> DenseDims {
         DenseDims {
             rows: self.rows,
             in_dim: self.in_dim,
@@ -159,6 +159,8 @@ fn kept_dispatch(
 /// The forward of one layer, bound to its buffers.
 pub struct DenseForward {
     spec: DenseLayerSpec,
+    /// Refreshes the packed weights the uniform-weight kernel reads.
+    pack: Option<Dispatch>,
     dispatch: Dispatch,
     family: DenseFamily,
 }
@@ -181,9 +183,10 @@ impl DenseForward {
         output.check(&format!("{label} output"), spec.rows, spec.out_dim)?;
         check_binding(ctx, &label, &input.buffer)?;
         check_binding(ctx, &label, &output.buffer)?;
-        let (kernel, (weights, weight_offset), workgroups, family, rows_per_workgroup) = pipelines
+        let (kernel, product_weights, workgroups, family, rows_per_workgroup) = pipelines
             .product_kernel(ctx, &label, params, spec, ProductKind::Forward)
             .await?;
+        let (weights, weight_offset) = product_weights.binding();
         let rows = row_count(ctx, spec, kept)?;
         let dims = DenseDims {
             x_stride: input.stride,
@@ -209,6 +212,7 @@ impl DenseForward {
         .with_indirect(kept_dispatch(kept, 1, rows_per_workgroup, workgroups[2])?);
         Ok(DenseForward {
             spec: spec.clone(),
+            pack: product_weights.into_pack(),
             dispatch,
             family,
         })
@@ -224,6 +228,9 @@ impl DenseForward {
     }
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        if let Some(pack) = &self.pack {
+            pack.record(pass);
+        }
         self.dispatch.record(pass);
     }
 }
@@ -243,7 +250,8 @@ pub struct DenseGradients<'a> {
 
 /// The backward of one layer, bound to its buffers; owns the per-chunk partial sums of dW.
 pub struct DenseBackward {
-    input_grad: Option<Dispatch>,
+    /// dX's packed weights' refresh (uniform-weight kernels), then dX.
+    input_grad: Option<(Option<Dispatch>, Dispatch)>,
     partial_sums: WeightPartials,
     reduce: Dispatch,
     chunks: u32,
@@ -304,9 +312,10 @@ impl DenseBackward {
                 let label = format!("{label} input gradient");
                 input_grad.check(&label, spec.rows, spec.in_dim)?;
                 check_binding(ctx, &label, &input_grad.buffer)?;
-                let (kernel, (weights, weight_offset), workgroups, _, rows_per_workgroup) = pipelines
+                let (kernel, product_weights, workgroups, _, rows_per_workgroup) = pipelines
                     .product_kernel(ctx, &label, params, spec, ProductKind::BackwardInput)
                     .await?;
+                let (weights, weight_offset) = product_weights.binding();
                 let dims = DenseDims {
                     dx_stride: input_grad.stride,
                     dx_offset: input_grad.offset,
@@ -314,22 +323,21 @@ impl DenseBackward {
                     ..base
                 };
                 let uniform = uniform_buffer_from(ctx, &label, &dims);
-                Some(
-                    bound(
-                        ctx,
-                        kernel,
-                        &[
-                            ("dims", uniform.as_entire_binding()),
-                            ("dy", output_grad.buffer.as_entire_binding()),
-                            ("y", output.buffer.as_entire_binding()),
-                            ("weights", weights),
-                            ("dx", input_grad.buffer.as_entire_binding()),
-                            ("row_count", rows.as_entire_binding()),
-                        ],
-                        workgroups,
-                    )?
-                    .with_indirect(kept_dispatch(kept, 1, rows_per_workgroup, workgroups[2])?),
-                )
+                let dispatch = bound(
+                    ctx,
+                    kernel,
+                    &[
+                        ("dims", uniform.as_entire_binding()),
+                        ("dy", output_grad.buffer.as_entire_binding()),
+                        ("y", output.buffer.as_entire_binding()),
+                        ("weights", weights),
+                        ("dx", input_grad.buffer.as_entire_binding()),
+                        ("row_count", rows.as_entire_binding()),
+                    ],
+                    workgroups,
+                )?
+                .with_indirect(kept_dispatch(kept, 1, rows_per_workgroup, workgroups[2])?);
+                Some((product_weights.into_pack(), dispatch))
             }
         };
 
@@ -370,7 +378,12 @@ impl DenseBackward {
                         chunk_rows,
                         chunks,
                         row_count: &rows,
-                        mask_dispatch: kept_dispatch(kept, spec.out_dim, super::uniform::UNIFORM_WORKGROUP, 1)?,
+                        mask_dispatch: kept_dispatch(
+                            kept,
+                            super::uniform::padded_to_vec4(spec.out_dim),
+                            super::uniform::UNIFORM_WORKGROUP,
+                            1,
+                        )?,
                     },
                 )
                 .await?,
@@ -425,7 +438,10 @@ impl DenseBackward {
 
     /// Records dX (if wanted), then the dW partial sums and their reduction into the gradient.
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        if let Some(input_grad) = &self.input_grad {
+        if let Some((pack, input_grad)) = &self.input_grad {
+            if let Some(pack) = pack {
+                pack.record(pass);
+            }
             input_grad.record(pass);
         }
         self.partial_sums.record(pass);

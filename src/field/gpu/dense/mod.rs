@@ -22,10 +22,12 @@
 //! On CPU devices (lavapipe, SwiftShader) the forward and the input gradient use a second
 //! family of kernels, [`DenseFamily::UniformWeights`] (`shaders/dense_*_uniform.wgsl`): one
 //! invocation per row, the layer's weights read through a uniform binding, which those devices
-//! load once per SIMD group instead of once per lane (see the shader for the measurement). It
-//! needs the parameter buffer made with UNIFORM usage and [`UNIFORM_WEIGHT_FLOATS`] of padding
-//! after the last layer, and a layer of at most that many weights; other layers, and every
-//! weight gradient, use the tiled kernels.
+//! load once per SIMD group instead of once per lane (see the shader for the measurement). Each
+//! such product reads a copy of the layer's weights in rows padded to whole vec4s, refreshed by a
+//! small dispatch before it (`shaders/dense_pack_weights.wgsl`), and the weight gradient reads dZ
+//! in rows padded the same way, so every uniform read is a whole vec4 at an index every lane
+//! shares. A layer qualifies when its padded matrix holds at most [`UNIFORM_WEIGHT_FLOATS`]
+//! values; other layers use the tiled kernels.
 //!
 //! X and Y (and dY and dX) of one layer must be different buffers: WebGPU forbids binding one
 //! buffer both read-only and writable in a dispatch.

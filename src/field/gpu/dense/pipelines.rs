@@ -5,7 +5,7 @@
 use super::DenseFamily;
 use super::layer::{DenseLayerSpec, range_binding};
 use super::tiled::{TileShape, row_tile_dispatch};
-use super::uniform::{uniform_block, uniform_dispatch};
+use super::uniform::{PackedWeights, uniform_block, uniform_dispatch};
 use crate::gpu::pipeline::{KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
@@ -19,6 +19,7 @@ pub(super) enum DenseKernel {
     BackwardInputUniform,
     MaskOutputGradient,
     ChunkPartialSums,
+    PackWeights,
 }
 
 impl DenseKernel {
@@ -53,6 +54,11 @@ impl DenseKernel {
                 "dense output gradient mask",
                 shaders::DENSE_BACKWARD_WEIGHT_UNIFORM,
                 "mask_output_gradient",
+            ),
+            DenseKernel::PackWeights => (
+                "dense weights packed for uniform reads",
+                shaders::DENSE_PACK_WEIGHTS,
+                "pack_weights",
             ),
             DenseKernel::ChunkPartialSums => (
                 "dense weight partial sums (uniform windows)",
@@ -140,11 +146,37 @@ pub(super) enum ProductKind {
     BackwardInput,
 }
 
-/// A pipeline and the kernel it runs, the weights' binding (and where the layer starts in it),
-/// the workgroup counts, the family actually used and the rows one workgroup covers.
+/// Where a product kernel reads the layer's weights.
+pub(super) enum ProductWeights<'a> {
+    /// The parameter buffer's range, and where the layer starts in it (tiled kernels).
+    Range(wgpu::BindingResource<'a>, u32),
+    /// A packed copy, refreshed by its own dispatch before each use (uniform-weight kernels).
+    Packed(PackedWeights),
+}
+
+impl ProductWeights<'_> {
+    /// The binding and the `weight_offset` the kernel's uniform block holds.
+    pub(super) fn binding(&self) -> (wgpu::BindingResource<'_>, u32) {
+        match self {
+            ProductWeights::Range(binding, offset) => (binding.clone(), *offset),
+            ProductWeights::Packed(packed) => (packed.buffer.as_entire_binding(), 0),
+        }
+    }
+
+    /// The dispatch that refreshes the packed copy, if there is one.
+    pub(super) fn into_pack(self) -> Option<crate::gpu::dispatch::Dispatch> {
+        match self {
+            ProductWeights::Range(..) => None,
+            ProductWeights::Packed(packed) => Some(packed.pack),
+        }
+    }
+}
+
+/// A pipeline and the kernel it runs, where it reads the weights, the workgroup counts, the
+/// family actually used and the rows one workgroup covers.
 pub(super) type ProductKernel<'a> = (
     (wgpu::ComputePipeline, DenseKernel),
-    (wgpu::BindingResource<'a>, u32),
+    ProductWeights<'a>,
     [u32; 3],
     DenseFamily,
     u32,
@@ -169,12 +201,12 @@ impl DensePipelines {
                 DenseKernel::BackwardInput,
             ),
         };
-        if let Some(binding) = self.uniform_weights(ctx, params, &spec.weights) {
+        if let Some(packed) = self.packed_weights(ctx, label, params, spec, kind).await? {
             let pipeline = self.get_uniform(ctx, uniform_kernel, uniform_block(columns)).await?;
             let workgroups = uniform_dispatch(ctx, spec.rows, columns)?;
             return Ok((
                 (pipeline, uniform_kernel),
-                binding,
+                ProductWeights::Packed(packed),
                 workgroups,
                 DenseFamily::UniformWeights,
                 super::uniform::UNIFORM_WORKGROUP,
@@ -182,11 +214,11 @@ impl DensePipelines {
         }
         let shape = TileShape::for_product(columns, None);
         let pipeline = self.get(ctx, tiled_kernel, shape).await?;
-        let binding = range_binding(ctx, label, params, &spec.weights)?;
+        let (binding, offset) = range_binding(ctx, label, params, &spec.weights)?;
         let workgroups = row_tile_dispatch(ctx, spec.rows, shape, columns.div_ceil(shape.tile_columns()))?;
         Ok((
             (pipeline, tiled_kernel),
-            binding,
+            ProductWeights::Range(binding, offset),
             workgroups,
             DenseFamily::Tiled,
             shape.tile_rows(),

@@ -2,11 +2,11 @@
 //! invocation per row with the layer's weights in a uniform binding, and the weight gradient
 //! read through 64 KiB uniform windows of dZ, one dispatch per chunk of rows.
 use std::num::NonZeroU64;
-use std::ops::Range;
 
-use super::layer::{DenseLayerSpec, bound};
-use super::pipelines::{DenseKernel, DensePipelines};
+use super::layer::{DenseDims, DenseLayerSpec, bound, range_binding};
+use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
 use super::{DenseFamily, RowView};
+use crate::gpu::buffers::uniform_buffer_from;
 use crate::gpu::dispatch::{Dispatch, IndirectArgs, bind_named};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError};
@@ -92,7 +92,7 @@ impl UniformWeightPartials {
             row_count,
             mask_dispatch,
         } = layer;
-        let window_floats = chunk_rows as usize * spec.out_dim as usize;
+        let window_floats = chunk_rows as usize * padded_to_vec4(spec.out_dim) as usize;
         // Every chunk's window is UNIFORM_WEIGHT_FLOATS long from its start, the last included.
         let dz_floats = (chunks as usize - 1) * window_floats + UNIFORM_WEIGHT_FLOATS;
         ctx.ensure_storage_binding_fits(label, dz_floats as u64 * 4)?;
@@ -119,7 +119,11 @@ impl UniformWeightPartials {
         );
 
         let mask_pipeline = pipelines.compile(ctx, DenseKernel::MaskOutputGradient, &[]).await?;
-        let groups = Dispatch1d::for_device(ctx, u64::from(spec.rows) * u64::from(spec.out_dim), UNIFORM_WORKGROUP)?;
+        let groups = Dispatch1d::for_device(
+            ctx,
+            u64::from(spec.rows) * u64::from(padded_to_vec4(spec.out_dim)),
+            UNIFORM_WORKGROUP,
+        )?;
         let mask = bound(
             ctx,
             (mask_pipeline, DenseKernel::MaskOutputGradient),
@@ -206,7 +210,8 @@ pub(super) fn uniform_weight_chunks(ctx: &GpuContext, spec: &DenseLayerSpec) -> 
     if (ctx.limits.max_uniform_buffer_binding_size as usize) < UNIFORM_WEIGHT_FLOATS * 4 {
         return None;
     }
-    let out = spec.out_dim as usize;
+    // dZ's rows are padded to whole vec4s in the windows.
+    let out = padded_to_vec4(spec.out_dim) as usize;
     if out > UNIFORM_WEIGHT_FLOATS {
         return None;
     }
@@ -218,7 +223,7 @@ pub(super) fn uniform_weight_chunks(ctx: &GpuContext, spec: &DenseLayerSpec) -> 
         return None;
     }
     let chunks = (spec.rows as usize).div_ceil(chunk_rows);
-    let partial_bytes = chunks as u64 * out as u64 * u64::from(spec.in_dim) * 4;
+    let partial_bytes = chunks as u64 * u64::from(spec.out_dim) * u64::from(spec.in_dim) * 4;
     let dz_bytes = ((chunks - 1) * chunk_rows * out + UNIFORM_WEIGHT_FLOATS) as u64 * 4;
     let limit = ctx
         .limits
@@ -283,29 +288,73 @@ impl DensePipelines {
 
     /// The uniform binding of `range` of `params` and where the range starts in it, when this
     /// family wants uniform-weight kernels and the layer and buffer allow them.
-    pub(super) fn uniform_weights<'a>(
+    /// The layer's weights packed for the uniform-weight kernel of `kind`
+    /// (`shaders/dense_pack_weights.wgsl`: transposed for the forward), when the family wants them
+    /// and the packed matrix fits the 64 KiB window; `None` otherwise.
+    pub(super) async fn packed_weights(
         &self,
         ctx: &GpuContext,
-        params: &'a wgpu::Buffer,
-        range: &Range<usize>,
-    ) -> Option<(wgpu::BindingResource<'a>, u32)> {
+        label: &str,
+        params: &wgpu::Buffer,
+        spec: &DenseLayerSpec,
+        kind: ProductKind,
+    ) -> Result<Option<PackedWeights>, GpuError> {
+        let transposed = kind == ProductKind::Forward;
+        let (rows, columns) = if transposed {
+            (spec.in_dim, spec.out_dim)
+        } else {
+            (spec.out_dim, spec.in_dim)
+        };
+        let packed_floats = rows as usize * padded_to_vec4(columns) as usize;
         if self.family != DenseFamily::UniformWeights
-            || !params.usage().contains(wgpu::BufferUsages::UNIFORM)
             || (ctx.limits.max_uniform_buffer_binding_size as usize) < UNIFORM_WEIGHT_FLOATS * 4
+            || packed_floats > UNIFORM_WEIGHT_FLOATS
         {
-            return None;
+            return Ok(None);
         }
-        let align = (ctx.limits.min_uniform_buffer_offset_alignment.max(4) / 4) as usize;
-        let start = range.start / align * align;
-        let local = range.start - start;
-        if local + range.len() > UNIFORM_WEIGHT_FLOATS || (start + UNIFORM_WEIGHT_FLOATS) as u64 * 4 > params.size() {
-            return None;
-        }
-        let binding = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-            buffer: params,
-            offset: start as u64 * 4,
-            size: NonZeroU64::new(UNIFORM_WEIGHT_FLOATS as u64 * 4),
+        let (source, offset) = range_binding(ctx, label, params, &spec.weights)?;
+        // The whole window, as the kernels declare it; what lies past the matrix stays zero.
+        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(&format!("{label} packed weights")),
+            size: UNIFORM_WEIGHT_FLOATS as u64 * 4,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::UNIFORM,
+            mapped_at_creation: false,
         });
-        Some((binding, local as u32))
+        let dims = DenseDims {
+            weight_offset: offset,
+            ..spec.base_dims()
+        };
+        let dims = uniform_buffer_from(ctx, &format!("{label} packing"), &dims);
+        let pipeline = self
+            .compile(
+                ctx,
+                DenseKernel::PackWeights,
+                &[("TRANSPOSED", f64::from(u8::from(transposed)))],
+            )
+            .await?;
+        let groups = Dispatch1d::for_device(ctx, packed_floats as u64, UNIFORM_WORKGROUP)?;
+        let pack = bound(
+            ctx,
+            (pipeline, DenseKernel::PackWeights),
+            &[
+                ("dims", dims.as_entire_binding()),
+                ("params", source),
+                ("packed", buffer.as_entire_binding()),
+            ],
+            groups,
+        )?;
+        Ok(Some(PackedWeights { buffer, pack }))
     }
+}
+
+/// `n` rounded up to a multiple of 4 (`padded_to_vec4` in `shaders/_dense_tile.wgsl`).
+pub(super) fn padded_to_vec4(n: u32) -> u32 {
+    n.div_ceil(4) * 4
+}
+
+/// A layer's weights in rows padded to whole vec4s, and the dispatch that copies them from the
+/// parameters (recorded before each kernel that reads them: the parameters change every step).
+pub(super) struct PackedWeights {
+    pub buffer: wgpu::Buffer,
+    pub pack: Dispatch,
 }

@@ -16,7 +16,7 @@ use crate::field::pause::{NoPause, Pause, run_to_end};
 use crate::field::propagate::PropagationCache;
 use crate::field::reference::LossTerms;
 use crate::gpu::buffers::{
-    PendingRead, read_buffer_async, read_elements_async, storage_buffer_padded, storage_buffer_zeroed,
+    PendingRead, read_buffer_async, read_elements_async, storage_buffer_from, storage_buffer_zeroed,
 };
 use crate::gpu::timing::{PassTime, PassTimer, total_by_name};
 use crate::gpu::{GpuContext, GpuError};
@@ -25,7 +25,7 @@ use crate::scene::{Bounds, Pca, Scene};
 
 use super::adam::{AdamBuffers, AdamPass};
 use super::composite::{CompositeInputs, CompositeLayout, CompositePass, LOSS_WORDS};
-use super::dense::{DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView, UNIFORM_WEIGHT_FLOATS};
+use super::dense::{DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView};
 use super::encoding::{
     DirectionLayout, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
     PositionEncodeBuffers, PositionEncodePass, ShOutputLayout,
@@ -167,14 +167,7 @@ impl Trainer {
             ctx.ensure_storage_binding_fits(what, (total * 4) as u64)?;
         }
         let optimizer = Optimizer {
-            // UNIFORM and padded: CPU devices read the MLP weights through uniform bindings.
-            params: storage_buffer_padded(
-                ctx,
-                "field parameters",
-                &initial,
-                UNIFORM_WEIGHT_FLOATS,
-                wgpu::BufferUsages::UNIFORM,
-            )?,
+            params: storage_buffer_from(ctx, "field parameters", &initial)?,
             grads: storage_buffer_zeroed::<f32>(ctx, "field gradients", total)?,
             first_moment: storage_buffer_zeroed::<f32>(ctx, "Adam first moment", total)?,
             second_moment: storage_buffer_zeroed::<f32>(ctx, "Adam second moment", total)?,
