@@ -1,6 +1,6 @@
 //! The uniform-weight dense kernels (`shaders/dense_*_uniform.wgsl`), used on CPU devices: one
-//! invocation per row with the layer's weights in a uniform binding, and the weight gradient
-//! read through 64 KiB uniform windows of dZ, one dispatch per chunk of rows.
+//! invocation per row with a packed copy of the layer's weights in a uniform binding, and the
+//! weight gradient read through 64 KiB uniform windows of dZ, one dispatch per chunk of rows.
 use std::num::NonZeroU64;
 
 use super::layer::{DenseDims, DenseLayerSpec, bound, range_binding};
@@ -286,8 +286,6 @@ impl DensePipelines {
         Ok((pipeline, [common, windows]))
     }
 
-    /// The uniform binding of `range` of `params` and where the range starts in it, when this
-    /// family wants uniform-weight kernels and the layer and buffer allow them.
     /// The layer's weights packed for the uniform-weight kernel of `kind`
     /// (`shaders/dense_pack_weights.wgsl`: transposed for the forward), when the family wants them
     /// and the packed matrix fits the 64 KiB window; `None` otherwise.
