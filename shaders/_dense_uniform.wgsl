@@ -33,6 +33,18 @@ struct Acc {
     a3: vec4<f32>,
 }
 
+// acc += value · (BLOCK weights: the packed row's quads from `w`).
+fn accumulate(acc: ptr<function, Acc>, value: f32, w: u32) {
+    (*acc).a0 += value * weights[w];
+    if BLOCK > 4u {
+        (*acc).a1 += value * weights[w + 1u];
+    }
+    if BLOCK > 8u {
+        (*acc).a2 += value * weights[w + 2u];
+        (*acc).a3 += value * weights[w + 3u];
+    }
+}
+
 fn acc_value(acc: ptr<function, Acc>, j: u32) -> f32 {
     let q = j >> 2u;
     var v = (*acc).a0;

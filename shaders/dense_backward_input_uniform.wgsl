@@ -29,14 +29,7 @@ fn backward_input(
         // W[o][i0 .. i0 + BLOCK] is the packed row's quads from i0 / 4 (BLOCK is a multiple of 4);
         // quads past the row's end are never written.
         let w = o * quads + (i0 >> 2u);
-        acc.a0 += g * weights[w];
-        if BLOCK > 4u {
-            acc.a1 += g * weights[w + 1u];
-        }
-        if BLOCK > 8u {
-            acc.a2 += g * weights[w + 2u];
-            acc.a3 += g * weights[w + 3u];
-        }
+        accumulate(&acc, g, w);
     }
     let dx_row = n * dims.dx_stride + dims.dx_offset;
     for (var j = 0u; j < BLOCK; j++) {

@@ -28,14 +28,7 @@ fn forward(
     for (var i = 0u; i < dims.in_dim; i++) {
         let value = x[x_row + i];
         let w = i * quads + q0;
-        acc.a0 += value * weights[w];
-        if BLOCK > 4u {
-            acc.a1 += value * weights[w + 1u];
-        }
-        if BLOCK > 8u {
-            acc.a2 += value * weights[w + 2u];
-            acc.a3 += value * weights[w + 3u];
-        }
+        accumulate(&acc, value, w);
     }
     let y_row = n * dims.y_stride + dims.y_offset;
     for (var j = 0u; j < BLOCK; j++) {
