@@ -6,8 +6,9 @@
 //
 // `mask_output_gradient` writes dZ packed ([n][o], rows of `padded_to_vec4(out_dim)` so that
 // the windows are read as whole vec4s, zeros in the padding; rows past N stay 0) into `dz_out`; then one
-// `chunk_partial_sums` dispatch per chunk of dims.chunk_rows rows reads that chunk's dZ through
-// the 64 KiB uniform window `dz` (bound at the chunk's offset) and writes partials[chunk].
+// `chunk_partial_sums` workgroup slot per chunk of dims.chunk_rows rows reads that chunk's dZ
+// through a 64 KiB uniform window (`dz0` .. `dz7`, bound at the chunk's offset) and writes
+// partials[chunk].
 //!include _dense_tile.wgsl
 //!include _dispatch.wgsl
 
@@ -45,13 +46,72 @@ fn mask_output_gradient(
     dz_out[e] = value;
 }
 
-// Mirrors `ChunkInfo` in dense.rs: one 256-byte slot per chunk, bound with a dynamic offset.
+// Mirrors `ChunkInfo` in uniform.rs: the first of the chunks this dispatch sums; workgroup z
+// is the slot of one of them, whose dZ window is bound at `dz<slot>`.
 struct ChunkInfo {
-    index: u32,
+    first: u32,
 }
 
-@group(1) @binding(0) var<uniform> dz: array<vec4<f32>, 4096>;
-@group(1) @binding(1) var<uniform> chunk: ChunkInfo;
+// One dispatch sums up to WINDOWS (8) chunks, each through its own 64 KiB window: lavapipe paid
+// about 0.15 ms per dispatch when every chunk had its own (docs/results/bench.md). WGSL cannot
+// index bindings or pass a uniform pointer to a function (naga refuses it), hence one small
+// function per window.
+@group(1) @binding(0) var<uniform> chunk: ChunkInfo;
+@group(1) @binding(1) var<uniform> dz0: array<vec4<f32>, 4096>;
+@group(1) @binding(2) var<uniform> dz1: array<vec4<f32>, 4096>;
+@group(1) @binding(3) var<uniform> dz2: array<vec4<f32>, 4096>;
+@group(1) @binding(4) var<uniform> dz3: array<vec4<f32>, 4096>;
+@group(1) @binding(5) var<uniform> dz4: array<vec4<f32>, 4096>;
+@group(1) @binding(6) var<uniform> dz5: array<vec4<f32>, 4096>;
+@group(1) @binding(7) var<uniform> dz6: array<vec4<f32>, 4096>;
+@group(1) @binding(8) var<uniform> dz7: array<vec4<f32>, 4096>;
+
+struct Acc4 {
+    a0: vec4<f32>,
+    a1: vec4<f32>,
+    a2: vec4<f32>,
+    a3: vec4<f32>,
+}
+
+// What one window's loop reads: its first row, its row count, the lane's column of X, the first
+// quad of the workgroup's outputs in a dZ row, and the quads per dZ row.
+struct Window {
+    first_row: u32,
+    count: u32,
+    column: u32,
+    q0: u32,
+    row_quads: u32,
+}
+
+// acc += X[row][column] · dZ[row][o0 .. o0 + BLOCK] (whole vec4s; quads past the row's end give
+// outputs that are never written, and BLOCK drops the quads it does not need).
+fn add_row(acc: ptr<function, Acc4>, xv: f32, d0: vec4<f32>, d1: vec4<f32>, d2: vec4<f32>, d3: vec4<f32>) {
+    (*acc).a0 += xv * d0;
+    if BLOCK > 4u {
+        (*acc).a1 += xv * d1;
+    }
+    if BLOCK > 8u {
+        (*acc).a2 += xv * d2;
+        (*acc).a3 += xv * d3;
+    }
+}
+
+fn x_at(w: Window, r: u32) -> f32 {
+    return x[(w.first_row + r) * dims.x_stride + w.column];
+}
+
+fn quad_at(w: Window, r: u32) -> u32 {
+    return r * w.row_quads + w.q0;
+}
+
+fn window_0(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz0[b], dz0[b + 1u], dz0[b + 2u], dz0[b + 3u]); } }
+fn window_1(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz1[b], dz1[b + 1u], dz1[b + 2u], dz1[b + 3u]); } }
+fn window_2(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz2[b], dz2[b + 1u], dz2[b + 2u], dz2[b + 3u]); } }
+fn window_3(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz3[b], dz3[b + 1u], dz3[b + 2u], dz3[b + 3u]); } }
+fn window_4(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz4[b], dz4[b + 1u], dz4[b + 2u], dz4[b + 3u]); } }
+fn window_5(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz5[b], dz5[b + 1u], dz5[b + 2u], dz5[b + 3u]); } }
+fn window_6(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz6[b], dz6[b + 1u], dz6[b + 2u], dz6[b + 3u]); } }
+fn window_7(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz7[b], dz7[b + 1u], dz7[b + 2u], dz7[b + 3u]); } }
 
 @compute @workgroup_size(COLUMNS)
 fn chunk_partial_sums(
@@ -60,7 +120,9 @@ fn chunk_partial_sums(
 ) {
     let i = workgroup_id.x * COLUMNS + local_index;
     let o0 = workgroup_id.y * BLOCK;
-    let first_row = chunk.index * dims.chunk_rows;
+    let slot = workgroup_id.z;
+    let index = chunk.first + slot;
+    let first_row = index * dims.chunk_rows;
     let rows = active_rows();
     var count = 0u;
     if first_row < rows {
@@ -68,24 +130,17 @@ fn chunk_partial_sums(
     }
     // Lanes past the last column read a valid column and discard the result.
     let column = dims.x_offset + min(i, dims.in_dim - 1u);
-    var a0 = vec4<f32>();
-    var a1 = vec4<f32>();
-    var a2 = vec4<f32>();
-    var a3 = vec4<f32>();
-    let row_quads = quads_per_row(dims.out_dim);
-    for (var r = 0u; r < count; r++) {
-        let xv = x[(first_row + r) * dims.x_stride + column];
-        // dZ[r][o0 .. o0 + BLOCK] as whole vec4s (o0 is a multiple of 4); quads past the row's
-        // end give outputs that are never written.
-        let base = r * row_quads + (o0 >> 2u);
-        a0 += xv * dz[base];
-        if BLOCK > 4u {
-            a1 += xv * dz[base + 1u];
-        }
-        if BLOCK > 8u {
-            a2 += xv * dz[base + 2u];
-            a3 += xv * dz[base + 3u];
-        }
+    let w = Window(first_row, count, column, o0 >> 2u, quads_per_row(dims.out_dim));
+    var acc: Acc4;
+    switch slot {
+        case 0u: { window_0(&acc, w); }
+        case 1u: { window_1(&acc, w); }
+        case 2u: { window_2(&acc, w); }
+        case 3u: { window_3(&acc, w); }
+        case 4u: { window_4(&acc, w); }
+        case 5u: { window_5(&acc, w); }
+        case 6u: { window_6(&acc, w); }
+        default: { window_7(&acc, w); }
     }
     if i >= dims.in_dim {
         return;
@@ -95,15 +150,15 @@ fn chunk_partial_sums(
         let o = o0 + j;
         if o < dims.out_dim {
             let q = j >> 2u;
-            var v = a0;
+            var v = acc.a0;
             if q == 1u {
-                v = a1;
+                v = acc.a1;
             } else if q == 2u {
-                v = a2;
+                v = acc.a2;
             } else if q == 3u {
-                v = a3;
+                v = acc.a3;
             }
-            partials[chunk.index * matrix + o * dims.in_dim + i] = v[j & 3u];
+            partials[index * matrix + o * dims.in_dim + i] = v[j & 3u];
         }
     }
 }

@@ -1,6 +1,7 @@
 //! The uniform-weight dense kernels (`shaders/dense_*_uniform.wgsl`), used on CPU devices: one
 //! invocation per row with a packed copy of the layer's weights in a uniform binding, and the
-//! weight gradient read through 64 KiB uniform windows of dZ, one dispatch per chunk of rows.
+//! weight gradient read through 64 KiB uniform windows of dZ, one per chunk of rows, up to
+//! [`WINDOWS_PER_DISPATCH`] chunks per dispatch.
 use std::num::NonZeroU64;
 
 use super::layer::{DenseDims, DenseLayerSpec, bound, range_binding};
@@ -30,11 +31,16 @@ pub(super) fn uniform_dispatch(ctx: &GpuContext, rows: u32, width: u32) -> Resul
     Ok([groups.x, groups.y, width.div_ceil(uniform_block(width))])
 }
 
+/// Chunks of rows one weight-gradient dispatch sums, each through its own 64 KiB window
+/// (`dz0` .. `dz7` in `shaders/dense_backward_weight_uniform.wgsl`). With the layer's `dims` and
+/// the chunk slot that is 10 uniform bindings, within WebGPU's default 12 per stage.
+pub(super) const WINDOWS_PER_DISPATCH: u32 = 8;
+
 /// Mirrors `ChunkInfo` in `shaders/dense_backward_weight_uniform.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct ChunkInfo {
-    index: u32,
+    first: u32,
     _pad: [u32; 3],
 }
 
@@ -63,11 +69,9 @@ pub(super) struct UniformWeightPartials {
     mask: Dispatch,
     pipeline: wgpu::ComputePipeline,
     common: wgpu::BindGroup,
-    windows: wgpu::BindGroup,
-    /// Bytes between consecutive chunks' dZ windows, and between their `ChunkInfo` slots.
-    window_stride: u32,
-    info_stride: u32,
-    chunks: u32,
+    /// One bind group per dispatch: its first chunk's slot and its chunks' dZ windows, with the
+    /// number of chunks it sums.
+    windows: Vec<(wgpu::BindGroup, u32)>,
     workgroups: [u32; 2],
     /// Owned so the bind groups' buffers live as long as the pass.
     _buffers: [wgpu::Buffer; 2],
@@ -103,10 +107,14 @@ impl UniformWeightPartials {
             mapped_at_creation: false,
         });
         let info_stride = ctx.limits.min_uniform_buffer_offset_alignment.max(16);
-        let mut infos = vec![0u8; chunks as usize * info_stride as usize];
-        for c in 0..chunks {
-            let info = ChunkInfo { index: c, _pad: [0; 3] };
-            let at = (c * info_stride) as usize;
+        let dispatches = chunks.div_ceil(WINDOWS_PER_DISPATCH);
+        let mut infos = vec![0u8; dispatches as usize * info_stride as usize];
+        for d in 0..dispatches {
+            let info = ChunkInfo {
+                first: d * WINDOWS_PER_DISPATCH,
+                _pad: [0; 3],
+            };
+            let at = (d * info_stride) as usize;
             infos[at..at + size_of::<ChunkInfo>()].copy_from_slice(bytemuck::bytes_of(&info));
         }
         let info = wgpu::util::DeviceExt::create_buffer_init(
@@ -154,38 +162,43 @@ impl UniformWeightPartials {
                 ("row_count", row_count.as_entire_binding()),
             ],
         )?;
-        let windows = bind_named(
-            ctx,
-            &sums,
-            &layouts[1],
-            1,
-            &[
-                (
-                    "dz",
+        let window_bytes = (window_floats * 4) as u64;
+        let window_names = ["dz0", "dz1", "dz2", "dz3", "dz4", "dz5", "dz6", "dz7"];
+        let mut windows = Vec::with_capacity(dispatches as usize);
+        for d in 0..dispatches {
+            let first = d * WINDOWS_PER_DISPATCH;
+            let count = (chunks - first).min(WINDOWS_PER_DISPATCH);
+            let mut entries = vec![(
+                "chunk",
+                wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &info,
+                    offset: u64::from(d * info_stride),
+                    size: NonZeroU64::new(size_of::<ChunkInfo>() as u64),
+                }),
+            )];
+            // Slots past the last chunk are never read; they bind the first chunk's window.
+            for (slot, name) in window_names.iter().enumerate() {
+                let c = if (slot as u32) < count {
+                    first + slot as u32
+                } else {
+                    first
+                };
+                entries.push((
+                    name,
                     wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                         buffer: &dz,
-                        offset: 0,
+                        offset: u64::from(c) * window_bytes,
                         size: NonZeroU64::new(UNIFORM_WEIGHT_FLOATS as u64 * 4),
                     }),
-                ),
-                (
-                    "chunk",
-                    wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &info,
-                        offset: 0,
-                        size: NonZeroU64::new(size_of::<ChunkInfo>() as u64),
-                    }),
-                ),
-            ],
-        )?;
+                ));
+            }
+            windows.push((bind_named(ctx, &sums, &layouts[1], 1, &entries)?, count));
+        }
         Ok(UniformWeightPartials {
             mask,
             pipeline,
             common,
             windows,
-            window_stride: (window_floats * 4) as u32,
-            info_stride,
-            chunks,
             workgroups: [spec.in_dim.div_ceil(columns), spec.out_dim.div_ceil(block)],
             _buffers: [dz, info],
         })
@@ -195,9 +208,9 @@ impl UniformWeightPartials {
         self.mask.record(pass);
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.common, &[]);
-        for c in 0..self.chunks {
-            pass.set_bind_group(1, &self.windows, &[c * self.window_stride, c * self.info_stride]);
-            pass.dispatch_workgroups(self.workgroups[0], self.workgroups[1], 1);
+        for (windows, count) in &self.windows {
+            pass.set_bind_group(1, windows, &[]);
+            pass.dispatch_workgroups(self.workgroups[0], self.workgroups[1], *count);
             crate::gpu::dispatch::count_dispatch();
         }
     }
@@ -237,40 +250,41 @@ fn gcd(a: usize, b: usize) -> usize {
 }
 
 impl DensePipelines {
-    /// The per-chunk weight-gradient kernel, whose dZ window and chunk slot are bound with
-    /// dynamic offsets (so an explicit layout), and its two bind group layouts.
+    /// The per-chunk weight-gradient kernel, with an explicit layout (its dZ windows are bound
+    /// as 64 KiB ranges of a larger buffer), and its two bind group layouts.
     pub(super) async fn chunk_sums_pipeline(
         &self,
         ctx: &GpuContext,
         block: u32,
         columns: u32,
     ) -> Result<(wgpu::ComputePipeline, [wgpu::BindGroupLayout; 2]), GpuError> {
-        let entry = |binding, ty, dynamic: bool, min: Option<u64>| wgpu::BindGroupLayoutEntry {
+        let entry = |binding, ty, min: Option<u64>| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,
             ty: wgpu::BindingType::Buffer {
                 ty,
-                has_dynamic_offset: dynamic,
+                has_dynamic_offset: false,
                 min_binding_size: min.and_then(NonZeroU64::new),
             },
             count: None,
         };
         let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
         let common = [
-            entry(0, wgpu::BufferBindingType::Uniform, false, None),
-            entry(3, storage(true), false, None),
-            entry(4, storage(false), false, None),
-            entry(7, storage(true), false, None),
+            entry(0, wgpu::BufferBindingType::Uniform, None),
+            entry(3, storage(true), None),
+            entry(4, storage(false), None),
+            entry(7, storage(true), None),
         ];
-        let windows = [
-            entry(
-                0,
-                wgpu::BufferBindingType::Uniform,
-                true,
-                Some(UNIFORM_WEIGHT_FLOATS as u64 * 4),
-            ),
-            entry(1, wgpu::BufferBindingType::Uniform, true, Some(16)),
-        ];
+        let windows: Vec<wgpu::BindGroupLayoutEntry> =
+            std::iter::once(entry(0, wgpu::BufferBindingType::Uniform, Some(16)))
+                .chain((1..=WINDOWS_PER_DISPATCH).map(|binding| {
+                    entry(
+                        binding,
+                        wgpu::BufferBindingType::Uniform,
+                        Some(UNIFORM_WEIGHT_FLOATS as u64 * 4),
+                    )
+                }))
+                .collect();
         let (label, source, entry_point) = DenseKernel::ChunkPartialSums.source();
         let spec = KernelSpec {
             label,
