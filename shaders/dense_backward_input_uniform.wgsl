@@ -1,13 +1,21 @@
 // Input gradient of one dense layer, weights from a uniform binding (`_dense_uniform.wgsl`):
 // dX[n][i] = Σ_o dZ[n][o] · W[o][i], dZ = dY ⊙ act'(Y) (ReLU: Y > 0, 0 at 0 as the reference).
 // dX is overwritten. Invocation: row n, inputs i0 .. i0 + BLOCK with i0 = BLOCK · workgroup_id.z.
+//
+// With WRITE_DZ the invocations of the first input block also write the dZ they form into
+// `dz_out` in the rows the uniform-window weight gradient reads (`padded_to_vec4(out_dim)` per
+// row, zeros in the padding; `dense_backward_weight_uniform.wgsl`), so that layer needs no
+// masking kernel of its own: one pass over dY and Y instead of two.
 //!include _dense_uniform.wgsl
+
+override WRITE_DZ: bool = false;
 
 @group(0) @binding(0) var<uniform> dims: DenseDims;
 @group(0) @binding(1) var<storage, read> dy: array<f32>;
 @group(0) @binding(2) var<storage, read> y: array<f32>;
 @group(0) @binding(3) var<uniform> weights: array<vec4<f32>, UNIFORM_WEIGHT_VEC4S>;
 @group(0) @binding(4) var<storage, read_write> dx: array<f32>;
+@group(0) @binding(6) var<storage, read_write> dz_out: array<f32>;
 
 @compute @workgroup_size(WORKGROUP)
 fn backward_input(
@@ -23,13 +31,23 @@ fn backward_input(
     let dy_row = n * dims.dy_stride + dims.dy_offset;
     let y_row = n * dims.y_stride + dims.y_offset;
     let quads = quads_per_row(dims.in_dim);
+    let writes_dz = WRITE_DZ && workgroup_id.z == 0u;
+    let dz_row = n * padded_to_vec4(dims.out_dim);
     var acc: Acc;
     for (var o = 0u; o < dims.out_dim; o++) {
         let g = output_gradient(dy[dy_row + o], y_row + o);
+        if writes_dz {
+            dz_out[dz_row + o] = g;
+        }
         // W[o][i0 .. i0 + BLOCK] is the packed row's quads from i0 / 4 (BLOCK is a multiple of 4);
         // quads past the row's end are never written.
         let w = o * quads + (i0 >> 2u);
         accumulate(&acc, g, w);
+    }
+    if writes_dz {
+        for (var o = dims.out_dim; o < padded_to_vec4(dims.out_dim); o++) {
+            dz_out[dz_row + o] = 0.0;
+        }
     }
     let dx_row = n * dims.dx_stride + dims.dx_offset;
     for (var j = 0u; j < BLOCK; j++) {

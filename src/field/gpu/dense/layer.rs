@@ -5,7 +5,7 @@ use std::ops::Range;
 
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
 use super::tiled::{REDUCE_SHAPE, REDUCE_WORKGROUP, TileShape, weight_chunks};
-use super::uniform::{UniformWeightPartials, WindowedLayer, uniform_weight_chunks};
+use super::uniform::{UniformWeightPartials, WindowedLayer, dz_windows_buffer, uniform_weight_chunks};
 use super::{Activation, DenseFamily, RowView};
 use crate::field::gpu::keep::HeadRows;
 use crate::gpu::buffers::{storage_buffer_from, storage_buffer_zeroed, uniform_buffer_from};
@@ -261,7 +261,8 @@ pub struct DenseBackward {
 enum WeightPartials {
     /// One dispatch of the tiled kernel over all chunks.
     Tiled(Dispatch),
-    /// dZ masked into a packed buffer, then one dispatch per chunk reading it as uniform.
+    /// dZ masked into a packed buffer (by dX's kernel where the layer has one), then up to 8
+    /// chunks per dispatch reading it as uniform windows.
     Uniform(UniformWeightPartials),
 }
 
@@ -306,14 +307,26 @@ impl DenseBackward {
         };
         let rows = row_count(ctx, spec, kept)?;
 
+        let label_dw = format!("{label} weight gradient");
+        let uniform_plan = match pipelines.family {
+            DenseFamily::UniformWeights => uniform_weight_chunks(ctx, spec),
+            DenseFamily::Tiled => None,
+        };
+        // The uniform-window weight gradient reads dZ from its own buffer, in padded rows.
+        let dz = uniform_plan
+            .map(|(chunk_rows, chunks)| dz_windows_buffer(ctx, &label_dw, spec, chunk_rows, chunks))
+            .transpose()?;
+
+        let mut dz_written = false;
         let input_grad = match gradients.input_grad {
             None => None,
             Some(input_grad) => {
                 let label = format!("{label} input gradient");
                 input_grad.check(&label, spec.rows, spec.in_dim)?;
                 check_binding(ctx, &label, &input_grad.buffer)?;
-                let (kernel, product_weights, workgroups, _, rows_per_workgroup) = pipelines
-                    .product_kernel(ctx, &label, params, spec, ProductKind::BackwardInput)
+                let writes_dz = dz.is_some();
+                let (kernel, product_weights, workgroups, family, rows_per_workgroup) = pipelines
+                    .product_kernel(ctx, &label, params, spec, ProductKind::BackwardInput { writes_dz })
                     .await?;
                 let (weights, weight_offset) = product_weights.binding();
                 let dims = DenseDims {
@@ -323,29 +336,39 @@ impl DenseBackward {
                     ..base
                 };
                 let uniform = uniform_buffer_from(ctx, &label, &dims);
-                let dispatch = bound(
-                    ctx,
-                    kernel,
-                    &[
-                        ("dims", uniform.as_entire_binding()),
-                        ("dy", output_grad.buffer.as_entire_binding()),
-                        ("y", output.buffer.as_entire_binding()),
-                        ("weights", weights),
-                        ("dx", input_grad.buffer.as_entire_binding()),
-                        ("row_count", rows.as_entire_binding()),
-                    ],
-                    workgroups,
-                )?
-                .with_indirect(kept_dispatch(kept, 1, rows_per_workgroup, workgroups[2])?);
+                let mut resources = vec![
+                    ("dims", uniform.as_entire_binding()),
+                    ("dy", output_grad.buffer.as_entire_binding()),
+                    ("y", output.buffer.as_entire_binding()),
+                    ("weights", weights),
+                    ("dx", input_grad.buffer.as_entire_binding()),
+                    ("row_count", rows.as_entire_binding()),
+                ];
+                // The uniform-weight kernel always names `dz_out`; without windows to fill it
+                // writes nothing there (WRITE_DZ off), so any buffer does.
+                let unused;
+                if family == DenseFamily::UniformWeights {
+                    let target = match &dz {
+                        Some(dz) => dz,
+                        None => {
+                            unused = storage_buffer_zeroed::<f32>(ctx, &format!("{label} (no dZ)"), 4)?;
+                            &unused
+                        }
+                    };
+                    resources.push(("dz_out", target.as_entire_binding()));
+                    dz_written = dz.is_some();
+                }
+                let dispatch = bound(ctx, kernel, &resources, workgroups)?.with_indirect(kept_dispatch(
+                    kept,
+                    1,
+                    rows_per_workgroup,
+                    workgroups[2],
+                )?);
                 Some((product_weights.into_pack(), dispatch))
             }
         };
 
-        let label = format!("{label} weight gradient");
-        let uniform_plan = match pipelines.family {
-            DenseFamily::UniformWeights => uniform_weight_chunks(ctx, spec),
-            DenseFamily::Tiled => None,
-        };
+        let label = label_dw;
         let shape = TileShape::for_product(spec.in_dim, Some(spec.out_dim));
         let (chunk_rows, chunks) = match uniform_plan {
             Some(plan) => plan,
@@ -362,8 +385,8 @@ impl DenseBackward {
         };
         let uniform = uniform_buffer_from(ctx, &label, &dims);
 
-        let partial_sums = match uniform_plan {
-            Some(_) => WeightPartials::Uniform(
+        let partial_sums = match dz {
+            Some(dz) => WeightPartials::Uniform(
                 UniformWeightPartials::new(
                     ctx,
                     pipelines,
@@ -375,6 +398,8 @@ impl DenseBackward {
                         output,
                         output_grad,
                         partials: &partials,
+                        dz,
+                        dz_written,
                         chunk_rows,
                         chunks,
                         row_count: &rows,
@@ -436,7 +461,8 @@ impl DenseBackward {
         self.chunks
     }
 
-    /// Records dX (if wanted), then the dW partial sums and their reduction into the gradient.
+    /// Records dX (if wanted; on the uniform-window path it also writes the dZ that dW reads),
+    /// then the dW partial sums and their reduction into the gradient.
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         if let Some((pack, input_grad)) = &self.input_grad {
             if let Some(pack) = pack {

@@ -110,15 +110,6 @@ impl DensePipelines {
         self.compile(ctx, kernel, &constants).await
     }
 
-    pub(super) async fn get_uniform(
-        &self,
-        ctx: &GpuContext,
-        kernel: DenseKernel,
-        block: u32,
-    ) -> Result<wgpu::ComputePipeline, GpuError> {
-        self.compile(ctx, kernel, &[("BLOCK", f64::from(block))]).await
-    }
-
     pub(super) async fn compile(
         &self,
         ctx: &GpuContext,
@@ -142,8 +133,9 @@ impl DensePipelines {
 pub(super) enum ProductKind {
     /// Y = act(X Wᵀ): `out_dim` columns.
     Forward,
-    /// dX = dZ W: `in_dim` columns.
-    BackwardInput,
+    /// dX = dZ W: `in_dim` columns. `writes_dz`: the uniform-weight kernel also writes dZ for
+    /// the uniform-window weight gradient (`dz_out`).
+    BackwardInput { writes_dz: bool },
 }
 
 /// Where a product kernel reads the layer's weights.
@@ -195,14 +187,22 @@ impl DensePipelines {
     ) -> Result<ProductKernel<'a>, GpuError> {
         let (columns, uniform_kernel, tiled_kernel) = match kind {
             ProductKind::Forward => (spec.out_dim, DenseKernel::ForwardUniform, DenseKernel::Forward),
-            ProductKind::BackwardInput => (
+            ProductKind::BackwardInput { .. } => (
                 spec.in_dim,
                 DenseKernel::BackwardInputUniform,
                 DenseKernel::BackwardInput,
             ),
         };
         if let Some(packed) = self.packed_weights(ctx, label, params, spec, kind).await? {
-            let pipeline = self.get_uniform(ctx, uniform_kernel, uniform_block(columns)).await?;
+            let block = f64::from(uniform_block(columns));
+            let pipeline = match kind {
+                ProductKind::Forward => self.compile(ctx, uniform_kernel, &[("BLOCK", block)]).await?,
+                ProductKind::BackwardInput { writes_dz } => {
+                    let writes = f64::from(u8::from(writes_dz));
+                    self.compile(ctx, uniform_kernel, &[("BLOCK", block), ("WRITE_DZ", writes)])
+                        .await?
+                }
+            };
             let workgroups = uniform_dispatch(ctx, spec.rows, columns)?;
             return Ok((
                 (pipeline, uniform_kernel),

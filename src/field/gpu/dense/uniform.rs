@@ -56,6 +56,10 @@ pub(super) struct WindowedLayer<'a> {
     pub output_grad: &'a RowView,
     /// Where each chunk's partial dW goes.
     pub partials: &'a wgpu::Buffer,
+    /// dZ in padded rows (from [`dz_windows_buffer`]), and whether the input gradient's kernel
+    /// writes it (then this layer records no masking kernel).
+    pub dz: wgpu::Buffer,
+    pub dz_written: bool,
     /// From [`uniform_weight_chunks`].
     pub chunk_rows: u32,
     pub chunks: u32,
@@ -66,7 +70,8 @@ pub(super) struct WindowedLayer<'a> {
 }
 
 pub(super) struct UniformWeightPartials {
-    mask: Dispatch,
+    /// Forms dZ where dX's kernel does not.
+    mask: Option<Dispatch>,
     pipeline: wgpu::ComputePipeline,
     common: wgpu::BindGroup,
     /// One bind group per dispatch: its first chunk's slot and its chunks' dZ windows, with the
@@ -91,21 +96,14 @@ impl UniformWeightPartials {
             output,
             output_grad,
             partials,
+            dz,
+            dz_written,
             chunk_rows,
             chunks,
             row_count,
             mask_dispatch,
         } = layer;
         let window_floats = chunk_rows as usize * padded_to_vec4(spec.out_dim) as usize;
-        // Every chunk's window is UNIFORM_WEIGHT_FLOATS long from its start, the last included.
-        let dz_floats = (chunks as usize - 1) * window_floats + UNIFORM_WEIGHT_FLOATS;
-        ctx.ensure_storage_binding_fits(label, dz_floats as u64 * 4)?;
-        let dz = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(&format!("{label} dZ")),
-            size: dz_floats as u64 * 4,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::UNIFORM,
-            mapped_at_creation: false,
-        });
         let info_stride = ctx.limits.min_uniform_buffer_offset_alignment.max(16);
         let dispatches = chunks.div_ceil(WINDOWS_PER_DISPATCH);
         let mut infos = vec![0u8; dispatches as usize * info_stride as usize];
@@ -126,25 +124,30 @@ impl UniformWeightPartials {
             },
         );
 
-        let mask_pipeline = pipelines.compile(ctx, DenseKernel::MaskOutputGradient, &[]).await?;
-        let groups = Dispatch1d::for_device(
-            ctx,
-            u64::from(spec.rows) * u64::from(padded_to_vec4(spec.out_dim)),
-            UNIFORM_WORKGROUP,
-        )?;
-        let mask = bound(
-            ctx,
-            (mask_pipeline, DenseKernel::MaskOutputGradient),
-            &[
-                ("dims", dims.as_entire_binding()),
-                ("dy", output_grad.buffer.as_entire_binding()),
-                ("y", output.buffer.as_entire_binding()),
-                ("dz_out", dz.as_entire_binding()),
-                ("row_count", row_count.as_entire_binding()),
-            ],
-            groups,
-        )?
-        .with_indirect(mask_dispatch);
+        let mask = if dz_written {
+            None
+        } else {
+            let mask_pipeline = pipelines.compile(ctx, DenseKernel::MaskOutputGradient, &[]).await?;
+            let groups = Dispatch1d::for_device(
+                ctx,
+                u64::from(spec.rows) * u64::from(padded_to_vec4(spec.out_dim)),
+                UNIFORM_WORKGROUP,
+            )?;
+            let mask = bound(
+                ctx,
+                (mask_pipeline, DenseKernel::MaskOutputGradient),
+                &[
+                    ("dims", dims.as_entire_binding()),
+                    ("dy", output_grad.buffer.as_entire_binding()),
+                    ("y", output.buffer.as_entire_binding()),
+                    ("dz_out", dz.as_entire_binding()),
+                    ("row_count", row_count.as_entire_binding()),
+                ],
+                groups,
+            )?
+            .with_indirect(mask_dispatch);
+            Some(mask)
+        };
 
         let block = uniform_block(spec.out_dim);
         let columns = spec.in_dim.next_power_of_two().clamp(8, UNIFORM_WORKGROUP);
@@ -205,7 +208,9 @@ impl UniformWeightPartials {
     }
 
     pub(super) fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        self.mask.record(pass);
+        if let Some(mask) = &self.mask {
+            mask.record(pass);
+        }
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.common, &[]);
         for (windows, count) in &self.windows {
@@ -214,6 +219,27 @@ impl UniformWeightPartials {
             crate::gpu::dispatch::count_dispatch();
         }
     }
+}
+
+/// The buffer the uniform-window weight gradient reads dZ from: `chunks` windows of
+/// `chunk_rows` padded rows, the last one UNIFORM_WEIGHT_FLOATS long from its start like every
+/// other.
+pub(super) fn dz_windows_buffer(
+    ctx: &GpuContext,
+    label: &str,
+    spec: &DenseLayerSpec,
+    chunk_rows: u32,
+    chunks: u32,
+) -> Result<wgpu::Buffer, GpuError> {
+    let window_floats = chunk_rows as usize * padded_to_vec4(spec.out_dim) as usize;
+    let dz_floats = (chunks as usize - 1) * window_floats + UNIFORM_WEIGHT_FLOATS;
+    ctx.ensure_storage_binding_fits(label, dz_floats as u64 * 4)?;
+    Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(&format!("{label} dZ")),
+        size: dz_floats as u64 * 4,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::UNIFORM,
+        mapped_at_creation: false,
+    }))
 }
 
 /// Rows per chunk and chunk count for the uniform-window weight gradient: as many rows as fit
