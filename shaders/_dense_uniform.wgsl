@@ -18,42 +18,17 @@
 // Stages declare `weights: array<vec4<f32>, UNIFORM_WEIGHT_VEC4S>`.
 //!include _dense_tile.wgsl
 //!include _dispatch.wgsl
+//!include _dense_acc.wgsl
 
-// Outputs (forward) or inputs (backward) per invocation: 4, 8 or 16 (dense.rs picks the least
-// that covers a narrow layer, so a 3-wide output does not compute 16).
+// Outputs (forward) or inputs (backward) per invocation: 4, 8, 16, 32 or 64 (uniform.rs picks
+// the least that covers the layer, so a 3-wide output does not compute 16).
 override BLOCK: u32 = 16u;
 const WORKGROUP: u32 = 64u;
 // 64 KiB: WebGPU's default maxUniformBufferBindingSize.
 const UNIFORM_WEIGHT_VEC4S: u32 = 4096u;
 
-struct Acc {
-    a0: vec4<f32>,
-    a1: vec4<f32>,
-    a2: vec4<f32>,
-    a3: vec4<f32>,
-}
-
-// acc += value · (BLOCK weights: the packed row's quads from `w`).
+// acc += value · (BLOCK weights: the packed row's quads from `w`). Quads past BLOCK are never
+// used, so specialisation drops their loads.
 fn accumulate(acc: ptr<function, Acc>, value: f32, w: u32) {
-    (*acc).a0 += value * weights[w];
-    if BLOCK > 4u {
-        (*acc).a1 += value * weights[w + 1u];
-    }
-    if BLOCK > 8u {
-        (*acc).a2 += value * weights[w + 2u];
-        (*acc).a3 += value * weights[w + 3u];
-    }
-}
-
-fn acc_value(acc: ptr<function, Acc>, j: u32) -> f32 {
-    let q = j >> 2u;
-    var v = (*acc).a0;
-    if q == 1u {
-        v = (*acc).a1;
-    } else if q == 2u {
-        v = (*acc).a2;
-    } else if q == 3u {
-        v = (*acc).a3;
-    }
-    return v[j & 3u];
+    add_scaled(acc, value, Acc(weights[w + 0u], weights[w + 1u], weights[w + 2u], weights[w + 3u], weights[w + 4u], weights[w + 5u], weights[w + 6u], weights[w + 7u], weights[w + 8u], weights[w + 9u], weights[w + 10u], weights[w + 11u], weights[w + 12u], weights[w + 13u], weights[w + 14u], weights[w + 15u]));
 }

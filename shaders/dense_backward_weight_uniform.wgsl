@@ -4,17 +4,19 @@
 // `reduce_chunks` in order), but with dZ read through a uniform binding so that a SIMD group of
 // lanes (one input column i each) loads each dZ value once instead of once per lane.
 //
-// `mask_output_gradient` writes dZ packed ([n][o], rows of `padded_to_vec4(out_dim)` so that
-// the windows are read as whole vec4s, zeros in the padding; rows past N stay 0) into `dz_out`; then one
+// `mask_output_gradient` (or, in a layer with an input gradient, that kernel with WRITE_DZ)
+// writes dZ packed ([n][o], rows of `padded_to_vec4(out_dim)` so that the windows are read as
+// whole vec4s, zeros in the padding; rows past N stay 0) into `dz_out`; then one
 // `chunk_partial_sums` workgroup slot per chunk of dims.chunk_rows rows reads that chunk's dZ
 // through a 64 KiB uniform window (`dz0` .. `dz7`, bound at the chunk's offset) and writes
 // partials[chunk].
 //!include _dense_tile.wgsl
 //!include _dispatch.wgsl
+//!include _dense_acc.wgsl
 
 const WORKGROUP: u32 = 64u;
 override BLOCK: u32 = 16u;
-// Lanes (input columns) per workgroup of `chunk_partial_sums`: dense.rs picks the smallest of
+// Lanes (input columns) per workgroup of `chunk_partial_sums`: uniform.rs picks the smallest of
 // 8..64 covering the layer's inputs, so a 15- or 32-input layer leaves few lanes idle.
 override COLUMNS: u32 = 64u;
 
@@ -66,13 +68,6 @@ struct ChunkInfo {
 @group(1) @binding(7) var<uniform> dz6: array<vec4<f32>, 4096>;
 @group(1) @binding(8) var<uniform> dz7: array<vec4<f32>, 4096>;
 
-struct Acc4 {
-    a0: vec4<f32>,
-    a1: vec4<f32>,
-    a2: vec4<f32>,
-    a3: vec4<f32>,
-}
-
 // What one window's loop reads: its first row, its row count, the lane's column of X, the first
 // quad of the workgroup's outputs in a dZ row, and the quads per dZ row.
 struct Window {
@@ -83,19 +78,6 @@ struct Window {
     row_quads: u32,
 }
 
-// acc += X[row][column] · dZ[row][o0 .. o0 + BLOCK] (whole vec4s; quads past the row's end give
-// outputs that are never written, and BLOCK drops the quads it does not need).
-fn add_row(acc: ptr<function, Acc4>, xv: f32, d0: vec4<f32>, d1: vec4<f32>, d2: vec4<f32>, d3: vec4<f32>) {
-    (*acc).a0 += xv * d0;
-    if BLOCK > 4u {
-        (*acc).a1 += xv * d1;
-    }
-    if BLOCK > 8u {
-        (*acc).a2 += xv * d2;
-        (*acc).a3 += xv * d3;
-    }
-}
-
 fn x_at(w: Window, r: u32) -> f32 {
     return x[(w.first_row + r) * dims.x_stride + w.column];
 }
@@ -104,14 +86,25 @@ fn quad_at(w: Window, r: u32) -> u32 {
     return r * w.row_quads + w.q0;
 }
 
-fn window_0(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz0[b], dz0[b + 1u], dz0[b + 2u], dz0[b + 3u]); } }
-fn window_1(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz1[b], dz1[b + 1u], dz1[b + 2u], dz1[b + 3u]); } }
-fn window_2(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz2[b], dz2[b + 1u], dz2[b + 2u], dz2[b + 3u]); } }
-fn window_3(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz3[b], dz3[b + 1u], dz3[b + 2u], dz3[b + 3u]); } }
-fn window_4(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz4[b], dz4[b + 1u], dz4[b + 2u], dz4[b + 3u]); } }
-fn window_5(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz5[b], dz5[b + 1u], dz5[b + 2u], dz5[b + 3u]); } }
-fn window_6(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz6[b], dz6[b + 1u], dz6[b + 2u], dz6[b + 3u]); } }
-fn window_7(a: ptr<function, Acc4>, w: Window) { for (var r = 0u; r < w.count; r++) { let b = quad_at(w, r); add_row(a, x_at(w, r), dz7[b], dz7[b + 1u], dz7[b + 2u], dz7[b + 3u]); } }
+// dZ[row][o0 .. o0 + 64] of window k as quads from `b` (quads past the row's end give outputs
+// that are never written; those past BLOCK are dropped by specialisation), and one window's
+// sum: acc += X[row][column] · dZ[row][o0 .. o0 + BLOCK] over its rows.
+fn quads_0(b: u32) -> Acc { return Acc(dz0[b + 0u], dz0[b + 1u], dz0[b + 2u], dz0[b + 3u], dz0[b + 4u], dz0[b + 5u], dz0[b + 6u], dz0[b + 7u], dz0[b + 8u], dz0[b + 9u], dz0[b + 10u], dz0[b + 11u], dz0[b + 12u], dz0[b + 13u], dz0[b + 14u], dz0[b + 15u]); }
+fn quads_1(b: u32) -> Acc { return Acc(dz1[b + 0u], dz1[b + 1u], dz1[b + 2u], dz1[b + 3u], dz1[b + 4u], dz1[b + 5u], dz1[b + 6u], dz1[b + 7u], dz1[b + 8u], dz1[b + 9u], dz1[b + 10u], dz1[b + 11u], dz1[b + 12u], dz1[b + 13u], dz1[b + 14u], dz1[b + 15u]); }
+fn quads_2(b: u32) -> Acc { return Acc(dz2[b + 0u], dz2[b + 1u], dz2[b + 2u], dz2[b + 3u], dz2[b + 4u], dz2[b + 5u], dz2[b + 6u], dz2[b + 7u], dz2[b + 8u], dz2[b + 9u], dz2[b + 10u], dz2[b + 11u], dz2[b + 12u], dz2[b + 13u], dz2[b + 14u], dz2[b + 15u]); }
+fn quads_3(b: u32) -> Acc { return Acc(dz3[b + 0u], dz3[b + 1u], dz3[b + 2u], dz3[b + 3u], dz3[b + 4u], dz3[b + 5u], dz3[b + 6u], dz3[b + 7u], dz3[b + 8u], dz3[b + 9u], dz3[b + 10u], dz3[b + 11u], dz3[b + 12u], dz3[b + 13u], dz3[b + 14u], dz3[b + 15u]); }
+fn quads_4(b: u32) -> Acc { return Acc(dz4[b + 0u], dz4[b + 1u], dz4[b + 2u], dz4[b + 3u], dz4[b + 4u], dz4[b + 5u], dz4[b + 6u], dz4[b + 7u], dz4[b + 8u], dz4[b + 9u], dz4[b + 10u], dz4[b + 11u], dz4[b + 12u], dz4[b + 13u], dz4[b + 14u], dz4[b + 15u]); }
+fn quads_5(b: u32) -> Acc { return Acc(dz5[b + 0u], dz5[b + 1u], dz5[b + 2u], dz5[b + 3u], dz5[b + 4u], dz5[b + 5u], dz5[b + 6u], dz5[b + 7u], dz5[b + 8u], dz5[b + 9u], dz5[b + 10u], dz5[b + 11u], dz5[b + 12u], dz5[b + 13u], dz5[b + 14u], dz5[b + 15u]); }
+fn quads_6(b: u32) -> Acc { return Acc(dz6[b + 0u], dz6[b + 1u], dz6[b + 2u], dz6[b + 3u], dz6[b + 4u], dz6[b + 5u], dz6[b + 6u], dz6[b + 7u], dz6[b + 8u], dz6[b + 9u], dz6[b + 10u], dz6[b + 11u], dz6[b + 12u], dz6[b + 13u], dz6[b + 14u], dz6[b + 15u]); }
+fn quads_7(b: u32) -> Acc { return Acc(dz7[b + 0u], dz7[b + 1u], dz7[b + 2u], dz7[b + 3u], dz7[b + 4u], dz7[b + 5u], dz7[b + 6u], dz7[b + 7u], dz7[b + 8u], dz7[b + 9u], dz7[b + 10u], dz7[b + 11u], dz7[b + 12u], dz7[b + 13u], dz7[b + 14u], dz7[b + 15u]); }
+fn window_0(a: ptr<function, Acc>, w: Window) { for (var r = 0u; r < w.count; r++) { add_scaled(a, x_at(w, r), quads_0(quad_at(w, r))); } }
+fn window_1(a: ptr<function, Acc>, w: Window) { for (var r = 0u; r < w.count; r++) { add_scaled(a, x_at(w, r), quads_1(quad_at(w, r))); } }
+fn window_2(a: ptr<function, Acc>, w: Window) { for (var r = 0u; r < w.count; r++) { add_scaled(a, x_at(w, r), quads_2(quad_at(w, r))); } }
+fn window_3(a: ptr<function, Acc>, w: Window) { for (var r = 0u; r < w.count; r++) { add_scaled(a, x_at(w, r), quads_3(quad_at(w, r))); } }
+fn window_4(a: ptr<function, Acc>, w: Window) { for (var r = 0u; r < w.count; r++) { add_scaled(a, x_at(w, r), quads_4(quad_at(w, r))); } }
+fn window_5(a: ptr<function, Acc>, w: Window) { for (var r = 0u; r < w.count; r++) { add_scaled(a, x_at(w, r), quads_5(quad_at(w, r))); } }
+fn window_6(a: ptr<function, Acc>, w: Window) { for (var r = 0u; r < w.count; r++) { add_scaled(a, x_at(w, r), quads_6(quad_at(w, r))); } }
+fn window_7(a: ptr<function, Acc>, w: Window) { for (var r = 0u; r < w.count; r++) { add_scaled(a, x_at(w, r), quads_7(quad_at(w, r))); } }
 
 @compute @workgroup_size(COLUMNS)
 fn chunk_partial_sums(
@@ -131,7 +124,7 @@ fn chunk_partial_sums(
     // Lanes past the last column read a valid column and discard the result.
     let column = dims.x_offset + min(i, dims.in_dim - 1u);
     let w = Window(first_row, count, column, o0 >> 2u, quads_per_row(dims.out_dim));
-    var acc: Acc4;
+    var acc: Acc;
     switch slot {
         case 0u: { window_0(&acc, w); }
         case 1u: { window_1(&acc, w); }
@@ -149,16 +142,7 @@ fn chunk_partial_sums(
     for (var j = 0u; j < BLOCK; j++) {
         let o = o0 + j;
         if o < dims.out_dim {
-            let q = j >> 2u;
-            var v = acc.a0;
-            if q == 1u {
-                v = acc.a1;
-            } else if q == 2u {
-                v = acc.a2;
-            } else if q == 3u {
-                v = acc.a3;
-            }
-            partials[index * matrix + o * dims.in_dim + i] = v[j & 3u];
+            partials[index * matrix + o * dims.in_dim + i] = acc_value(&acc, j);
         }
     }
 }

@@ -547,7 +547,9 @@ fn forward_only_pass_refuses_backward_and_bad_views_are_errors() {
 /// Measurement, not a check: GFLOP/s of the default density MLP's forward and backward at
 /// N = 262144 rows (4096 rays × 64 samples) next to the plain matmul's, in the same run:
 /// `cargo test --release --test gpu_field_dense -- --ignored --nocapture`. `DENSE_BENCH_ROWS`,
-/// `DENSE_BENCH_PRESET` and `DENSE_FAMILY=uniform` change the rows, the widths and the kernels.
+/// `DENSE_BENCH_PRESET` and `DENSE_FAMILY=uniform` change the rows, the widths and the kernels;
+/// `DENSE_BENCH_MLP` (semantic, feature, colour), `DENSE_BENCH_CLASSES` and
+/// `DENSE_BENCH_REPEATS` the MLP, the semantic head's classes and the timed repeats.
 #[test]
 #[ignore = "measurement; run explicitly in release mode"]
 fn density_mlp_throughput_report() {
@@ -561,7 +563,10 @@ fn density_mlp_throughput_report() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(262_144);
-    let iterations = 3;
+    let iterations: u32 = std::env::var("DENSE_BENCH_REPEATS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(3);
     // DENSE_BENCH_PRESET=small measures the widths the page and the CPU devices train.
     let cfg = match std::env::var("DENSE_BENCH_PRESET") {
         Ok(name) => scribblefield::field::Preset::parse(&name)
@@ -569,8 +574,18 @@ fn density_mlp_throughput_report() {
             .config(),
         Err(_) => FieldConfig::default(),
     };
+    let mut cfg = cfg;
+    if let Some(classes) = std::env::var("DENSE_BENCH_CLASSES").ok().and_then(|v| v.parse().ok()) {
+        cfg.num_classes = classes;
+    }
     let layout = ParamLayout::new(&cfg);
-    let mlp_layout = &layout.density;
+    // DENSE_BENCH_MLP=semantic (feature, colour) measures another of the field's MLPs.
+    let mlp_layout = match std::env::var("DENSE_BENCH_MLP").as_deref() {
+        Ok("semantic") => &layout.semantic,
+        Ok("feature") => &layout.feature,
+        Ok("colour") => &layout.color,
+        _ => &layout.density,
+    };
     let mut rng = SplitMix64::new(9);
     let params = trainer_params(&ctx, &layout.init(1));
     let grads = storage_buffer_from(&ctx, "grads", &vec![0.0f32; layout.total]).unwrap();
@@ -643,7 +658,7 @@ fn density_mlp_throughput_report() {
     let matmul = pollster::block_on(matmul_gflops(&ctx, 512, 5)).unwrap();
     println!("adapter: {} (timestamps: {})", ctx.describe(), ctx.has_timestamps);
     println!(
-        "density MLP {:?}, N = {rows} rows, kernels {:?}",
+        "MLP {:?}, N = {rows} rows, kernels {:?}",
         mlp_layout.dims,
         mlp.layer_families().collect::<Vec<_>>()
     );

@@ -17,12 +17,15 @@ pub const UNIFORM_WEIGHT_FLOATS: usize = 16384;
 /// Invocations per workgroup of the uniform-weight kernels (`WORKGROUP` in the shader).
 pub(super) const UNIFORM_WORKGROUP: u32 = 64;
 
-/// Outputs per invocation of a uniform-weight kernel: the fewest of 4, 8, 16 covering `width`.
+/// Outputs (or inputs) per invocation of a uniform-weight kernel: the fewest of 4, 8, 16, 32, 64
+/// covering `width` (`shaders/_dense_acc.wgsl`).
 pub(super) fn uniform_block(width: u32) -> u32 {
     match width {
         0..=4 => 4,
         5..=8 => 8,
-        _ => 16,
+        9..=16 => 16,
+        17..=32 => 32,
+        _ => 64,
     }
 }
 
