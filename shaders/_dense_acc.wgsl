@@ -83,49 +83,49 @@ fn add_scaled(acc: ptr<function, Acc>, value: f32, q: Acc) {
 fn acc_value(acc: ptr<function, Acc>, j: u32) -> f32 {
     let q = j >> 2u;
     var v = (*acc).a0;
-    if q == 1u {
+    if BLOCK > 4u && q == 1u {
         v = (*acc).a1;
     }
-    if q == 2u {
+    if BLOCK > 8u && q == 2u {
         v = (*acc).a2;
     }
-    if q == 3u {
+    if BLOCK > 12u && q == 3u {
         v = (*acc).a3;
     }
-    if q == 4u {
+    if BLOCK > 16u && q == 4u {
         v = (*acc).a4;
     }
-    if q == 5u {
+    if BLOCK > 20u && q == 5u {
         v = (*acc).a5;
     }
-    if q == 6u {
+    if BLOCK > 24u && q == 6u {
         v = (*acc).a6;
     }
-    if q == 7u {
+    if BLOCK > 28u && q == 7u {
         v = (*acc).a7;
     }
-    if q == 8u {
+    if BLOCK > 32u && q == 8u {
         v = (*acc).a8;
     }
-    if q == 9u {
+    if BLOCK > 36u && q == 9u {
         v = (*acc).a9;
     }
-    if q == 10u {
+    if BLOCK > 40u && q == 10u {
         v = (*acc).a10;
     }
-    if q == 11u {
+    if BLOCK > 44u && q == 11u {
         v = (*acc).a11;
     }
-    if q == 12u {
+    if BLOCK > 48u && q == 12u {
         v = (*acc).a12;
     }
-    if q == 13u {
+    if BLOCK > 52u && q == 13u {
         v = (*acc).a13;
     }
-    if q == 14u {
+    if BLOCK > 56u && q == 14u {
         v = (*acc).a14;
     }
-    if q == 15u {
+    if BLOCK > 60u && q == 15u {
         v = (*acc).a15;
     }
     return v[j & 3u];

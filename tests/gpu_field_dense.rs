@@ -396,6 +396,13 @@ fn every_mlp_matches_the_reference_with_uniform_weights() {
         return;
     };
     check_every_mlp(&ctx, DensePipelines::with_family(DenseFamily::UniformWeights));
+    // The narrower blocks other CPU devices get (SwiftShader: 16).
+    for limit in [16, 4] {
+        check_every_mlp(
+            &ctx,
+            DensePipelines::with_family(DenseFamily::UniformWeights).with_uniform_block_limit(limit),
+        );
+    }
     // And they are used: a small MLP runs every layer on them.
     let cfg = FieldConfig::small();
     let layout = ParamLayout::new(&cfg);

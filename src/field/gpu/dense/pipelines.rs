@@ -5,7 +5,7 @@
 use super::DenseFamily;
 use super::layer::{DenseLayerSpec, range_binding};
 use super::tiled::{TileShape, row_tile_dispatch};
-use super::uniform::{PackedWeights, uniform_block, uniform_dispatch};
+use super::uniform::{PackedWeights, uniform_block, uniform_dispatch, widest_uniform_block};
 use crate::gpu::pipeline::{KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
@@ -73,6 +73,9 @@ impl DenseKernel {
 /// pipeline for one kernel and its override constants.
 pub struct DensePipelines {
     pub(super) family: DenseFamily,
+    /// The widest block of outputs one uniform-weight invocation computes; `None`: the device's
+    /// (`widest_uniform_block`).
+    uniform_block_limit: Option<u32>,
 }
 
 impl Default for DensePipelines {
@@ -88,7 +91,23 @@ impl DensePipelines {
     }
 
     pub fn with_family(family: DenseFamily) -> DensePipelines {
-        DensePipelines { family }
+        DensePipelines {
+            family,
+            uniform_block_limit: None,
+        }
+    }
+
+    /// The same with the uniform-weight kernels' blocks at most `limit` (4, 8, 16, 32 or 64)
+    /// outputs wide whatever the device, so tests can run every width on one device.
+    pub fn with_uniform_block_limit(self, limit: u32) -> DensePipelines {
+        DensePipelines {
+            uniform_block_limit: Some(limit),
+            ..self
+        }
+    }
+
+    pub(super) fn uniform_block_limit(&self, ctx: &GpuContext) -> u32 {
+        self.uniform_block_limit.unwrap_or_else(|| widest_uniform_block(ctx))
     }
 
     pub fn family(&self) -> DenseFamily {
@@ -194,7 +213,9 @@ impl DensePipelines {
             ),
         };
         if let Some(packed) = self.packed_weights(ctx, label, params, spec, kind).await? {
-            let block = f64::from(uniform_block(columns));
+            let block = uniform_block(columns, self.uniform_block_limit(ctx));
+            let workgroups = uniform_dispatch(ctx, spec.rows, columns, block)?;
+            let block = f64::from(block);
             let pipeline = match kind {
                 ProductKind::Forward => self.compile(ctx, uniform_kernel, &[("BLOCK", block)]).await?,
                 ProductKind::BackwardInput { writes_dz } => {
@@ -203,7 +224,6 @@ impl DensePipelines {
                         .await?
                 }
             };
-            let workgroups = uniform_dispatch(ctx, spec.rows, columns)?;
             return Ok((
                 (pipeline, uniform_kernel),
                 ProductWeights::Packed(packed),

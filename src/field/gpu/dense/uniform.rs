@@ -18,20 +18,34 @@ pub const UNIFORM_WEIGHT_FLOATS: usize = 16384;
 pub(super) const UNIFORM_WORKGROUP: u32 = 64;
 
 /// Outputs (or inputs) per invocation of a uniform-weight kernel: the fewest of 4, 8, 16, 32, 64
-/// covering `width` (`shaders/_dense_acc.wgsl`).
-pub(super) fn uniform_block(width: u32) -> u32 {
-    match width {
+/// covering `width` (`shaders/_dense_acc.wgsl`), at most `limit`.
+pub(super) fn uniform_block(width: u32, limit: u32) -> u32 {
+    let block = match width {
         0..=4 => 4,
         5..=8 => 8,
         9..=16 => 16,
         17..=32 => 32,
         _ => 64,
+    };
+    block.min(limit)
+}
+
+/// The widest block worth computing per invocation on `ctx`'s device. lavapipe (LLVM) keeps a
+/// whole 32- or 64-wide row's accumulators, spilled or not, cheaper than loading each input once
+/// per block of 16; SwiftShader's Subzero compiler ran 16 faster, natively and in the page, and
+/// a browser's CPU device has no name to tell which it is (docs/results/bench.md).
+pub(super) fn widest_uniform_block(ctx: &GpuContext) -> u32 {
+    let name = ctx.adapter_info.name.to_ascii_lowercase();
+    if name.contains("llvmpipe") || name.contains("lavapipe") {
+        64
+    } else {
+        16
     }
 }
 
-pub(super) fn uniform_dispatch(ctx: &GpuContext, rows: u32, width: u32) -> Result<[u32; 3], GpuError> {
+pub(super) fn uniform_dispatch(ctx: &GpuContext, rows: u32, width: u32, block: u32) -> Result<[u32; 3], GpuError> {
     let groups = Dispatch1d::for_device(ctx, u64::from(rows), UNIFORM_WORKGROUP)?;
-    Ok([groups.x, groups.y, width.div_ceil(uniform_block(width))])
+    Ok([groups.x, groups.y, width.div_ceil(block)])
 }
 
 /// Chunks of rows one weight-gradient dispatch sums, each through its own 64 KiB window
@@ -152,7 +166,7 @@ impl UniformWeightPartials {
             Some(mask)
         };
 
-        let block = uniform_block(spec.out_dim);
+        let block = uniform_block(spec.out_dim, pipelines.uniform_block_limit(ctx));
         let columns = spec.in_dim.next_power_of_two().clamp(8, UNIFORM_WORKGROUP);
         let (pipeline, layouts) = pipelines.chunk_sums_pipeline(ctx, block, columns).await?;
         let sums = DenseKernel::ChunkPartialSums.spec();
