@@ -117,6 +117,58 @@ fn a_second_trainer_compiles_no_pipelines() {
     assert!(second.losses_blocking().unwrap().terms.total().is_finite());
 }
 
+/// `bench --json`'s traffic estimate of a whole step at the full config (4096 rays x 64
+/// samples): near issue 15's reading of the kernels (roughly 8.6 GB, MLP backward more than half;
+/// the CPU-device kernels this test runs on move somewhat less), and fewer samples at the heads
+/// move less through the heads' MLPs and the same through the density's.
+#[test]
+fn the_step_traffic_estimate_counts_what_the_mlps_record() {
+    let Some(ctx) = gpu_for_tests("the_step_traffic_estimate_counts_what_the_mlps_record") else {
+        return;
+    };
+    let scene = demo_scene(&DemoOptions {
+        width: 32,
+        height: 24,
+        frames: 4,
+        ..Default::default()
+    })
+    .unwrap();
+    let cfg = FieldConfig {
+        num_classes: scene.classes.len() as u32,
+        ..FieldConfig::default()
+    };
+    let trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, 1)).unwrap();
+    let all = u64::from(cfg.batch_rays) * cfg.samples_per_ray() as u64;
+    let bytes_of = |kept: u64, name: &str| -> u64 {
+        trainer
+            .step_shape(kept)
+            .iter()
+            .filter(|s| name.is_empty() || s.name == name)
+            .map(|s| s.bytes)
+            .sum()
+    };
+    let total = bytes_of(all, "");
+    let backward: u64 = [
+        "semantic mlp backward",
+        "feature mlp backward",
+        "colour mlp backward",
+        "density mlp backward",
+    ]
+    .iter()
+    .map(|name| bytes_of(all, name))
+    .sum();
+    let gb = total as f64 / 1e9;
+    assert!((4.0..16.0).contains(&gb), "{gb} GB");
+    assert!(backward * 3 > total, "MLP backward {backward} of {total}");
+    assert!(trainer.step_shape(all).iter().all(|s| s.bytes > 0));
+    assert!(bytes_of(all / 10, "") < total);
+    assert!(bytes_of(all / 10, "feature mlp backward") < bytes_of(all, "feature mlp backward"));
+    assert_eq!(
+        bytes_of(all / 10, "density mlp backward"),
+        bytes_of(all, "density mlp backward")
+    );
+}
+
 #[test]
 #[ignore = "measurement: prints where a training step's GPU time goes"]
 fn profile_a_step() {

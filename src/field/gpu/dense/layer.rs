@@ -5,13 +5,16 @@ use std::ops::Range;
 
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
 use super::tiled::{REDUCE_SHAPE, REDUCE_WORKGROUP, TileShape, weight_chunks};
-use super::uniform::{UniformWeightPartials, WindowedLayer, dz_windows_buffer, uniform_weight_chunks};
+use super::uniform::{UniformWeightPartials, WindowedLayer, dz_windows_buffer, padded_to_vec4, uniform_weight_chunks};
 use super::{Activation, DenseFamily, RowView};
 use crate::field::gpu::keep::HeadRows;
 use crate::gpu::buffers::{storage_buffer_from, storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::{Dispatch, IndirectArgs, bind_named};
 use crate::gpu::pipeline::Dispatch1d;
 use crate::gpu::{GpuContext, GpuError};
+
+/// Bytes per `f32` element.
+const WORD: u64 = 4;
 
 /// Uniform block of every dense kernel; mirrors `DenseDims` in `shaders/_dense_tile.wgsl`.
 #[repr(C)]
@@ -222,6 +225,19 @@ impl DenseForward {
         &self.spec
     }
 
+    /// Bytes its dispatches move through global memory over `rows` rows (every element a
+    /// dispatch reads or writes counted once): X read, Y written, the weights read, and on the
+    /// uniform-weight path their packed copy written and read.
+    pub fn global_bytes(&self, rows: u64) -> u64 {
+        let (i, o) = (u64::from(self.spec.in_dim), u64::from(self.spec.out_dim));
+        let packed = if self.pack.is_some() {
+            2 * i * u64::from(padded_to_vec4(self.spec.out_dim))
+        } else {
+            0
+        };
+        WORD * (rows * (i + o) + i * o + packed)
+    }
+
     /// The kernels this layer's forward runs (uniform weights only where the layer fits).
     pub fn family(&self) -> DenseFamily {
         self.family
@@ -250,8 +266,11 @@ pub struct DenseGradients<'a> {
 
 /// The backward of one layer, bound to its buffers; owns the per-chunk partial sums of dW.
 pub struct DenseBackward {
+    spec: DenseLayerSpec,
     /// dX's packed weights' refresh (uniform-weight kernels), then dX.
     input_grad: Option<(Option<Dispatch>, Dispatch)>,
+    /// Whether dX's kernel also writes the dZ the weight gradient reads.
+    dz_written: bool,
     partial_sums: WeightPartials,
     reduce: Dispatch,
     chunks: u32,
@@ -405,7 +424,7 @@ impl DenseBackward {
                         row_count: &rows,
                         mask_dispatch: kept_dispatch(
                             kept,
-                            super::uniform::padded_to_vec4(spec.out_dim),
+                            padded_to_vec4(spec.out_dim),
                             super::uniform::UNIFORM_WORKGROUP,
                             1,
                         )?,
@@ -449,11 +468,49 @@ impl DenseBackward {
             reduce_groups,
         )?;
         Ok(DenseBackward {
+            spec: spec.clone(),
             input_grad,
+            dz_written,
             partial_sums,
             reduce,
             chunks,
         })
+    }
+
+    /// Bytes its dispatches move through global memory over `rows` rows (every element a
+    /// dispatch reads or writes counted once; dZ = dY masked by the ReLU reads Y as well):
+    /// - dX: dY (and Y) and the weights read, dX written; on the uniform-weight path the packed
+    ///   weights written and read, and dZ written in padded rows when the weight gradient reads it;
+    /// - uniform weight gradient: dZ formed by its own kernel where dX's does not, then X and dZ
+    ///   read and every chunk's partial matrix written;
+    /// - tiled weight gradient: dY (and Y) and X read, the partial matrices written;
+    /// - the reduction: the partial matrices read, the gradient read and written.
+    pub fn global_bytes(&self, rows: u64) -> u64 {
+        let (i, o) = (u64::from(self.spec.in_dim), u64::from(self.spec.out_dim));
+        let relu = u64::from(self.spec.activation == Activation::Relu);
+        let dz_row = u64::from(padded_to_vec4(self.spec.out_dim));
+        let dz_from_dy = rows * o * (1 + relu);
+        let input_grad = match &self.input_grad {
+            None => 0,
+            Some((pack, _)) => {
+                let packed = if pack.is_some() {
+                    2 * o * u64::from(padded_to_vec4(self.spec.in_dim))
+                } else {
+                    0
+                };
+                let dz = if self.dz_written { rows * dz_row } else { 0 };
+                dz_from_dy + i * o + rows * i + packed + dz
+            }
+        };
+        let partials = u64::from(self.chunks) * i * o;
+        let weight_grad = match &self.partial_sums {
+            WeightPartials::Uniform(_) => {
+                let mask = if self.dz_written { 0 } else { dz_from_dy + rows * dz_row };
+                mask + rows * (i + dz_row) + partials
+            }
+            WeightPartials::Tiled(_) => dz_from_dy + rows * i + partials,
+        };
+        WORD * (input_grad + weight_grad + partials + 2 * i * o)
     }
 
     /// Chunks of rows whose partial dW are summed by the second kernel.

@@ -179,6 +179,22 @@ impl MlpPass {
         Ok(())
     }
 
+    /// Bytes its forward moves through global memory over `rows` rows
+    /// ([`DenseForward::global_bytes`] of every layer).
+    pub fn forward_bytes(&self, rows: u64) -> u64 {
+        self.forward.iter().map(|layer| layer.global_bytes(rows)).sum()
+    }
+
+    /// Bytes its backward moves over `rows` rows ([`DenseBackward::global_bytes`] of every
+    /// layer); 0 for a forward-only pass.
+    pub fn backward_bytes(&self, rows: u64) -> u64 {
+        self.backward
+            .iter()
+            .flatten()
+            .map(|layer| layer.global_bytes(rows))
+            .sum()
+    }
+
     /// The MLP's (linear) output.
     pub fn output(&self) -> &RowView {
         &self.outputs[self.outputs.len() - 1]
