@@ -1,18 +1,31 @@
-// Copies one layer's [out][in] weights into the layout a uniform-weight kernel reads as whole
-// vec4s (`_dense_uniform.wgsl`), zeros in the padding: [in][out padded to a multiple of 4] for
-// the forward (TRANSPOSED), [out][in padded] for the input gradient. Run before each use, as the
-// parameters change every step. Invocation: one packed element.
-//!include _dense_tile.wgsl
+// Copies the [out][in] weights of every layer of one MLP into the layouts the uniform-weight
+// kernels read as whole vec4s (`_dense_uniform.wgsl`), zeros in the padding: [in][out padded to
+// a multiple of 4] for a forward (transposed), [out][in padded] for an input gradient. One
+// dispatch per MLP (src/field/gpu/dense/uniform.rs, `MlpPacking`), recorded before its forward:
+// the parameters change every step, and not between an MLP's forward and its backward.
+// Invocation: one packed element of one job.
 //!include _dispatch.wgsl
 
 const PACK_WORKGROUP: u32 = 64u;
-override TRANSPOSED: bool = false;
 
-@group(0) @binding(0) var<uniform> dims: DenseDims;
+// Mirrors `PackJob` in uniform.rs: one packed matrix. `src` is where the layer's [out][in]
+// matrix starts in `params`; the packed matrix has `rows` rows of `columns` values padded to a
+// multiple of 4, starts at `dst` in `packed`, and is elements first .. first + rows · padded of
+// the dispatch. Jobs are in order of `first`.
+struct PackJob {
+    src: u32,
+    rows: u32,
+    columns: u32,
+    transposed: u32,
+    dst: u32,
+    first: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+@group(0) @binding(0) var<storage, read> jobs: array<PackJob>;
 @group(0) @binding(1) var<storage, read> params: array<f32>;
 @group(0) @binding(2) var<storage, read_write> packed: array<f32>;
-// Named by `_dense_tile.wgsl`'s output_gradient, which this stage does not call.
-@group(0) @binding(3) var<storage, read> y: array<f32>;
 
 @compute @workgroup_size(PACK_WORKGROUP)
 fn pack_weights(
@@ -21,28 +34,27 @@ fn pack_weights(
     @builtin(local_invocation_index) local_index: u32,
 ) {
     let e = linear_item_index(workgroup_id, num_workgroups, local_index, PACK_WORKGROUP);
-    // Packed rows: `rows` of `row_length`, the last `row_length - columns` of each zero.
-    var rows = dims.out_dim;
-    var columns = dims.in_dim;
-    if TRANSPOSED {
-        rows = dims.in_dim;
-        columns = dims.out_dim;
+    var job = jobs[0];
+    for (var j = 1u; j < arrayLength(&jobs); j++) {
+        if e >= jobs[j].first {
+            job = jobs[j];
+        }
     }
-    let row_length = padded_to_vec4(columns);
-    if e >= rows * row_length {
+    let row_length = (job.columns + 3u) & ~3u;
+    let local = e - job.first;
+    if local >= job.rows * row_length {
         return;
     }
-    let r = e / row_length;
-    let c = e - r * row_length;
+    let r = local / row_length;
+    let c = local - r * row_length;
     var value = 0.0;
-    if c < columns {
-        var o = r;
-        var i = c;
-        if TRANSPOSED {
-            o = c;
-            i = r;
+    if c < job.columns {
+        // [out][in]: the forward's packed row r is input r, the input gradient's is output r.
+        if job.transposed != 0u {
+            value = params[job.src + c * job.rows + r];
+        } else {
+            value = params[job.src + r * job.columns + c];
         }
-        value = params[dims.weight_offset + o * dims.in_dim + i];
     }
-    packed[e] = value;
+    packed[job.dst + local] = value;
 }

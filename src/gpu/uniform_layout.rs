@@ -61,6 +61,12 @@ pub const MIRRORS: &[Mirror] = &[
         "ChunkInfo",
     ),
     mirror(
+        "src/field/gpu/dense/uniform.rs",
+        "PackJob",
+        "dense_pack_weights.wgsl",
+        "PackJob",
+    ),
+    mirror(
         "src/field/gpu/encoding.rs",
         "HashGridUniforms",
         "hash_encode.wgsl",

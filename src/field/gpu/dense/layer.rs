@@ -3,7 +3,7 @@
 use std::num::NonZeroU64;
 use std::ops::Range;
 
-use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
+use super::pipelines::{DenseKernel, DensePipelines, ProductKind, ProductWeights};
 use super::tiled::{REDUCE_SHAPE, REDUCE_WORKGROUP, TileShape, weight_chunks};
 use super::uniform::{UniformWeightPartials, WindowedLayer, dz_windows_buffer, padded_to_vec4, uniform_weight_chunks};
 use super::{Activation, DenseFamily, RowView};
@@ -162,8 +162,8 @@ fn kept_dispatch(
 /// The forward of one layer, bound to its buffers.
 pub struct DenseForward {
     spec: DenseLayerSpec,
-    /// Refreshes the packed weights the uniform-weight kernel reads.
-    pack: Option<Dispatch>,
+    /// Whether the kernel reads a packed copy of the weights (uniform-weight kernels).
+    packed: bool,
     dispatch: Dispatch,
     family: DenseFamily,
 }
@@ -171,14 +171,16 @@ pub struct DenseForward {
 impl DenseForward {
     /// `input` must hold `spec.rows` rows of `in_dim` values, `output` of `out_dim`; the output
     /// is overwritten. With `kept`, only the first kept rows are computed (see [`HeadRows`]).
-    pub async fn new(
+    /// `packed`: the window of the MLP's packed weights for this layer's forward (then the
+    /// uniform-weight kernel runs; the MLP refreshes the copy), or `None` (tiled).
+    pub(super) async fn new(
         ctx: &GpuContext,
         pipelines: &mut DensePipelines,
         spec: &DenseLayerSpec,
         params: &wgpu::Buffer,
-        input: &RowView,
-        output: &RowView,
+        (input, output): (&RowView, &RowView),
         kept: Option<&HeadRows>,
+        packed: Option<wgpu::BindingResource<'_>>,
     ) -> Result<DenseForward, GpuError> {
         spec.check()?;
         let label = format!("{} forward", spec.label);
@@ -187,8 +189,9 @@ impl DenseForward {
         check_binding(ctx, &label, &input.buffer)?;
         check_binding(ctx, &label, &output.buffer)?;
         let (kernel, product_weights, workgroups, family, rows_per_workgroup) = pipelines
-            .product_kernel(ctx, &label, params, spec, ProductKind::Forward)
+            .product_kernel(ctx, &label, params, spec, ProductKind::Forward, packed)
             .await?;
+        let packed = matches!(product_weights, ProductWeights::Packed(_));
         let (weights, weight_offset) = product_weights.binding();
         let rows = row_count(ctx, spec, kept)?;
         let dims = DenseDims {
@@ -215,7 +218,7 @@ impl DenseForward {
         .with_indirect(kept_dispatch(kept, 1, rows_per_workgroup, workgroups[2])?);
         Ok(DenseForward {
             spec: spec.clone(),
-            pack: product_weights.into_pack(),
+            packed,
             dispatch,
             family,
         })
@@ -225,17 +228,17 @@ impl DenseForward {
         &self.spec
     }
 
-    /// Bytes its dispatches move through global memory over `rows` rows (every element a
-    /// dispatch reads or writes counted once): X read, Y written, the weights read, and on the
-    /// uniform-weight path their packed copy written and read.
+    /// Bytes its dispatch moves through global memory over `rows` rows (every element read or
+    /// written counted once): X read, Y written, the weights (or their packed copy) read. The
+    /// MLP counts the packing.
     pub fn global_bytes(&self, rows: u64) -> u64 {
         let (i, o) = (u64::from(self.spec.in_dim), u64::from(self.spec.out_dim));
-        let packed = if self.pack.is_some() {
-            2 * i * u64::from(padded_to_vec4(self.spec.out_dim))
+        let weights = if self.packed {
+            i * u64::from(padded_to_vec4(self.spec.out_dim))
         } else {
-            0
+            i * o
         };
-        WORD * (rows * (i + o) + i * o + packed)
+        WORD * (rows * (i + o) + weights)
     }
 
     /// The kernels this layer's forward runs (uniform weights only where the layer fits).
@@ -244,9 +247,6 @@ impl DenseForward {
     }
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        if let Some(pack) = &self.pack {
-            pack.record(pass);
-        }
         self.dispatch.record(pass);
     }
 }
@@ -267,8 +267,8 @@ pub struct DenseGradients<'a> {
 /// The backward of one layer, bound to its buffers; owns the per-chunk partial sums of dW.
 pub struct DenseBackward {
     spec: DenseLayerSpec,
-    /// dX's packed weights' refresh (uniform-weight kernels), then dX.
-    input_grad: Option<(Option<Dispatch>, Dispatch)>,
+    /// dX, and whether it reads a packed copy of the weights (uniform-weight kernels).
+    input_grad: Option<(bool, Dispatch)>,
     /// Whether dX's kernel also writes the dZ the weight gradient reads.
     dz_written: bool,
     partial_sums: WeightPartials,
@@ -295,15 +295,16 @@ impl WeightPartials {
 }
 
 impl DenseBackward {
-    /// `input` and `output` are the forward's views (X and the activated Y).
-    pub async fn new(
+    /// `input` and `output` are the forward's views (X and the activated Y); `packed` as for
+    /// [`DenseForward::new`], the window of the copy dX reads.
+    pub(super) async fn new(
         ctx: &GpuContext,
         pipelines: &mut DensePipelines,
         spec: &DenseLayerSpec,
         params: &wgpu::Buffer,
-        input: &RowView,
-        output: &RowView,
+        (input, output): (&RowView, &RowView),
         gradients: &DenseGradients<'_>,
+        packed: Option<wgpu::BindingResource<'_>>,
     ) -> Result<DenseBackward, GpuError> {
         let kept = gradients.kept;
         spec.check()?;
@@ -345,7 +346,14 @@ impl DenseBackward {
                 check_binding(ctx, &label, &input_grad.buffer)?;
                 let writes_dz = dz.is_some();
                 let (kernel, product_weights, workgroups, family, rows_per_workgroup) = pipelines
-                    .product_kernel(ctx, &label, params, spec, ProductKind::BackwardInput { writes_dz })
+                    .product_kernel(
+                        ctx,
+                        &label,
+                        params,
+                        spec,
+                        ProductKind::BackwardInput { writes_dz },
+                        packed,
+                    )
                     .await?;
                 let (weights, weight_offset) = product_weights.binding();
                 let dims = DenseDims {
@@ -383,7 +391,7 @@ impl DenseBackward {
                     rows_per_workgroup,
                     workgroups[2],
                 )?);
-                Some((product_weights.into_pack(), dispatch))
+                Some((matches!(product_weights, ProductWeights::Packed(_)), dispatch))
             }
         };
 
@@ -479,8 +487,8 @@ impl DenseBackward {
 
     /// Bytes its dispatches move through global memory over `rows` rows (every element a
     /// dispatch reads or writes counted once; dZ = dY masked by the ReLU reads Y as well):
-    /// - dX: dY (and Y) and the weights read, dX written; on the uniform-weight path the packed
-    ///   weights written and read, and dZ written in padded rows when the weight gradient reads it;
+    /// - dX: dY (and Y) and the weights (or their packed copy) read, dX written, and dZ in padded
+    ///   rows where the uniform-window weight gradient reads it;
     /// - uniform weight gradient: dZ formed by its own kernel where dX's does not, then X and dZ
     ///   read and every chunk's partial matrix written;
     /// - tiled weight gradient: dY (and Y) and X read, the partial matrices written;
@@ -492,14 +500,14 @@ impl DenseBackward {
         let dz_from_dy = rows * o * (1 + relu);
         let input_grad = match &self.input_grad {
             None => 0,
-            Some((pack, _)) => {
-                let packed = if pack.is_some() {
-                    2 * o * u64::from(padded_to_vec4(self.spec.in_dim))
+            Some((packed, _)) => {
+                let weights = if *packed {
+                    o * u64::from(padded_to_vec4(self.spec.in_dim))
                 } else {
-                    0
+                    i * o
                 };
                 let dz = if self.dz_written { rows * dz_row } else { 0 };
-                dz_from_dy + i * o + rows * i + packed + dz
+                dz_from_dy + weights + rows * i + dz
             }
         };
         let partials = u64::from(self.chunks) * i * o;
@@ -521,10 +529,7 @@ impl DenseBackward {
     /// Records dX (if wanted; on the uniform-window path it also writes the dZ that dW reads),
     /// then the dW partial sums and their reduction into the gradient.
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        if let Some((pack, input_grad)) = &self.input_grad {
-            if let Some(pack) = pack {
-                pack.record(pass);
-            }
+        if let Some((_, input_grad)) = &self.input_grad {
             input_grad.record(pass);
         }
         self.partial_sums.record(pass);

@@ -1,5 +1,7 @@
 //! Whole MLPs on the dense layers: the twin of `reference::mlp`.
 use super::layer::{DenseBackward, DenseForward, DenseGradients, DenseLayerSpec};
+use super::pipelines::ProductKind;
+use super::uniform::MlpPacking;
 use super::{Activation, DenseFamily, DensePipelines, RowView};
 use crate::field::gpu::keep::HeadRows;
 use crate::field::params::MlpLayout;
@@ -38,6 +40,9 @@ pub struct MlpPassDesc<'a> {
 /// A whole MLP (ReLU after every hidden layer, linear output, as `reference::mlp`): the forward
 /// keeps every layer's output in buffers this pass owns (N × width, packed) for the backward.
 pub struct MlpPass {
+    /// The packed weight copies its uniform-weight kernels read, refreshed before the forward.
+    packing: MlpPacking,
+    packing_bytes: u64,
     forward: Vec<DenseForward>,
     backward: Option<Vec<DenseBackward>>,
     /// Output of layer k (the input of layer k + 1; the last is the MLP's output).
@@ -101,10 +106,18 @@ impl MlpPass {
             };
             outputs.push(view);
         }
+        // dX of layer 0 only where the caller wants the input's gradient; of every later layer
+        // whenever there is a backward.
+        let input_grads: Vec<bool> = (0..layers)
+            .map(|k| gradients.as_ref().is_some_and(|g| k > 0 || g.input_grad.is_some()))
+            .collect();
+        let packing = MlpPacking::new(ctx, pipelines, label, params, &specs, &input_grads).await?;
         let mut forward = Vec::with_capacity(layers);
         for (k, spec) in specs.iter().enumerate() {
             let layer_input = if k == 0 { &input } else { &outputs[k - 1] };
-            forward.push(DenseForward::new(ctx, pipelines, spec, params, layer_input, &outputs[k], kept).await?);
+            let window = packing.window(k, ProductKind::Forward);
+            forward
+                .push(DenseForward::new(ctx, pipelines, spec, params, (layer_input, &outputs[k]), kept, window).await?);
         }
 
         let mut hidden_grads = Vec::new();
@@ -143,15 +156,27 @@ impl MlpPass {
                         input_grad,
                         kept,
                     };
+                    let window = packing.window(k, ProductKind::BackwardInput { writes_dz: false });
                     backward.push(
-                        DenseBackward::new(ctx, pipelines, spec, params, layer_input, &outputs[k], &layer_gradients)
-                            .await?,
+                        DenseBackward::new(
+                            ctx,
+                            pipelines,
+                            spec,
+                            params,
+                            (layer_input, &outputs[k]),
+                            &layer_gradients,
+                            window,
+                        )
+                        .await?,
                     );
                 }
                 Some(backward)
             }
         };
+        let packing_bytes = packing.global_bytes(&specs);
         Ok(MlpPass {
+            packing,
+            packing_bytes,
             forward,
             backward,
             outputs,
@@ -159,8 +184,10 @@ impl MlpPass {
         })
     }
 
-    /// Records every layer's forward, in order.
+    /// Records every layer's forward, in order, after refreshing the packed weights that both
+    /// the forward and the backward read (the parameters do not change between them).
     pub fn record_forward(&self, pass: &mut wgpu::ComputePass<'_>) {
+        self.packing.record(pass);
         for layer in &self.forward {
             layer.record(pass);
         }
@@ -179,10 +206,10 @@ impl MlpPass {
         Ok(())
     }
 
-    /// Bytes its forward moves through global memory over `rows` rows
-    /// ([`DenseForward::global_bytes`] of every layer).
+    /// Bytes its forward moves through global memory over `rows` rows (the packing of the
+    /// weights and [`DenseForward::global_bytes`] of every layer).
     pub fn forward_bytes(&self, rows: u64) -> u64 {
-        self.forward.iter().map(|layer| layer.global_bytes(rows)).sum()
+        self.packing_bytes + self.forward.iter().map(|layer| layer.global_bytes(rows)).sum::<u64>()
     }
 
     /// Bytes its backward moves over `rows` rows ([`DenseBackward::global_bytes`] of every

@@ -5,7 +5,7 @@
 use super::DenseFamily;
 use super::layer::{DenseLayerSpec, range_binding};
 use super::tiled::{TileShape, row_tile_dispatch};
-use super::uniform::{PackedWeights, uniform_block, uniform_dispatch, widest_uniform_block};
+use super::uniform::{uniform_block, uniform_dispatch, widest_uniform_block};
 use crate::gpu::pipeline::{KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
@@ -161,8 +161,9 @@ pub(super) enum ProductKind {
 pub(super) enum ProductWeights<'a> {
     /// The parameter buffer's range, and where the layer starts in it (tiled kernels).
     Range(wgpu::BindingResource<'a>, u32),
-    /// A packed copy, refreshed by its own dispatch before each use (uniform-weight kernels).
-    Packed(PackedWeights),
+    /// The 64 KiB window of the MLP's packed copies holding this product's (uniform-weight
+    /// kernels; `MlpPacking` refreshes them).
+    Packed(wgpu::BindingResource<'a>),
 }
 
 impl ProductWeights<'_> {
@@ -170,15 +171,7 @@ impl ProductWeights<'_> {
     pub(super) fn binding(&self) -> (wgpu::BindingResource<'_>, u32) {
         match self {
             ProductWeights::Range(binding, offset) => (binding.clone(), *offset),
-            ProductWeights::Packed(packed) => (packed.buffer.as_entire_binding(), 0),
-        }
-    }
-
-    /// The dispatch that refreshes the packed copy, if there is one.
-    pub(super) fn into_pack(self) -> Option<crate::gpu::dispatch::Dispatch> {
-        match self {
-            ProductWeights::Range(..) => None,
-            ProductWeights::Packed(packed) => Some(packed.pack),
+            ProductWeights::Packed(window) => (window.clone(), 0),
         }
     }
 }
@@ -194,8 +187,8 @@ pub(super) type ProductKernel<'a> = (
 );
 
 impl DensePipelines {
-    /// The kernel for one of a layer's weight products: uniform weights where the family wants
-    /// them and the layer fits, tiled otherwise.
+    /// The kernel for one of a layer's weight products: uniform weights where the MLP packed
+    /// a copy for it (`packed`, from `MlpPacking::window`), tiled otherwise.
     pub(super) async fn product_kernel<'a>(
         &self,
         ctx: &GpuContext,
@@ -203,6 +196,7 @@ impl DensePipelines {
         params: &'a wgpu::Buffer,
         spec: &DenseLayerSpec,
         kind: ProductKind,
+        packed: Option<wgpu::BindingResource<'a>>,
     ) -> Result<ProductKernel<'a>, GpuError> {
         let (columns, uniform_kernel, tiled_kernel) = match kind {
             ProductKind::Forward => (spec.out_dim, DenseKernel::ForwardUniform, DenseKernel::Forward),
@@ -212,7 +206,7 @@ impl DensePipelines {
                 DenseKernel::BackwardInput,
             ),
         };
-        if let Some(packed) = self.packed_weights(ctx, label, params, spec, kind).await? {
+        if let Some(packed) = packed {
             let block = uniform_block(columns, self.uniform_block_limit(ctx));
             let workgroups = uniform_dispatch(ctx, spec.rows, columns, block)?;
             let block = f64::from(block);

@@ -4,10 +4,10 @@
 //! [`WINDOWS_PER_DISPATCH`] chunks per dispatch.
 use std::num::NonZeroU64;
 
-use super::layer::{DenseDims, DenseLayerSpec, bound, range_binding};
+use super::layer::{DenseLayerSpec, bound, range_binding};
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
 use super::{DenseFamily, RowView};
-use crate::gpu::buffers::uniform_buffer_from;
+use crate::gpu::buffers::storage_buffer_from;
 use crate::gpu::dispatch::{Dispatch, IndirectArgs, bind_named};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError};
@@ -343,62 +343,13 @@ impl DensePipelines {
         Ok((pipeline, [common, windows]))
     }
 
-    /// The layer's weights packed for the uniform-weight kernel of `kind`
-    /// (`shaders/dense_pack_weights.wgsl`: transposed for the forward), when the family wants them
-    /// and the packed matrix fits the 64 KiB window; `None` otherwise.
-    pub(super) async fn packed_weights(
-        &self,
-        ctx: &GpuContext,
-        label: &str,
-        params: &wgpu::Buffer,
-        spec: &DenseLayerSpec,
-        kind: ProductKind,
-    ) -> Result<Option<PackedWeights>, GpuError> {
-        let transposed = kind == ProductKind::Forward;
-        let (rows, columns) = if transposed {
-            (spec.in_dim, spec.out_dim)
-        } else {
-            (spec.out_dim, spec.in_dim)
-        };
-        let packed_floats = rows as usize * padded_to_vec4(columns) as usize;
-        if self.family != DenseFamily::UniformWeights
-            || (ctx.limits.max_uniform_buffer_binding_size as usize) < UNIFORM_WEIGHT_FLOATS * 4
-            || packed_floats > UNIFORM_WEIGHT_FLOATS
-        {
-            return Ok(None);
-        }
-        let (source, offset) = range_binding(ctx, label, params, &spec.weights)?;
-        // The whole window, as the kernels declare it; what lies past the matrix stays zero.
-        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(&format!("{label} packed weights")),
-            size: UNIFORM_WEIGHT_FLOATS as u64 * 4,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::UNIFORM,
-            mapped_at_creation: false,
-        });
-        let dims = DenseDims {
-            weight_offset: offset,
-            ..spec.base_dims()
-        };
-        let dims = uniform_buffer_from(ctx, &format!("{label} packing"), &dims);
-        let pipeline = self
-            .compile(
-                ctx,
-                DenseKernel::PackWeights,
-                &[("TRANSPOSED", f64::from(u8::from(transposed)))],
-            )
-            .await?;
-        let groups = Dispatch1d::for_device(ctx, packed_floats as u64, UNIFORM_WORKGROUP)?;
-        let pack = bound(
-            ctx,
-            (pipeline, DenseKernel::PackWeights),
-            &[
-                ("dims", dims.as_entire_binding()),
-                ("params", source),
-                ("packed", buffer.as_entire_binding()),
-            ],
-            groups,
-        )?;
-        Ok(Some(PackedWeights { buffer, pack }))
+    /// Whether the uniform-weight kernel of `kind` can run `spec`: the family wants it, the
+    /// device binds 64 KiB uniforms, and the packed matrix fits one.
+    pub(super) fn packs(&self, ctx: &GpuContext, spec: &DenseLayerSpec, kind: ProductKind) -> bool {
+        let (rows, columns) = packed_shape(spec, kind);
+        self.family == DenseFamily::UniformWeights
+            && (ctx.limits.max_uniform_buffer_binding_size as usize) >= UNIFORM_WEIGHT_FLOATS * 4
+            && rows as usize * padded_to_vec4(columns) as usize <= UNIFORM_WEIGHT_FLOATS
     }
 }
 
@@ -407,9 +358,154 @@ pub(super) fn padded_to_vec4(n: u32) -> u32 {
     n.div_ceil(4) * 4
 }
 
-/// A layer's weights in rows padded to whole vec4s, and the dispatch that copies them from the
-/// parameters (recorded before each kernel that reads them: the parameters change every step).
-pub(super) struct PackedWeights {
-    pub buffer: wgpu::Buffer,
-    pub pack: Dispatch,
+/// Rows and columns of a layer's packed copy for `kind`: [in][out] for the forward, [out][in]
+/// for the input gradient.
+fn packed_shape(spec: &DenseLayerSpec, kind: ProductKind) -> (u32, u32) {
+    match kind {
+        ProductKind::Forward => (spec.in_dim, spec.out_dim),
+        ProductKind::BackwardInput { .. } => (spec.out_dim, spec.in_dim),
+    }
+}
+
+/// Mirrors `PackJob` in `shaders/dense_pack_weights.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct PackJob {
+    src: u32,
+    rows: u32,
+    columns: u32,
+    transposed: u32,
+    dst: u32,
+    first: u32,
+    _pad: [u32; 2],
+}
+
+/// Every packed weight copy one MLP's uniform-weight kernels read, in one buffer, and the one
+/// dispatch that refreshes them all (`shaders/dense_pack_weights.wgsl`), recorded before the
+/// MLP's forward: one dispatch per MLP and step instead of one per product.
+pub(super) struct MlpPacking {
+    /// (layer, transposed) → byte offset of its packed copy in `buffer`.
+    slots: Vec<((usize, bool), u64)>,
+    buffer: Option<wgpu::Buffer>,
+    pack: Option<Dispatch>,
+    /// Owned so the dispatch's bind group's buffer lives as long as the pass.
+    _jobs: Option<wgpu::Buffer>,
+}
+
+impl MlpPacking {
+    /// Packs layer k's forward copy where its uniform kernel runs, and its input-gradient copy
+    /// too where `input_grads[k]` (the backward computes dX of that layer).
+    pub(super) async fn new(
+        ctx: &GpuContext,
+        pipelines: &DensePipelines,
+        label: &str,
+        params: &wgpu::Buffer,
+        specs: &[DenseLayerSpec],
+        input_grads: &[bool],
+    ) -> Result<MlpPacking, GpuError> {
+        let mut wanted = Vec::new();
+        for (k, spec) in specs.iter().enumerate() {
+            for kind in [ProductKind::Forward, ProductKind::BackwardInput { writes_dz: false }] {
+                let needed = kind == ProductKind::Forward || input_grads.get(k).copied().unwrap_or(false);
+                if needed && pipelines.packs(ctx, spec, kind) {
+                    wanted.push((k, kind));
+                }
+            }
+        }
+        if wanted.is_empty() {
+            return Ok(MlpPacking {
+                slots: Vec::new(),
+                buffer: None,
+                pack: None,
+                _jobs: None,
+            });
+        }
+        let start = specs.iter().map(|s| s.weights.start).min().unwrap_or(0);
+        let end = specs.iter().map(|s| s.weights.end).max().unwrap_or(0);
+        let (source, local) = range_binding(ctx, label, params, &(start..end))?;
+        let align = u64::from(ctx.limits.min_uniform_buffer_offset_alignment.max(16));
+        let (mut slots, mut jobs) = (Vec::new(), Vec::new());
+        let (mut offset, mut first) = (0u64, 0u32);
+        for &(k, kind) in &wanted {
+            let spec = &specs[k];
+            let (rows, columns) = packed_shape(spec, kind);
+            let transposed = kind == ProductKind::Forward;
+            jobs.push(PackJob {
+                src: local + (spec.weights.start - start) as u32,
+                rows,
+                columns,
+                transposed: u32::from(transposed),
+                dst: (offset / 4) as u32,
+                first,
+                _pad: [0; 2],
+            });
+            slots.push(((k, transposed), offset));
+            let floats = rows * padded_to_vec4(columns);
+            first += floats;
+            offset = (offset + u64::from(floats) * 4).div_ceil(align) * align;
+        }
+        // Each kernel binds a whole 64 KiB window from its copy's start, the last one included.
+        let last = slots.last().map_or(0, |(_, at)| *at);
+        let size = last + UNIFORM_WEIGHT_FLOATS as u64 * 4;
+        ctx.ensure_storage_binding_fits(label, size)?;
+        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(&format!("{label} packed weights")),
+            size,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::UNIFORM,
+            mapped_at_creation: false,
+        });
+        let jobs = storage_buffer_from(ctx, &format!("{label} packing jobs"), &jobs)?;
+        let pipeline = pipelines.compile(ctx, DenseKernel::PackWeights, &[]).await?;
+        let groups = Dispatch1d::for_device(ctx, u64::from(first), UNIFORM_WORKGROUP)?;
+        let pack = bound(
+            ctx,
+            (pipeline, DenseKernel::PackWeights),
+            &[
+                ("jobs", jobs.as_entire_binding()),
+                ("params", source),
+                ("packed", buffer.as_entire_binding()),
+            ],
+            groups,
+        )?;
+        Ok(MlpPacking {
+            slots,
+            buffer: Some(buffer),
+            pack: Some(pack),
+            _jobs: Some(jobs),
+        })
+    }
+
+    /// The 64 KiB window holding layer `layer`'s packed copy for `kind`, if it has one.
+    pub(super) fn window(&self, layer: usize, kind: ProductKind) -> Option<wgpu::BindingResource<'_>> {
+        let transposed = kind == ProductKind::Forward;
+        let buffer = self.buffer.as_ref()?;
+        let &(_, offset) = self.slots.iter().find(|(slot, _)| *slot == (layer, transposed))?;
+        Some(wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer,
+            offset,
+            size: NonZeroU64::new(UNIFORM_WEIGHT_FLOATS as u64 * 4),
+        }))
+    }
+
+    /// Bytes the packing moves: every copied weight read and every packed value written.
+    pub(super) fn global_bytes(&self, specs: &[DenseLayerSpec]) -> u64 {
+        self.slots
+            .iter()
+            .map(|&((k, transposed), _)| {
+                let kind = if transposed {
+                    ProductKind::Forward
+                } else {
+                    ProductKind::BackwardInput { writes_dz: false }
+                };
+                let (rows, columns) = packed_shape(&specs[k], kind);
+                4 * u64::from(rows) * u64::from(columns + padded_to_vec4(columns))
+            })
+            .sum()
+    }
+
+    pub(super) fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        if let Some(pack) = &self.pack {
+            pack.record(pass);
+        }
+    }
 }
