@@ -194,7 +194,8 @@ impl MlpPass {
     }
 
     /// Records every layer's backward, last layer first. Needs the forward of the same rows
-    /// recorded before it (it reads the stored outputs); fails on a forward-only pass.
+    /// recorded before it, with no parameter update between (it reads the stored outputs and
+    /// the weights the forward packed); fails on a forward-only pass.
     pub fn record_backward(&self, pass: &mut wgpu::ComputePass<'_>) -> Result<(), GpuError> {
         let backward = self.backward.as_ref().ok_or_else(|| {
             let label = self.forward.first().map_or("mlp", |layer| layer.spec().label.as_str());

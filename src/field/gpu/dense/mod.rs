@@ -23,10 +23,10 @@
 //! family of kernels, [`DenseFamily::UniformWeights`] (`shaders/dense_*_uniform.wgsl`): one
 //! invocation per row, the layer's weights read through a uniform binding, which those devices
 //! load once per SIMD group instead of once per lane (see the shader for the measurement). Each
-//! such product reads a copy of the layer's weights in rows padded to whole vec4s, refreshed by a
-//! small dispatch before it (`shaders/dense_pack_weights.wgsl`), and the weight gradient reads dZ
-//! in rows padded the same way, so every uniform read is a whole vec4 at an index every lane
-//! shares. A layer qualifies when its padded matrix holds at most [`UNIFORM_WEIGHT_FLOATS`]
+//! such product reads a copy of the layer's weights in rows padded to whole vec4s (all of one
+//! MLP's copies refreshed by one dispatch before its forward: `shaders/dense_pack_weights.wgsl`,
+//! `uniform::MlpPacking`), and the weight gradient reads dZ in rows padded the same way, so
+//! every uniform read is a whole vec4 at an index every lane shares. A layer qualifies when its padded matrix holds at most [`UNIFORM_WEIGHT_FLOATS`]
 //! values; other layers use the tiled kernels.
 //!
 //! X and Y (and dY and dX) of one layer must be different buffers: WebGPU forbids binding one
