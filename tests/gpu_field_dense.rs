@@ -118,8 +118,9 @@ fn assert_close(what: &str, gpu: &[f32], reference: &[f64], magnitude: &[f64], r
     worst
 }
 
-/// Configs with MLPs of every kind of shape: the small one (width 32) and the default widths
-/// with a small hash table (the widths are what matters here, the table only pads the buffer).
+/// Configs with MLPs of every kind of shape: the small one (width 32), the default widths
+/// with a small hash table (the widths are what matters here, the table only pads the buffer),
+/// and a deeper density MLP.
 fn configs() -> Vec<(&'static str, FieldConfig)> {
     let default_widths = FieldConfig {
         log2_hash_table_size: 12,
@@ -130,10 +131,16 @@ fn configs() -> Vec<(&'static str, FieldConfig)> {
         num_classes: 5,
         ..FieldConfig::small()
     };
+    // Five layers: ten packed copies, more than one packing dispatch takes.
+    let deep = FieldConfig {
+        density_layers: 4,
+        ..FieldConfig::small()
+    };
     vec![
         ("small", FieldConfig::small()),
         ("default widths", default_widths),
         ("freq-only, 5 classes", freq_only),
+        ("small, density 4 hidden layers", deep),
     ]
 }
 

@@ -7,7 +7,7 @@ use std::num::NonZeroU64;
 use super::layer::{DenseLayerSpec, bound, range_binding};
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
 use super::{DenseFamily, RowView};
-use crate::gpu::buffers::storage_buffer_from;
+use crate::gpu::buffers::uniform_buffer_from;
 use crate::gpu::dispatch::{Dispatch, IndirectArgs, bind_named};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError};
@@ -376,9 +376,11 @@ struct PackJob {
     columns: u32,
     transposed: u32,
     dst: u32,
-    first: u32,
-    _pad: [u32; 2],
+    _pad: [u32; 3],
 }
+
+/// Jobs one packing dispatch takes (`MAX_PACK_JOBS` in the shader).
+const MAX_PACK_JOBS: usize = 8;
 
 /// Every packed weight copy one MLP's uniform-weight kernels read, in one buffer, and the one
 /// dispatch that refreshes them all (`shaders/dense_pack_weights.wgsl`), recorded before the
@@ -387,9 +389,8 @@ pub(super) struct MlpPacking {
     /// (layer, transposed) → byte offset of its packed copy in `buffer`.
     slots: Vec<((usize, bool), u64)>,
     buffer: Option<wgpu::Buffer>,
-    pack: Option<Dispatch>,
-    /// Owned so the dispatch's bind group's buffer lives as long as the pass.
-    _jobs: Option<wgpu::Buffer>,
+    /// One dispatch per MAX_PACK_JOBS copies (one for MLPs of up to 4 layers).
+    packs: Vec<Dispatch>,
 }
 
 impl MlpPacking {
@@ -416,8 +417,7 @@ impl MlpPacking {
             return Ok(MlpPacking {
                 slots: Vec::new(),
                 buffer: None,
-                pack: None,
-                _jobs: None,
+                packs: Vec::new(),
             });
         }
         let start = specs.iter().map(|s| s.weights.start).min().unwrap_or(0);
@@ -425,7 +425,7 @@ impl MlpPacking {
         let (source, local) = range_binding(ctx, label, params, &(start..end))?;
         let align = u64::from(ctx.limits.min_uniform_buffer_offset_alignment.max(16));
         let (mut slots, mut jobs) = (Vec::new(), Vec::new());
-        let (mut offset, mut first) = (0u64, 0u32);
+        let mut offset = 0u64;
         for &(k, kind) in &wanted {
             let spec = &specs[k];
             let (rows, columns) = packed_shape(spec, kind);
@@ -436,12 +436,10 @@ impl MlpPacking {
                 columns,
                 transposed: u32::from(transposed),
                 dst: (offset / 4) as u32,
-                first,
-                _pad: [0; 2],
+                _pad: [0; 3],
             });
             slots.push(((k, transposed), offset));
             let floats = rows * padded_to_vec4(columns);
-            first += floats;
             offset = (offset + u64::from(floats) * 4).div_ceil(align) * align;
         }
         // Each kernel binds a whole 64 KiB window from its copy's start, the last one included.
@@ -454,24 +452,33 @@ impl MlpPacking {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::UNIFORM,
             mapped_at_creation: false,
         });
-        let jobs = storage_buffer_from(ctx, &format!("{label} packing jobs"), &jobs)?;
         let pipeline = pipelines.compile(ctx, DenseKernel::PackWeights, &[]).await?;
-        let groups = Dispatch1d::for_device(ctx, u64::from(first), UNIFORM_WORKGROUP)?;
-        let pack = bound(
-            ctx,
-            (pipeline, DenseKernel::PackWeights),
-            &[
-                ("jobs", jobs.as_entire_binding()),
-                ("params", source),
-                ("packed", buffer.as_entire_binding()),
-            ],
-            groups,
-        )?;
+        let mut packs = Vec::new();
+        for batch in jobs.chunks(MAX_PACK_JOBS) {
+            let most = batch
+                .iter()
+                .map(|j| j.rows * padded_to_vec4(j.columns))
+                .max()
+                .unwrap_or(0);
+            let mut table = [<PackJob as bytemuck::Zeroable>::zeroed(); MAX_PACK_JOBS];
+            table[..batch.len()].copy_from_slice(batch);
+            let table = uniform_buffer_from(ctx, &format!("{label} packing jobs"), &table);
+            let groups = Dispatch1d::for_device(ctx, u64::from(most), UNIFORM_WORKGROUP)?;
+            packs.push(bound(
+                ctx,
+                (pipeline.clone(), DenseKernel::PackWeights),
+                &[
+                    ("jobs", table.as_entire_binding()),
+                    ("params", source.clone()),
+                    ("packed", buffer.as_entire_binding()),
+                ],
+                [groups.x, groups.y, batch.len() as u32],
+            )?);
+        }
         Ok(MlpPacking {
             slots,
             buffer: Some(buffer),
-            pack: Some(pack),
-            _jobs: Some(jobs),
+            packs,
         })
     }
 
@@ -504,7 +511,7 @@ impl MlpPacking {
     }
 
     pub(super) fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        if let Some(pack) = &self.pack {
+        for pack in &self.packs {
             pack.record(pass);
         }
     }
