@@ -1,4 +1,4 @@
-// The BLOCK (4, 8, 16, 32 or 64) accumulators of one invocation of the uniform-weight dense
+// The BLOCK (a multiple of 4 up to 64) accumulators of one invocation of the uniform-weight dense
 // kernels (src/field/gpu/dense/uniform.rs), as named vec4s rather than an indexed array: a
 // private array indexed in a loop ends up in scratch memory on lavapipe, and every scratch or
 // storage access there is a per-lane loop. Quads past BLOCK are dropped when the pipeline is

@@ -20,8 +20,8 @@
 //!include _dispatch.wgsl
 //!include _dense_acc.wgsl
 
-// Outputs (forward) or inputs (backward) per invocation: 4, 8, 16, 32 or 64 (uniform.rs picks
-// the least that covers the layer, so a 3-wide output does not compute 16).
+// Outputs (forward) or inputs (backward) per invocation: a multiple of 4 up to 64 (uniform.rs
+// splits the layer into equal blocks, so a 3-wide output does not compute 16).
 override BLOCK: u32 = 16u;
 const WORKGROUP: u32 = 64u;
 // 64 KiB: WebGPU's default maxUniformBufferBindingSize.

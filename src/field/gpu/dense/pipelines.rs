@@ -97,7 +97,7 @@ impl DensePipelines {
         }
     }
 
-    /// The same with the uniform-weight kernels' blocks at most `limit` (4, 8, 16, 32 or 64)
+    /// The same with the uniform-weight kernels' blocks at most `limit` (a multiple of 4 up to 64)
     /// outputs wide whatever the device, so tests can run every width on one device.
     pub fn with_uniform_block_limit(self, limit: u32) -> DensePipelines {
         DensePipelines {

@@ -17,17 +17,13 @@ pub const UNIFORM_WEIGHT_FLOATS: usize = 16384;
 /// Invocations per workgroup of the uniform-weight kernels (`WORKGROUP` in the shader).
 pub(super) const UNIFORM_WORKGROUP: u32 = 64;
 
-/// Outputs (or inputs) per invocation of a uniform-weight kernel: the fewest of 4, 8, 16, 32, 64
-/// covering `width` (`shaders/_dense_acc.wgsl`), at most `limit`.
+/// Outputs (or inputs) per invocation of a uniform-weight kernel (`shaders/_dense_acc.wgsl`):
+/// `width` split into as few blocks of at most `limit` (a multiple of 4, at most 64) as
+/// possible, of equal size rounded up to a multiple of 4, so a 79-wide layer runs two blocks
+/// of 40 rather than 64 and 15 wasted.
 pub(super) fn uniform_block(width: u32, limit: u32) -> u32 {
-    let block = match width {
-        0..=4 => 4,
-        5..=8 => 8,
-        9..=16 => 16,
-        17..=32 => 32,
-        _ => 64,
-    };
-    block.min(limit)
+    let blocks = width.max(1).div_ceil(limit);
+    padded_to_vec4(width.max(1).div_ceil(blocks))
 }
 
 /// The widest block worth computing per invocation on `ctx`'s device. lavapipe (LLVM) keeps a
@@ -513,6 +509,31 @@ impl MlpPacking {
     pub(super) fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         for pack in &self.packs {
             pack.record(pass);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::uniform_block;
+
+    #[test]
+    fn blocks_split_a_layer_evenly_in_multiples_of_four() {
+        for (width, limit, block) in [
+            (79, 64, 40),
+            (128, 64, 64),
+            (64, 64, 64),
+            (32, 64, 32),
+            (28, 64, 28),
+            (6, 64, 8),
+            (3, 64, 4),
+            (79, 16, 16),
+            (64, 16, 16),
+            (15, 16, 16),
+            (6, 4, 4),
+        ] {
+            assert_eq!(uniform_block(width, limit), block, "width {width}, limit {limit}");
+            assert!(block % 4 == 0 && block <= limit.max(4));
         }
     }
 }
