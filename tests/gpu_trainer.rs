@@ -10,13 +10,7 @@ fn losses_fall_on_the_demo_scene() {
     let Some(ctx) = gpu_for_tests("losses_fall_on_the_demo_scene") else {
         return;
     };
-    let mut scene = demo_scene(&DemoOptions {
-        width: 64,
-        height: 48,
-        frames: 24,
-        ..Default::default()
-    })
-    .unwrap();
+    let mut scene = demo_of(64, 48, 24);
     scene.labels = Some(scribble_frames(&scene, &[0, 12], &ScribbleOptions::default()));
     let cfg = FieldConfig {
         num_classes: scene.classes.len() as u32,
@@ -89,13 +83,7 @@ fn a_second_trainer_compiles_no_pipelines() {
     let Some(ctx) = gpu_for_tests("a_second_trainer_compiles_no_pipelines") else {
         return;
     };
-    let scene = demo_scene(&DemoOptions {
-        width: 32,
-        height: 24,
-        frames: 4,
-        ..Default::default()
-    })
-    .unwrap();
+    let scene = demo_of(32, 24, 4);
     let cfg = FieldConfig {
         num_classes: scene.classes.len() as u32,
         batch_rays: 64,
@@ -126,13 +114,7 @@ fn the_step_traffic_estimate_counts_what_the_mlps_record() {
     let Some(ctx) = gpu_for_tests("the_step_traffic_estimate_counts_what_the_mlps_record") else {
         return;
     };
-    let scene = demo_scene(&DemoOptions {
-        width: 32,
-        height: 24,
-        frames: 4,
-        ..Default::default()
-    })
-    .unwrap();
+    let scene = demo_of(32, 24, 4);
     let cfg = FieldConfig {
         num_classes: scene.classes.len() as u32,
         ..FieldConfig::default()
@@ -175,13 +157,7 @@ fn profile_a_step() {
     let Some(ctx) = gpu_for_tests("profile_a_step") else {
         return;
     };
-    let scene = demo_scene(&DemoOptions {
-        width: 64,
-        height: 48,
-        frames: 24,
-        ..Default::default()
-    })
-    .unwrap();
+    let scene = demo_of(64, 48, 24);
     let cfg = FieldConfig {
         num_classes: scene.classes.len() as u32,
         batch_rays: 256,
@@ -252,13 +228,7 @@ fn check_one_step_gradient(name: &str, semantic_input: SemanticInput, head_weigh
     let Some(ctx) = gpu_for_tests(name) else {
         return;
     };
-    let mut scene = demo_scene(&DemoOptions {
-        width: 24,
-        height: 18,
-        frames: 24,
-        ..Default::default()
-    })
-    .unwrap();
+    let mut scene = demo_of(24, 18, 24);
     let labels = scribble_frames(
         &scene,
         &[0, 12],
@@ -491,4 +461,15 @@ fn interpolate(a: &[f64; 16], b: &[f64; 16]) -> [f64; 16] {
         m[row * 4 + 3] = 0.5 * (a[row * 4 + 3] + b[row * 4 + 3]);
     }
     m
+}
+
+/// The built-in demo scene at `width` x `height` with `frames` frames.
+fn demo_of(width: u32, height: u32, frames: u32) -> scribblefield::scene::Scene {
+    demo_scene(&DemoOptions {
+        width,
+        height,
+        frames,
+        ..Default::default()
+    })
+    .unwrap()
 }

@@ -189,7 +189,7 @@ impl DenseForward {
         check_binding(ctx, &label, &input.buffer)?;
         check_binding(ctx, &label, &output.buffer)?;
         let (kernel, product_weights, workgroups, family, rows_per_workgroup) = pipelines
-            .product_kernel(ctx, &label, params, spec, ProductKind::Forward, packed)
+            .product_kernel(ctx, &label, (params, packed), spec, ProductKind::Forward, false)
             .await?;
         let packed = matches!(product_weights, ProductWeights::Packed(_));
         let (weights, weight_offset) = product_weights.binding();
@@ -269,8 +269,6 @@ pub struct DenseBackward {
     spec: DenseLayerSpec,
     /// dX, and whether it reads a packed copy of the weights (uniform-weight kernels).
     input_grad: Option<(bool, Dispatch)>,
-    /// Whether dX's kernel also writes the dZ the weight gradient reads.
-    dz_written: bool,
     partial_sums: WeightPartials,
     reduce: Dispatch,
     chunks: u32,
@@ -349,10 +347,10 @@ impl DenseBackward {
                     .product_kernel(
                         ctx,
                         &label,
-                        params,
+                        (params, packed),
                         spec,
-                        ProductKind::BackwardInput { writes_dz },
-                        packed,
+                        ProductKind::BackwardInput,
+                        writes_dz,
                     )
                     .await?;
                 let (weights, weight_offset) = product_weights.binding();
@@ -478,7 +476,6 @@ impl DenseBackward {
         Ok(DenseBackward {
             spec: spec.clone(),
             input_grad,
-            dz_written,
             partial_sums,
             reduce,
             chunks,
@@ -498,6 +495,8 @@ impl DenseBackward {
         let relu = u64::from(self.spec.activation == Activation::Relu);
         let dz_row = u64::from(padded_to_vec4(self.spec.out_dim));
         let dz_from_dy = rows * o * (1 + relu);
+        // dX's kernel forms the dZ the uniform windows read unless the layer masks it itself.
+        let dz_written = matches!(&self.partial_sums, WeightPartials::Uniform(p) if !p.masks());
         let input_grad = match &self.input_grad {
             None => 0,
             Some((packed, _)) => {
@@ -506,14 +505,14 @@ impl DenseBackward {
                 } else {
                     i * o
                 };
-                let dz = if self.dz_written { rows * dz_row } else { 0 };
+                let dz = if dz_written { rows * dz_row } else { 0 };
                 dz_from_dy + weights + rows * i + dz
             }
         };
         let partials = u64::from(self.chunks) * i * o;
         let weight_grad = match &self.partial_sums {
             WeightPartials::Uniform(_) => {
-                let mask = if self.dz_written { 0 } else { dz_from_dy + rows * dz_row };
+                let mask = if dz_written { 0 } else { dz_from_dy + rows * dz_row };
                 mask + rows * (i + dz_row) + partials
             }
             WeightPartials::Tiled(_) => dz_from_dy + rows * i + partials,

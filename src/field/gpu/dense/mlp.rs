@@ -42,7 +42,6 @@ pub struct MlpPassDesc<'a> {
 pub struct MlpPass {
     /// The packed weight copies its uniform-weight kernels read, refreshed before the forward.
     packing: MlpPacking,
-    packing_bytes: u64,
     forward: Vec<DenseForward>,
     backward: Option<Vec<DenseBackward>>,
     /// Output of layer k (the input of layer k + 1; the last is the MLP's output).
@@ -156,7 +155,7 @@ impl MlpPass {
                         input_grad,
                         kept,
                     };
-                    let window = packing.window(k, ProductKind::BackwardInput { writes_dz: false });
+                    let window = packing.window(k, ProductKind::BackwardInput);
                     backward.push(
                         DenseBackward::new(
                             ctx,
@@ -173,10 +172,8 @@ impl MlpPass {
                 Some(backward)
             }
         };
-        let packing_bytes = packing.global_bytes(&specs);
         Ok(MlpPass {
             packing,
-            packing_bytes,
             forward,
             backward,
             outputs,
@@ -210,7 +207,7 @@ impl MlpPass {
     /// Bytes its forward moves through global memory over `rows` rows (the packing of the
     /// weights and [`DenseForward::global_bytes`] of every layer).
     pub fn forward_bytes(&self, rows: u64) -> u64 {
-        self.packing_bytes + self.forward.iter().map(|layer| layer.global_bytes(rows)).sum::<u64>()
+        self.packing.global_bytes() + self.forward.iter().map(|layer| layer.global_bytes(rows)).sum::<u64>()
     }
 
     /// Bytes its backward moves over `rows` rows ([`DenseBackward::global_bytes`] of every

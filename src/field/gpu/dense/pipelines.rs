@@ -152,9 +152,8 @@ impl DensePipelines {
 pub(super) enum ProductKind {
     /// Y = act(X Wᵀ): `out_dim` columns.
     Forward,
-    /// dX = dZ W: `in_dim` columns. `writes_dz`: the uniform-weight kernel also writes dZ for
-    /// the uniform-window weight gradient (`dz_out`).
-    BackwardInput { writes_dz: bool },
+    /// dX = dZ W: `in_dim` columns.
+    BackwardInput,
 }
 
 /// Where a product kernel reads the layer's weights.
@@ -187,20 +186,23 @@ pub(super) type ProductKernel<'a> = (
 );
 
 impl DensePipelines {
-    /// The kernel for one of a layer's weight products: uniform weights where the MLP packed
-    /// a copy for it (`packed`, from `MlpPacking::window`), tiled otherwise.
+    /// The kernel for one of a layer's weight products, given where the weights are: the
+    /// parameters, and the window of the MLP's packed copy for this product if it has one
+    /// (`MlpPacking::window`; then the uniform-weight kernel runs, tiled otherwise).
+    /// `writes_dz` (input gradient only): the uniform-weight kernel also writes dZ for the
+    /// uniform-window weight gradient (`dz_out`, WRITE_DZ).
     pub(super) async fn product_kernel<'a>(
         &self,
         ctx: &GpuContext,
         label: &str,
-        params: &'a wgpu::Buffer,
+        (params, packed): (&'a wgpu::Buffer, Option<wgpu::BindingResource<'a>>),
         spec: &DenseLayerSpec,
         kind: ProductKind,
-        packed: Option<wgpu::BindingResource<'a>>,
+        writes_dz: bool,
     ) -> Result<ProductKernel<'a>, GpuError> {
         let (columns, uniform_kernel, tiled_kernel) = match kind {
             ProductKind::Forward => (spec.out_dim, DenseKernel::ForwardUniform, DenseKernel::Forward),
-            ProductKind::BackwardInput { .. } => (
+            ProductKind::BackwardInput => (
                 spec.in_dim,
                 DenseKernel::BackwardInputUniform,
                 DenseKernel::BackwardInput,
@@ -212,7 +214,7 @@ impl DensePipelines {
             let block = f64::from(block);
             let pipeline = match kind {
                 ProductKind::Forward => self.compile(ctx, uniform_kernel, &[("BLOCK", block)]).await?,
-                ProductKind::BackwardInput { writes_dz } => {
+                ProductKind::BackwardInput => {
                     let writes = f64::from(u8::from(writes_dz));
                     self.compile(ctx, uniform_kernel, &[("BLOCK", block), ("WRITE_DZ", writes)])
                         .await?

@@ -220,6 +220,11 @@ impl UniformWeightPartials {
         })
     }
 
+    /// Whether this layer forms dZ with its own masking kernel (dX's kernel does otherwise).
+    pub(super) fn masks(&self) -> bool {
+        self.mask.is_some()
+    }
+
     pub(super) fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         if let Some(mask) = &self.mask {
             mask.record(pass);
@@ -359,7 +364,7 @@ pub(super) fn padded_to_vec4(n: u32) -> u32 {
 fn packed_shape(spec: &DenseLayerSpec, kind: ProductKind) -> (u32, u32) {
     match kind {
         ProductKind::Forward => (spec.in_dim, spec.out_dim),
-        ProductKind::BackwardInput { .. } => (spec.out_dim, spec.in_dim),
+        ProductKind::BackwardInput => (spec.out_dim, spec.in_dim),
     }
 }
 
@@ -382,8 +387,10 @@ const MAX_PACK_JOBS: usize = 8;
 /// dispatch that refreshes them all (`shaders/dense_pack_weights.wgsl`), recorded before the
 /// MLP's forward: one dispatch per MLP and step instead of one per product.
 pub(super) struct MlpPacking {
-    /// (layer, transposed) → byte offset of its packed copy in `buffer`.
-    slots: Vec<((usize, bool), u64)>,
+    /// (layer, product) → byte offset of its packed copy in `buffer`.
+    slots: Vec<((usize, ProductKind), u64)>,
+    /// What refreshing them moves: every copied weight read, every packed value written.
+    bytes: u64,
     buffer: Option<wgpu::Buffer>,
     /// One dispatch per MAX_PACK_JOBS copies (one for MLPs of up to 4 layers).
     packs: Vec<Dispatch>,
@@ -402,7 +409,7 @@ impl MlpPacking {
     ) -> Result<MlpPacking, GpuError> {
         let mut wanted = Vec::new();
         for (k, spec) in specs.iter().enumerate() {
-            for kind in [ProductKind::Forward, ProductKind::BackwardInput { writes_dz: false }] {
+            for kind in [ProductKind::Forward, ProductKind::BackwardInput] {
                 let needed = kind == ProductKind::Forward || input_grads.get(k).copied().unwrap_or(false);
                 if needed && pipelines.packs(ctx, spec, kind) {
                     wanted.push((k, kind));
@@ -412,6 +419,7 @@ impl MlpPacking {
         if wanted.is_empty() {
             return Ok(MlpPacking {
                 slots: Vec::new(),
+                bytes: 0,
                 buffer: None,
                 packs: Vec::new(),
             });
@@ -421,7 +429,7 @@ impl MlpPacking {
         let (source, local) = range_binding(ctx, label, params, &(start..end))?;
         let align = u64::from(ctx.limits.min_uniform_buffer_offset_alignment.max(16));
         let (mut slots, mut jobs) = (Vec::new(), Vec::new());
-        let mut offset = 0u64;
+        let (mut offset, mut bytes) = (0u64, 0u64);
         for &(k, kind) in &wanted {
             let spec = &specs[k];
             let (rows, columns) = packed_shape(spec, kind);
@@ -434,8 +442,9 @@ impl MlpPacking {
                 dst: (offset / 4) as u32,
                 _pad: [0; 3],
             });
-            slots.push(((k, transposed), offset));
+            slots.push(((k, kind), offset));
             let floats = rows * padded_to_vec4(columns);
+            bytes += 4 * (u64::from(rows) * u64::from(columns) + u64::from(floats));
             offset = (offset + u64::from(floats) * 4).div_ceil(align) * align;
         }
         // Each kernel binds a whole 64 KiB window from its copy's start, the last one included.
@@ -473,6 +482,7 @@ impl MlpPacking {
         }
         Ok(MlpPacking {
             slots,
+            bytes,
             buffer: Some(buffer),
             packs,
         })
@@ -480,9 +490,8 @@ impl MlpPacking {
 
     /// The 64 KiB window holding layer `layer`'s packed copy for `kind`, if it has one.
     pub(super) fn window(&self, layer: usize, kind: ProductKind) -> Option<wgpu::BindingResource<'_>> {
-        let transposed = kind == ProductKind::Forward;
         let buffer = self.buffer.as_ref()?;
-        let &(_, offset) = self.slots.iter().find(|(slot, _)| *slot == (layer, transposed))?;
+        let &(_, offset) = self.slots.iter().find(|(slot, _)| *slot == (layer, kind))?;
         Some(wgpu::BindingResource::Buffer(wgpu::BufferBinding {
             buffer,
             offset,
@@ -490,20 +499,9 @@ impl MlpPacking {
         }))
     }
 
-    /// Bytes the packing moves: every copied weight read and every packed value written.
-    pub(super) fn global_bytes(&self, specs: &[DenseLayerSpec]) -> u64 {
-        self.slots
-            .iter()
-            .map(|&((k, transposed), _)| {
-                let kind = if transposed {
-                    ProductKind::Forward
-                } else {
-                    ProductKind::BackwardInput { writes_dz: false }
-                };
-                let (rows, columns) = packed_shape(&specs[k], kind);
-                4 * u64::from(rows) * u64::from(columns + padded_to_vec4(columns))
-            })
-            .sum()
+    /// Bytes one refresh moves: every copied weight read and every packed value written.
+    pub(super) fn global_bytes(&self) -> u64 {
+        self.bytes
     }
 
     pub(super) fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
