@@ -21,10 +21,12 @@ use scribblefield::rng::SplitMix64;
 const STEPS: u32 = 5;
 const RELATIVE_TOLERANCE: f32 = 1e-6;
 
-fn assert_close(what: &str, gpu: &[f32], reference: &[f32], floor: f32) {
+/// `scale[i]` is the size the error of element i is relative to: the value itself, or for a sum
+/// whose terms can cancel, the sum of the terms' sizes.
+fn assert_close(what: &str, gpu: &[f32], reference: &[f32], scale: &[f32], floor: f32) {
     assert_eq!(gpu.len(), reference.len(), "{what}");
     for (i, (&g, &r)) in gpu.iter().zip(reference).enumerate() {
-        let allowed = RELATIVE_TOLERANCE * r.abs().max(floor);
+        let allowed = RELATIVE_TOLERANCE * scale[i].abs().max(floor);
         assert!(
             (g - r).abs() <= allowed,
             "{what}[{i}]: GPU {g}, reference {r}, allowed {allowed:e}"
@@ -79,6 +81,10 @@ fn check_adam(ctx: &GpuContext, count: usize, segment_len: Option<u64>) {
 
     let mut reference = Adam::new(cfg.adam, count);
     let mut total_lr = 0.0f32;
+    // The first moment is a sum of gradients of both signs: where they nearly cancel, m is tiny
+    // and a rounding the GPU may do differently (WGSL allows fused multiply-adds; NVIDIA's
+    // Vulkan driver contracts) is large against it. Its error is bounded by the terms' sizes.
+    let mut m_scale = vec![0.0f32; count];
     for t in 1..=STEPS {
         let lr = 1e-2 / t as f32;
         total_lr += lr;
@@ -94,6 +100,10 @@ fn check_adam(ctx: &GpuContext, count: usize, segment_len: Option<u64>) {
         }
         ctx.queue.submit([encoder.finish()]);
         reference.update(&mut params, &grads, lr);
+        let beta1 = cfg.adam.beta1;
+        for (scale, g) in m_scale.iter_mut().zip(&grads) {
+            *scale = beta1 * *scale + (1.0 - beta1) * g.abs();
+        }
     }
     let what = format!("{count} parameters, segments {segment_len:?}");
     let gpu_params: Vec<f32> = read_buffer_blocking(ctx, &params_buffer).unwrap();
@@ -105,9 +115,15 @@ fn check_adam(ctx: &GpuContext, count: usize, segment_len: Option<u64>) {
         gpu_grads.iter().all(|&g| g.to_bits() == 0),
         "{what}: gradient left after the step"
     );
-    assert_close(&format!("{what}: m"), &gpu_m[..count], &reference.m, 0.0);
-    assert_close(&format!("{what}: v"), &gpu_v[..count], &reference.v, 0.0);
-    assert_close(&format!("{what}: params"), &gpu_params[..count], &params, total_lr);
+    assert_close(&format!("{what}: m"), &gpu_m[..count], &reference.m, &m_scale, 0.0);
+    assert_close(&format!("{what}: v"), &gpu_v[..count], &reference.v, &reference.v, 0.0);
+    assert_close(
+        &format!("{what}: params"),
+        &gpu_params[..count],
+        &params,
+        &params,
+        total_lr,
+    );
     let moved = gpu_params.iter().zip(&params).filter(|(g, p)| g != p).count();
     eprintln!("{what}: {moved} of {count} parameters differ in some bit from the reference");
 }
