@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use scribblefield::field::FieldConfig;
 use scribblefield::field::gpu::composite::{
-    CompositeInputs, CompositeLayout, CompositePass, CompositeUniforms, RowView,
+    CompositeInputs, CompositeKernel, CompositeLayout, CompositePass, CompositeUniforms, RowView,
 };
 use scribblefield::field::gpu::keep::NOT_KEPT;
 use scribblefield::field::gpu::rays::{
@@ -64,6 +64,17 @@ impl Batch {
             }
         }
         out
+    }
+
+    /// As [`Batch::random`] with densities low enough that light reaches the last of many samples
+    /// (σ ≤ e⁻¹): there, what one sample's gradient owes to the samples behind it is not near 0.
+    fn random_thin(cfg: FieldConfig, seed: u64) -> Batch {
+        let mut batch = Batch::random(cfg, seed);
+        let mut rng = SplitMix64::new(seed ^ 0x7417);
+        for row in batch.density.chunks_mut(DENSITY_STRIDE as usize) {
+            row[0] = rng.uniform(-6.0, -1.0) as f32;
+        }
+        batch
     }
 
     fn random(cfg: FieldConfig, seed: u64) -> Batch {
@@ -292,6 +303,7 @@ fn run_entry(ctx: &GpuContext, batch: &Batch, render: bool) -> GpuRun {
         slot: &slot,
     };
     let pass = pollster::block_on(CompositePass::new(ctx, cfg, &inputs)).unwrap();
+    assert_eq!(pass.kernel, CompositeKernel::for_device(ctx));
     fill_with_garbage(ctx, &pass.grad_heads);
     fill_with_garbage(ctx, &pass.head_grads);
     fill_with_garbage(ctx, &pass.ray_outputs);
@@ -440,22 +452,42 @@ fn check_render_matches_training(ctx: &GpuContext, batch: &Batch) {
     assert!(garbage(&rendered.ray_outputs[layout.grad_rendered(all)]) > 0);
 }
 
+/// The device as it is chosen for a CPU device and for a GPU: each composite kernel in turn,
+/// whatever the adapter.
+fn with_each_kernel(ctx: &GpuContext) -> [GpuContext; 2] {
+    let kernels = [
+        ctx.clone().treated_as_software(true),
+        ctx.clone().treated_as_software(false),
+    ];
+    assert_eq!(
+        CompositeKernel::for_device(&kernels[0]),
+        CompositeKernel::InvocationPerRay
+    );
+    assert_eq!(
+        CompositeKernel::for_device(&kernels[1]),
+        CompositeKernel::WorkgroupPerRay
+    );
+    kernels
+}
+
 #[test]
 fn render_entry_point_matches_the_training_render_bit_for_bit() {
     let Some(ctx) = gpu_for_tests("render_entry_point_matches_the_training_render_bit_for_bit") else {
         return;
     };
-    check_render_matches_training(&ctx, &Batch::random(config(3, 5, 5, 7, 300, true), 11));
-    let d = FieldConfig::default();
-    let widths = config(
-        d.num_classes,
-        d.feature_dim,
-        d.samples_coarse,
-        d.samples_fine,
-        130,
-        true,
-    );
-    check_render_matches_training(&ctx, &Batch::random(widths, 12));
+    for ctx in with_each_kernel(&ctx) {
+        check_render_matches_training(&ctx, &Batch::random(config(3, 5, 5, 7, 300, true), 11));
+        let d = FieldConfig::default();
+        let widths = config(
+            d.num_classes,
+            d.feature_dim,
+            d.samples_coarse,
+            d.samples_fine,
+            130,
+            true,
+        );
+        check_render_matches_training(&ctx, &Batch::random(widths, 12));
+    }
 }
 
 #[test]
@@ -468,8 +500,10 @@ fn composite_matches_reference_on_small_shapes() {
     let Some(ctx) = gpu_for_tests("composite_matches_reference_on_small_shapes") else {
         return;
     };
-    // 300 rays: not a multiple of the 64-ray workgroup; S = 12, C = 3, D = 5.
-    check_batch(&ctx, &Batch::random(config(3, 5, 5, 7, 300, true), 11));
+    for ctx in with_each_kernel(&ctx) {
+        // 300 rays: not a multiple of the 64-ray workgroup; S = 12, C = 3, D = 5.
+        check_batch(&ctx, &Batch::random(config(3, 5, 5, 7, 300, true), 11));
+    }
 }
 
 #[test]
@@ -477,26 +511,41 @@ fn composite_matches_reference_with_default_widths() {
     let Some(ctx) = gpu_for_tests("composite_matches_reference_with_default_widths") else {
         return;
     };
-    let d = FieldConfig::default();
-    // The default model's C, D and S (16 + 48), feature supervision on and off.
-    let on = config(
-        d.num_classes,
-        d.feature_dim,
-        d.samples_coarse,
-        d.samples_fine,
-        130,
-        true,
-    );
-    check_batch(&ctx, &Batch::random(on, 12));
-    let off = config(
-        d.num_classes,
-        d.feature_dim,
-        d.samples_coarse,
-        d.samples_fine,
-        70,
-        false,
-    );
-    check_batch(&ctx, &Batch::random(off, 13));
+    for ctx in with_each_kernel(&ctx) {
+        let d = FieldConfig::default();
+        // The default model's C, D and S (16 + 48), feature supervision on and off.
+        let on = config(
+            d.num_classes,
+            d.feature_dim,
+            d.samples_coarse,
+            d.samples_fine,
+            130,
+            true,
+        );
+        check_batch(&ctx, &Batch::random(on, 12));
+        let off = config(
+            d.num_classes,
+            d.feature_dim,
+            d.samples_coarse,
+            d.samples_fine,
+            70,
+            false,
+        );
+        check_batch(&ctx, &Batch::random(off, 13));
+    }
+}
+
+#[test]
+fn composite_matches_reference_over_several_chunks_of_samples() {
+    let Some(ctx) = gpu_for_tests("composite_matches_reference_over_several_chunks_of_samples") else {
+        return;
+    };
+    // S = 129: the workgroup kernel stages samples 64 at a time, so two full chunks and one of a
+    // single sample, each walked back to front in turn, with the light reaching all of them.
+    for ctx in with_each_kernel(&ctx) {
+        check_batch(&ctx, &Batch::random_thin(config(4, 6, 33, 96, 70, true), 14));
+        check_render_matches_training(&ctx, &Batch::random_thin(config(4, 6, 33, 96, 70, true), 15));
+    }
 }
 
 #[test]
@@ -590,7 +639,13 @@ fn composite_throughput_report() {
         targets: &targets,
         slot: &slot,
     };
-    let pass = pollster::block_on(CompositePass::new(&ctx, &cfg, &inputs)).unwrap();
+    for ctx in with_each_kernel(&ctx) {
+        report_throughput(&ctx, &cfg, &inputs);
+    }
+}
+
+fn report_throughput(ctx: &GpuContext, cfg: &FieldConfig, inputs: &CompositeInputs<'_>) {
+    let pass = pollster::block_on(CompositePass::new(ctx, cfg, inputs)).unwrap();
     // The training entry point and the render one (forward alone), on the same inputs.
     let run = |repeats: u32, render: bool| {
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
@@ -615,7 +670,8 @@ fn composite_throughput_report() {
         let seconds = start.elapsed().as_secs_f64();
         let rays = f64::from(repeats * cfg.batch_rays);
         println!(
-            "{name} (B = {}, S = {}, C = {}, D = {}) on {}: {:.0} rays/s, {:.0} samples/s",
+            "{name}, {:?} (B = {}, S = {}, C = {}, D = {}) on {}: {:.0} rays/s, {:.0} samples/s",
+            pass.kernel,
             cfg.batch_rays,
             cfg.samples_per_ray(),
             cfg.num_classes,

@@ -184,6 +184,7 @@ fn one_step_gradient_matches_the_reference() {
         "one_step_gradient_matches_the_reference",
         SemanticInput::FeatureAndGeometry,
         FieldConfig::default().head_weight_threshold,
+        Kernels::OfThisDevice,
     );
 }
 
@@ -194,6 +195,7 @@ fn one_step_gradient_matches_the_reference_with_every_sample_at_the_heads() {
         "one_step_gradient_matches_the_reference_with_every_sample_at_the_heads",
         SemanticInput::FeatureAndGeometry,
         0.0,
+        Kernels::OfThisDevice,
     );
 }
 
@@ -206,6 +208,7 @@ fn one_step_gradient_matches_the_reference_with_most_samples_kept_from_the_heads
         "one_step_gradient_matches_the_reference_with_most_samples_kept_from_the_heads",
         SemanticInput::FeatureAndGeometry,
         0.02,
+        Kernels::OfThisDevice,
     );
 }
 
@@ -216,10 +219,30 @@ fn one_step_gradient_matches_the_reference_with_the_feature_only_semantic_head()
         "one_step_gradient_matches_the_reference_with_the_feature_only_semantic_head",
         SemanticInput::Feature,
         FieldConfig::default().head_weight_threshold,
+        Kernels::OfThisDevice,
     );
 }
 
-fn check_one_step_gradient(name: &str, semantic_input: SemanticInput, head_weight_threshold: f32) {
+/// The kernels a GPU runs (workgroup-tiled dense layers, a workgroup per ray in the composite)
+/// on whatever device this is, through a whole step.
+#[test]
+fn one_step_gradient_matches_the_reference_with_the_kernels_of_a_gpu() {
+    check_one_step_gradient(
+        "one_step_gradient_matches_the_reference_with_the_kernels_of_a_gpu",
+        SemanticInput::FeatureAndGeometry,
+        FieldConfig::default().head_weight_threshold,
+        Kernels::OfAGpu,
+    );
+}
+
+/// Which kernels the trainer runs: those chosen for this device, or a GPU's whatever it is.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Kernels {
+    OfThisDevice,
+    OfAGpu,
+}
+
+fn check_one_step_gradient(name: &str, semantic_input: SemanticInput, head_weight_threshold: f32, kernels: Kernels) {
     use scribblefield::field::gpu::rays::{StepUniforms, pick_pixel, sample_jitter};
     use scribblefield::field::gpu::scene_buffers::LabelIndex;
     use scribblefield::field::propagate::propagate_labels;
@@ -227,6 +250,11 @@ fn check_one_step_gradient(name: &str, semantic_input: SemanticInput, head_weigh
 
     let Some(ctx) = gpu_for_tests(name) else {
         return;
+    };
+    let ctx = if kernels == Kernels::OfAGpu {
+        ctx.treated_as_software(false)
+    } else {
+        ctx
     };
     let mut scene = demo_of(24, 18, 24);
     let labels = scribble_frames(

@@ -1,5 +1,6 @@
 //! Volume rendering, the four losses and the backward of both on the GPU
-//! (`shaders/composite.wgsl`): one invocation per ray, looping over its S samples.
+//! (`shaders/composite*.wgsl`), in one of two kernels ([`CompositeKernel`]) that compute the
+//! same values in the same order.
 //!
 //! Reads per sample the density pre-activation h₀ and, at the sample's packed row
 //! (`slot`, see [`super::keep`]), the raw head outputs (colour pre-sigmoid (3), semantic
@@ -138,8 +139,37 @@ impl CompositeLayout {
     }
 }
 
+/// How the composite spreads a batch over invocations.
+///
+/// A batch has a few thousand rays: as one invocation each, too few to fill a GPU, and each ray's
+/// serial loops (S samples times k channels, three times) made the composite the longest stage
+/// of a step on an NVIDIA H200 (docs/results/bench.md). On a CPU device the opposite holds: its
+/// SIMD lanes run neighbouring invocations, so one ray each keeps them all busy, while a
+/// workgroup per ray waits at barriers with one lane walking the ray (3.6x slower on lavapipe).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CompositeKernel {
+    /// `composite.wgsl`: one invocation per ray, looping over its samples and channels.
+    InvocationPerRay,
+    /// `composite_lanes.wgsl`: one workgroup of 64 invocations per ray, splitting its channels
+    /// and samples; the two walks along the ray run on one lane over values staged in
+    /// workgroup memory, so every sum adds in the same order as the other kernel's.
+    WorkgroupPerRay,
+}
+
+impl CompositeKernel {
+    /// The kernel that is faster on `ctx`'s kind of device.
+    pub fn for_device(ctx: &GpuContext) -> CompositeKernel {
+        if ctx.is_software() {
+            CompositeKernel::InvocationPerRay
+        } else {
+            CompositeKernel::WorkgroupPerRay
+        }
+    }
+}
+
 /// Compositing, losses and their backward for a batch of `cfg.batch_rays` rays.
 pub struct CompositePass {
+    pub kernel: CompositeKernel,
     dispatch: Dispatch,
     /// The forward alone (`composite_render`).
     render: Dispatch,
@@ -201,8 +231,17 @@ impl CompositePass {
         let head_grads = storage_buffer_zeroed::<f32>(ctx, "head gradients", samples * layout.grad_stride())?;
         let ray_outputs = storage_buffer_zeroed::<f32>(ctx, "ray losses and renders", layout.ray_output_words())?;
         let uniform = uniform_buffer_from(ctx, "composite uniforms", &uniforms);
-        let spec = KernelSpec::new("composite", shaders::COMPOSITE, "composite");
-        let groups = Dispatch1d::for_device(ctx, batch as u64, RAY_WORKGROUP_SIZE)?;
+        let kernel = CompositeKernel::for_device(ctx);
+        let (source, groups) = match kernel {
+            CompositeKernel::InvocationPerRay => (
+                shaders::COMPOSITE,
+                Dispatch1d::for_device(ctx, batch as u64, RAY_WORKGROUP_SIZE)?,
+            ),
+            CompositeKernel::WorkgroupPerRay => {
+                (shaders::COMPOSITE_LANES, Dispatch1d::for_device(ctx, batch as u64, 1)?)
+            }
+        };
+        let spec = KernelSpec::new("composite", source, "composite");
         let bindings = whole(&[
             ("step_info", inputs.step_uniforms),
             ("params", &uniform),
@@ -218,7 +257,7 @@ impl CompositePass {
             ("head_grads", &head_grads),
         ]);
         let dispatch = Dispatch::build(ctx, &spec, &bindings, groups).await?;
-        let render_spec = KernelSpec::new("composite (render)", shaders::COMPOSITE, "composite_render");
+        let render_spec = KernelSpec::new("composite (render)", source, "composite_render");
         let render_bindings: Vec<_> = bindings
             .iter()
             .filter(|(name, _)| *name != "head_grads")
@@ -226,6 +265,7 @@ impl CompositePass {
             .collect();
         let render = Dispatch::build(ctx, &render_spec, &render_bindings, groups).await?;
         Ok(CompositePass {
+            kernel,
             dispatch,
             render,
             layout,
