@@ -1,8 +1,9 @@
 // Shared by the dense-layer kernels (src/field/gpu/dense/): the uniform describing one layer
 // and the register-tiled product C += A·B of a TM x KC tile of A and a KC x TN tile of B staged
-// in workgroup memory. Each invocation owns RM x RN (4 x 4) elements of the TM x TN tile of C, strided by
-// the invocation grid (row ty + r·TY, column tx + c·TX) so neighbouring invocations read
-// neighbouring workgroup words.
+// in workgroup memory. Each invocation owns a contiguous RM x RN (4 x 4) block of the TM x TN
+// tile of C (rows RM·ty + r, columns RN·tx + c), so per step of k it reads its four A values
+// and its four B values as one vec4 each: 2 workgroup loads per 16 multiply-adds, neighbouring
+// invocations reading neighbouring vec4s of B and the same vec4 of A.
 //
 // The grid (TX, TY) and the chunk depth KC are override constants chosen per layer shape by
 // `dense::TileShape` (wide layers 16x16 invocations over 64x64 tiles, narrow outputs tall thin
@@ -63,9 +64,19 @@ const RN: u32 = 4u;
 const A_TILE_CAP: u32 = 2048u;
 const B_TILE_CAP: u32 = 1024u;
 
-// a_tile[k · TM + m], b_tile[k · TN + n]: k-major so the inner loop reads RM (RN) words of one row.
-var<workgroup> a_tile: array<f32, A_TILE_CAP>;
-var<workgroup> b_tile: array<f32, B_TILE_CAP>;
+// Element (k, m) of the A tile is word k · TM + m, (k, n) of the B tile word k · TN + n, held as
+// vec4s (TM and TN are multiples of 4): k-major, so an invocation's RM (RN) values of one k are
+// one vec4.
+var<workgroup> a_tile: array<vec4<f32>, A_TILE_CAP / 4u>;
+var<workgroup> b_tile: array<vec4<f32>, B_TILE_CAP / 4u>;
+
+fn stage_a(k: u32, m: u32, value: f32) {
+    a_tile[(k * tile_m() + m) >> 2u][m & 3u] = value;
+}
+
+fn stage_b(k: u32, n: u32, value: f32) {
+    b_tile[(k * tile_n() + n) >> 2u][n & 3u] = value;
+}
 
 fn tile_m() -> u32 {
     return TY * RM;
@@ -75,7 +86,7 @@ fn tile_n() -> u32 {
     return TX * RN;
 }
 
-// The RM x RN = 4 x 4 outputs of one invocation: row r of its block in `rows[r]`. Four named
+// The RM x RN = 4 x 4 outputs of one invocation: row r of its block in `r<r>`. Four named
 // vectors rather than an indexed array, so no compiler has to keep them in memory (a private
 // array indexed in a loop that is not unrolled ends up in scratch memory, e.g. on lavapipe).
 struct Block {
@@ -85,19 +96,15 @@ struct Block {
     r3: vec4<f32>,
 }
 
-// block.r[r][c] += Σ_k a_tile[k][ty + r·TY] · b_tile[k][tx + c·TX] over the staged chunk.
+// block.r[r][c] += Σ_k A[k][RM·ty + r] · B[k][RN·tx + c] over the staged chunk.
 fn multiply_staged(block: ptr<function, Block>, tx: u32, ty: u32) {
-    let tm = tile_m();
-    let tn = tile_n();
     var r0 = (*block).r0;
     var r1 = (*block).r1;
     var r2 = (*block).r2;
     var r3 = (*block).r3;
     for (var k = 0u; k < KC; k++) {
-        let a_base = k * tm + ty;
-        let b_base = k * tn + tx;
-        let a = vec4<f32>(a_tile[a_base], a_tile[a_base + TY], a_tile[a_base + 2u * TY], a_tile[a_base + 3u * TY]);
-        let b = vec4<f32>(b_tile[b_base], b_tile[b_base + TX], b_tile[b_base + 2u * TX], b_tile[b_base + 3u * TX]);
+        let a = a_tile[k * TY + ty];
+        let b = b_tile[k * TX + tx];
         r0 += a.x * b;
         r1 += a.y * b;
         r2 += a.z * b;

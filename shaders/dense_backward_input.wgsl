@@ -11,13 +11,13 @@
 @group(0) @binding(3) var<storage, read> weights: array<f32>;
 @group(0) @binding(4) var<storage, read_write> dx: array<f32>;
 
-// Writes the 4 values of one block row (columns col + c·TX) that lie inside dX.
+// Writes the 4 values of one block row (columns col .. col + 3) that lie inside dX.
 fn store_row(row: u32, col: u32, values: vec4<f32>) {
     if row >= active_rows() {
         return;
     }
     for (var c = 0u; c < RN; c++) {
-        let i = col + c * TX;
+        let i = col + c;
         if i < dims.in_dim {
             dx[row * dims.dx_stride + dims.dx_offset + i] = values[c];
         }
@@ -54,7 +54,7 @@ fn backward_input(
                 let g = dy[row * dims.dy_stride + dims.dy_offset + o];
                 value = output_gradient(g, row * dims.y_stride + dims.y_offset + o);
             }
-            a_tile[k * tm + m] = value;
+            stage_a(k, m, value);
         }
         // B[k][i] = W[k0 + k][i]: read along a weight row.
         for (var e = local_index; e < tn * KC; e += threads) {
@@ -66,16 +66,16 @@ fn backward_input(
             if o < dims.out_dim && i < dims.in_dim {
                 value = weights[dims.weight_offset + o * dims.in_dim + i];
             }
-            b_tile[k * tn + n] = value;
+            stage_b(k, n, value);
         }
         workgroupBarrier();
         multiply_staged(&block, local_id.x, local_id.y);
         workgroupBarrier();
     }
-    let row = row0 + local_id.y;
-    let col = col0 + local_id.x;
+    let row = row0 + local_id.y * RM;
+    let col = col0 + local_id.x * RN;
     store_row(row, col, block.r0);
-    store_row(row + TY, col, block.r1);
-    store_row(row + 2u * TY, col, block.r2);
-    store_row(row + 3u * TY, col, block.r3);
+    store_row(row + 1u, col, block.r1);
+    store_row(row + 2u, col, block.r2);
+    store_row(row + 3u, col, block.r3);
 }

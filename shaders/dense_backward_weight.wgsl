@@ -15,26 +15,26 @@
 @group(0) @binding(4) var<storage, read_write> partials: array<f32>;
 @group(0) @binding(5) var<storage, read_write> grads: array<f32>;
 
-// Writes the 4 partial sums of one block row (output unit o, inputs i + c·TX) of a chunk.
+// Writes the 4 partial sums of one block row (output unit o, inputs i .. i + 3) of a chunk.
 fn store_row(chunk: u32, o: u32, i: u32, values: vec4<f32>) {
     if o >= dims.out_dim {
         return;
     }
     let base = (chunk * dims.out_dim + o) * dims.in_dim;
     for (var c = 0u; c < RN; c++) {
-        let column = i + c * TX;
+        let column = i + c;
         if column < dims.in_dim {
             partials[base + column] = values[c];
         }
     }
 }
 
-// Writes this invocation's block (output units o + r·TY, inputs i + c·TX) of a chunk.
+// Writes this invocation's block (output units o .. o + 3, inputs i .. i + 3) of a chunk.
 fn store_block(chunk: u32, o: u32, i: u32, block: Block) {
     store_row(chunk, o, i, block.r0);
-    store_row(chunk, o + TY, i, block.r1);
-    store_row(chunk, o + 2u * TY, i, block.r2);
-    store_row(chunk, o + 3u * TY, i, block.r3);
+    store_row(chunk, o + 1u, i, block.r1);
+    store_row(chunk, o + 2u, i, block.r2);
+    store_row(chunk, o + 3u, i, block.r3);
 }
 
 @compute @workgroup_size(TX, TY)
@@ -54,7 +54,7 @@ fn partial_sums(
     // A chunk past the rows present sums nothing: its partial is zero (reduce_chunks adds
     // every chunk). Uniform per workgroup, so returning before the barriers is allowed.
     if first_row >= rows {
-        store_block(chunk, o0 + local_id.y, i0 + local_id.x, block);
+        store_block(chunk, o0 + local_id.y * RM, i0 + local_id.x * RN, block);
         return;
     }
     let end_row = min(first_row + dims.chunk_rows, rows);
@@ -71,7 +71,7 @@ fn partial_sums(
                 let g = dy[row * dims.dy_stride + dims.dy_offset + o];
                 value = output_gradient(g, row * dims.y_stride + dims.y_offset + o);
             }
-            a_tile[k * tm + m] = value;
+            stage_a(k, m, value);
         }
         // B[k][n] = X[row k][input n]: read along a row of X.
         for (var e = local_index; e < tn * KC; e += threads) {
@@ -83,13 +83,13 @@ fn partial_sums(
             if row < end_row && i < dims.in_dim {
                 value = x[row * dims.x_stride + dims.x_offset + i];
             }
-            b_tile[k * tn + n] = value;
+            stage_b(k, n, value);
         }
         workgroupBarrier();
         multiply_staged(&block, local_id.x, local_id.y);
         workgroupBarrier();
     }
-    store_block(chunk, o0 + local_id.y, i0 + local_id.x, block);
+    store_block(chunk, o0 + local_id.y * RM, i0 + local_id.x * RN, block);
 }
 
 const REDUCE_WORKGROUP: u32 = 256u;

@@ -10,13 +10,13 @@
 @group(0) @binding(2) var<storage, read> weights: array<f32>;
 @group(0) @binding(3) var<storage, read_write> y: array<f32>;
 
-// Writes the 4 outputs of one block row (columns col + c·TX) that lie inside Y, activated.
+// Writes the 4 outputs of one block row (columns col .. col + 3) that lie inside Y, activated.
 fn store_row(row: u32, col: u32, values: vec4<f32>) {
     if row >= active_rows() {
         return;
     }
     for (var c = 0u; c < RN; c++) {
-        let o = col + c * TX;
+        let o = col + c;
         if o < dims.out_dim {
             var value = values[c];
             if dims.relu != 0u {
@@ -57,7 +57,7 @@ fn forward(
             if row < rows && i < dims.in_dim {
                 value = x[row * dims.x_stride + dims.x_offset + i];
             }
-            a_tile[k * tm + m] = value;
+            stage_a(k, m, value);
         }
         // B[k][o] = W[o][k]: consecutive invocations read along a weight row.
         for (var e = local_index; e < tn * KC; e += threads) {
@@ -69,16 +69,16 @@ fn forward(
             if o < dims.out_dim && i < dims.in_dim {
                 value = weights[dims.weight_offset + o * dims.in_dim + i];
             }
-            b_tile[k * tn + n] = value;
+            stage_b(k, n, value);
         }
         workgroupBarrier();
         multiply_staged(&block, local_id.x, local_id.y);
         workgroupBarrier();
     }
-    let row = row0 + local_id.y;
-    let col = col0 + local_id.x;
+    let row = row0 + local_id.y * RM;
+    let col = col0 + local_id.x * RN;
     store_row(row, col, block.r0);
-    store_row(row + TY, col, block.r1);
-    store_row(row + 2u * TY, col, block.r2);
-    store_row(row + 3u * TY, col, block.r3);
+    store_row(row + 1u, col, block.r1);
+    store_row(row + 2u, col, block.r2);
+    store_row(row + 3u, col, block.r3);
 }

@@ -13,8 +13,9 @@
 //!   second kernel sums the chunks in order, so a step gives the same bits every run.
 //!
 //! The three kernels (`shaders/dense_*.wgsl`) share one register-tiled product
-//! (`shaders/_dense_tile.wgsl`): each invocation accumulates 4×4 outputs from tiles staged in
-//! workgroup memory; the invocation grid and chunk depth are override constants picked per
+//! (`shaders/_dense_tile.wgsl`): each invocation accumulates a contiguous 4×4 block of outputs
+//! from tiles staged in workgroup memory as vec4s (one load of A and one of B per 16
+//! multiply-adds); the invocation grid and chunk depth are override constants picked per
 //! layer shape by [`TileShape`], so 128-wide layers use 64×64 tiles and 1-, 3- or C-wide outputs
 //! tall thin ones. Pipelines are compiled once per (kernel, shape) and device (through
 //! [`DensePipelines`] into the context's pipeline cache) and shared by every layer of every MLP.
