@@ -122,6 +122,37 @@ fn ray_rows(ray: u32, batch: u32) -> RayRows {
     );
 }
 
+// The clearing both kernels do, split over invocations: this one takes items first,
+// first + step, ... (one invocation per ray: 0, 1; a workgroup per ray: its lane, its size).
+
+// Zeroes the ray's losses and dL/drendered, before the losses add what applies to it.
+fn clear_losses_and_gradient(ray: u32, rows: RayRows, first: u32, step: u32) {
+    for (var c = first; c < LOSS_WORDS; c += step) {
+        ray_outputs[ray * LOSS_WORDS + c] = 0.0;
+    }
+    for (var ch = first; ch < rows.k; ch += step) {
+        ray_outputs[rows.grad_at + ch] = 0.0;
+    }
+}
+
+// A ray that misses the scene box renders nothing and passes no gradient to its samples.
+fn clear_missed_ray(rows: RayRows, first: u32, step: u32) {
+    let k = rows.k;
+    for (var ch = first; ch < k; ch += step) {
+        ray_outputs[rows.rendered_at + ch] = 0.0;
+    }
+    for (var s = 0u; s < step_info.samples_per_ray; s++) {
+        let n = rows.first + s;
+        let h = slot[n];
+        for (var ch = first; ch < k; ch += step) {
+            grad_heads[n * k + ch] = 0.0;
+            if h != NOT_KEPT {
+                head_grads[h * k + ch] = 0.0;
+            }
+        }
+    }
+}
+
 // Channel `ch` of sample n in reference::render::Channels order: colour (after the sigmoid),
 // z-depth, logits, feature.
 fn channel_value(n: u32, ch: u32) -> f32 {

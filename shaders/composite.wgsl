@@ -87,23 +87,9 @@ fn composite(
     let grad_at = rows.grad_at;
     let flags = targets[rows.target_row + TARGET_FLAGS];
 
-    for (var c = 0u; c < LOSS_WORDS; c++) {
-        ray_outputs[ray * LOSS_WORDS + c] = 0.0;
-    }
-    for (var c = 0u; c < k; c++) {
-        ray_outputs[rows.rendered_at + c] = 0.0;
-        ray_outputs[grad_at + c] = 0.0;
-    }
+    clear_losses_and_gradient(ray, rows, 0u, 1u);
     if (flags & RAY_HITS_BOX) == 0u {
-        for (var s = 0u; s < samples; s++) {
-            let h = slot[first + s];
-            for (var c = 0u; c < k; c++) {
-                grad_heads[(first + s) * k + c] = 0.0;
-                if h != NOT_KEPT {
-                    head_grads[h * k + c] = 0.0;
-                }
-            }
-        }
+        clear_missed_ray(rows, 0u, 1u);
         return;
     }
 

@@ -165,31 +165,12 @@ fn composite(
     if ray >= batch {
         return;
     }
-    let samples = step_info.samples_per_ray;
     let rows = ray_rows(ray, batch);
-    let k = rows.k;
     let flags = flags_of_ray(rows, lane);
 
-    if lane < LOSS_WORDS {
-        ray_outputs[ray * LOSS_WORDS + lane] = 0.0;
-    }
-    for (var ch = lane; ch < k; ch += LANES) {
-        ray_outputs[rows.grad_at + ch] = 0.0;
-    }
+    clear_losses_and_gradient(ray, rows, lane, LANES);
     if (flags & RAY_HITS_BOX) == 0u {
-        for (var ch = lane; ch < k; ch += LANES) {
-            ray_outputs[rows.rendered_at + ch] = 0.0;
-        }
-        for (var s = 0u; s < samples; s++) {
-            let n = rows.first + s;
-            let h = slot[n];
-            for (var ch = lane; ch < k; ch += LANES) {
-                grad_heads[n * k + ch] = 0.0;
-                if h != NOT_KEPT {
-                    head_grads[h * k + ch] = 0.0;
-                }
-            }
-        }
+        clear_missed_ray(rows, lane, LANES);
         return;
     }
 

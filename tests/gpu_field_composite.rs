@@ -415,6 +415,19 @@ fn check_batch(ctx: &GpuContext, batch: &Batch) {
     eprintln!("batch loss terms: reference {totals:?}, GPU {gpu_totals:?}");
 }
 
+/// The default model's C, D and S (16 + 48) over `batch` rays.
+fn default_widths(batch: u32, features: bool) -> FieldConfig {
+    let d = FieldConfig::default();
+    config(
+        d.num_classes,
+        d.feature_dim,
+        d.samples_coarse,
+        d.samples_fine,
+        batch,
+        features,
+    )
+}
+
 fn config(classes: u32, feature_dim: u32, coarse: u32, fine: u32, batch: u32, features: bool) -> FieldConfig {
     FieldConfig {
         num_classes: classes,
@@ -477,15 +490,7 @@ fn render_entry_point_matches_the_training_render_bit_for_bit() {
     };
     for ctx in with_each_kernel(&ctx) {
         check_render_matches_training(&ctx, &Batch::random(config(3, 5, 5, 7, 300, true), 11));
-        let d = FieldConfig::default();
-        let widths = config(
-            d.num_classes,
-            d.feature_dim,
-            d.samples_coarse,
-            d.samples_fine,
-            130,
-            true,
-        );
+        let widths = default_widths(130, true);
         check_render_matches_training(&ctx, &Batch::random(widths, 12));
     }
 }
@@ -512,25 +517,10 @@ fn composite_matches_reference_with_default_widths() {
         return;
     };
     for ctx in with_each_kernel(&ctx) {
-        let d = FieldConfig::default();
         // The default model's C, D and S (16 + 48), feature supervision on and off.
-        let on = config(
-            d.num_classes,
-            d.feature_dim,
-            d.samples_coarse,
-            d.samples_fine,
-            130,
-            true,
-        );
+        let on = default_widths(130, true);
         check_batch(&ctx, &Batch::random(on, 12));
-        let off = config(
-            d.num_classes,
-            d.feature_dim,
-            d.samples_coarse,
-            d.samples_fine,
-            70,
-            false,
-        );
+        let off = default_widths(70, false);
         check_batch(&ctx, &Batch::random(off, 13));
     }
 }
@@ -595,15 +585,7 @@ fn composite_throughput_report() {
     let Some(ctx) = gpu_for_tests("composite_throughput_report") else {
         return;
     };
-    let d = FieldConfig::default();
-    let cfg = config(
-        d.num_classes,
-        d.feature_dim,
-        d.samples_coarse,
-        d.samples_fine,
-        4096,
-        true,
-    );
+    let cfg = default_widths(4096, true);
     let batch = Batch::random(cfg.clone(), 5);
     let step = uniform_buffer_from(&ctx, "step", &StepUniforms::for_step(&cfg, 1, 0, 1e-3));
     let density = storage_buffer_from(&ctx, "density out", &batch.density).unwrap();
