@@ -136,11 +136,21 @@ fn configs() -> Vec<(&'static str, FieldConfig)> {
         density_layers: 4,
         ..FieldConfig::small()
     };
+    // Widths 16 (the `tiny` preset's): hidden widths within SwiftShader's blocks of 16, so its
+    // input gradients run as one chain there too; the semantic head's 64 inputs take 4 blocks.
+    let narrow = FieldConfig {
+        density_width: 16,
+        color_width: 16,
+        feature_width: 16,
+        semantic_width: 16,
+        ..FieldConfig::small()
+    };
     vec![
         ("small", FieldConfig::small()),
         ("default widths", default_widths),
         ("freq-only, 5 classes", freq_only),
         ("small, density 4 hidden layers", deep),
+        ("widths 16", narrow),
     ]
 }
 
@@ -254,6 +264,15 @@ fn check_mlp(case: MlpCase<'_>) {
         if let Some(buffer) = mlp.hidden_gradient(k) {
             fill_with_garbage(ctx, buffer);
         }
+        if let Some(buffer) = mlp.layer_dz(k) {
+            fill_with_garbage(ctx, buffer);
+        }
+    }
+    if mlp.chains_input_gradients() {
+        assert!(
+            (1..layers).all(|k| mlp.hidden_gradient(k).is_none()),
+            "{name}: a chain keeps dX in registers"
+        );
     }
     assert!(mlp.hidden_gradient(0).is_none() && mlp.hidden_gradient(layers).is_none());
 
@@ -337,7 +356,10 @@ fn check_mlp(case: MlpCase<'_>) {
         let what = format!("{name} input gradient");
         assert_rows_untouched(&what, input_grad_layout, &gpu_input_grad, active, rows);
         for (k, &width) in dims.iter().enumerate().take(layers).skip(1) {
-            let hidden: Vec<f32> = read_buffer_blocking(ctx, mlp.hidden_gradient(k).unwrap()).unwrap();
+            let Some(hidden) = mlp.hidden_gradient(k) else {
+                continue;
+            };
+            let hidden: Vec<f32> = read_buffer_blocking(ctx, hidden).unwrap();
             let packed = ViewLayout::padded(width, 0, 0);
             assert_rows_untouched(
                 &format!("{name} layer {k} input gradient"),
@@ -381,9 +403,10 @@ fn check_mlp(case: MlpCase<'_>) {
         &magnitude,
         WEIGHT_GRAD_TOLERANCE,
     );
+    let chained = mlp.chains_input_gradients();
     eprintln!(
-        "{name} {dims:?} × {active} of {rows} rows, kernels {families:?}: worst error / magnitude: forward {worst_forward:.2e}, \
-         input gradient {worst_input_grad:.2e}, weight gradient {worst_weight:.2e}"
+        "{name} {dims:?} × {active} of {rows} rows, kernels {families:?}, input gradients chained {chained}: worst error / \
+         magnitude: forward {worst_forward:.2e}, input gradient {worst_input_grad:.2e}, weight gradient {worst_weight:.2e}"
     );
 }
 
@@ -402,13 +425,19 @@ fn every_mlp_matches_the_reference_with_uniform_weights() {
     let Some(ctx) = gpu_for_tests("every_mlp_matches_the_reference_with_uniform_weights") else {
         return;
     };
-    check_every_mlp(&ctx, DensePipelines::with_family(DenseFamily::UniformWeights));
-    // The narrower blocks other CPU devices get (SwiftShader: 16).
-    for limit in [16, 4] {
-        check_every_mlp(
-            &ctx,
-            DensePipelines::with_family(DenseFamily::UniformWeights).with_uniform_block_limit(limit),
-        );
+    // With and without the input-gradient chain (the device decides by default).
+    for chain in [true, false] {
+        let uniform = DensePipelines::with_family(DenseFamily::UniformWeights).with_input_gradient_chain(chain);
+        check_every_mlp(&ctx, uniform.with_uniform_block_limit(64));
+        // The narrower blocks other CPU devices get (SwiftShader: 16).
+        for limit in [16, 4] {
+            check_every_mlp(
+                &ctx,
+                DensePipelines::with_family(DenseFamily::UniformWeights)
+                    .with_uniform_block_limit(limit)
+                    .with_input_gradient_chain(chain),
+            );
+        }
     }
     // And they are used: a small MLP runs every layer on them.
     let cfg = FieldConfig::small();
@@ -429,6 +458,71 @@ fn every_mlp_matches_the_reference_with_uniform_weights() {
     let mut pipelines = DensePipelines::with_family(DenseFamily::UniformWeights);
     let mlp = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc)).unwrap();
     assert!(mlp.layer_families().all(|f| f == DenseFamily::UniformWeights));
+}
+
+/// Which MLPs run their input gradients as one chain: those of 2 or 3 layers on the uniform
+/// family whose hidden widths fit one block (the checks above run both kinds).
+#[test]
+fn uniform_mlps_chain_their_input_gradients_where_they_fit() {
+    let Some(ctx) = gpu_for_tests("uniform_mlps_chain_their_input_gradients_where_they_fit") else {
+        return;
+    };
+    let configs = configs();
+    let config = |name: &str| configs.iter().find(|(n, _)| *n == name).unwrap().1.clone();
+    let uniform = || DensePipelines::with_family(DenseFamily::UniformWeights).with_input_gradient_chain(true);
+    let cases = [
+        (
+            "small",
+            uniform().with_uniform_block_limit(64),
+            [true, true, true, true],
+        ),
+        ("small", uniform().with_uniform_block_limit(16), [false; 4]),
+        ("small", DensePipelines::new(), [false; 4]),
+        ("widths 16", uniform().with_uniform_block_limit(16), [true; 4]),
+        // 128-wide density and colour layers; the feature MLP's copies span more than one
+        // window; the semantic head's one hidden layer of 64 fits.
+        (
+            "default widths",
+            uniform().with_uniform_block_limit(64),
+            [false, false, false, true],
+        ),
+        (
+            "small, density 4 hidden layers",
+            uniform().with_uniform_block_limit(64),
+            [false, true, true, true],
+        ),
+        (
+            "small",
+            uniform().with_uniform_block_limit(64).with_input_gradient_chain(false),
+            [false; 4],
+        ),
+    ];
+    for (name, mut pipelines, expected) in cases {
+        let layout = ParamLayout::new(&config(name));
+        let params = trainer_params(&ctx, &layout.init(3));
+        let rows = 100u32;
+        for ((mlp_name, mlp), chains) in layout.mlps().into_iter().zip(expected) {
+            let (in_dim, out_dim) = (mlp.input_dim() as u32, mlp.output_dim() as u32);
+            let buffer = |width: u32| storage_buffer_zeroed::<f32>(&ctx, "rows", (rows * width) as usize).unwrap();
+            let (input, output_grad, input_grad) = (buffer(in_dim), buffer(out_dim), buffer(in_dim));
+            let desc = MlpPassDesc {
+                label: mlp_name,
+                layout: mlp,
+                rows,
+                params: &params,
+                input: RowView::packed(&input, in_dim),
+                output: None,
+                gradients: Some(MlpGradients {
+                    grads: storage_buffer_zeroed::<f32>(&ctx, "grads", layout.total).unwrap(),
+                    output_grad: RowView::packed(&output_grad, out_dim),
+                    input_grad: (mlp_name != "color").then(|| RowView::packed(&input_grad, in_dim)),
+                }),
+                kept: None,
+            };
+            let pass = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc)).unwrap();
+            assert_eq!(pass.chains_input_gradients(), chains, "{name} {mlp_name}");
+        }
+    }
 }
 
 fn check_every_mlp(ctx: &GpuContext, mut pipelines: DensePipelines) {
@@ -495,7 +589,7 @@ fn kept_row_counts_match_the_reference() {
     let layout = ParamLayout::new(&cfg);
     let params = layout.init(7);
     for family in [DenseFamily::Tiled, DenseFamily::UniformWeights] {
-        let mut pipelines = DensePipelines::with_family(family);
+        let mut pipelines = DensePipelines::with_family(family).with_input_gradient_chain(true);
         for (kept, seed) in [(0, 11), (1, 12), (1500, 13), (3000, 14)] {
             for (mlp_name, mlp, input_grad) in [("colour", &layout.color, false), ("semantic", &layout.semantic, true)]
             {

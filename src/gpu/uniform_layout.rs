@@ -49,6 +49,12 @@ pub const MIRRORS: &[Mirror] = &[
         "CompositeUniforms",
     ),
     mirror(
+        "src/field/gpu/dense/chain.rs",
+        "ChainDims",
+        "dense_backward_chain_uniform.wgsl",
+        "ChainDims",
+    ),
+    mirror(
         "src/field/gpu/dense/layer.rs",
         "DenseDims",
         "dense_forward.wgsl",

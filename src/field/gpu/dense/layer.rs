@@ -262,6 +262,9 @@ pub struct DenseGradients<'a> {
     pub input_grad: Option<&'a RowView>,
     /// As the forward's `kept`: the rows present are the kept samples (see [`HeadRows`]).
     pub kept: Option<&'a HeadRows>,
+    /// The MLP's input-gradient chain writes this layer's dZ (`input_grad` must be `None`;
+    /// see `chain.rs`): the layer records its weight gradient alone.
+    pub dz_from_chain: bool,
 }
 
 /// The backward of one layer, bound to its buffers; owns the per-chunk partial sums of dW.
@@ -272,6 +275,10 @@ pub struct DenseBackward {
     partial_sums: WeightPartials,
     reduce: Dispatch,
     chunks: u32,
+    /// The padded dZ rows the uniform-window weight gradient reads (`None`: tiled).
+    dz: Option<wgpu::Buffer>,
+    /// The row-count word its kernels read.
+    row_count: wgpu::Buffer,
 }
 
 /// The first half of dW: every chunk of rows' partial matrix.
@@ -334,8 +341,14 @@ impl DenseBackward {
         let dz = uniform_plan
             .map(|(chunk_rows, chunks)| dz_windows_buffer(ctx, &label_dw, spec, chunk_rows, chunks))
             .transpose()?;
+        if gradients.dz_from_chain && (dz.is_none() || gradients.input_grad.is_some()) {
+            return Err(GpuError::invalid_argument(
+                &label,
+                "a chain writes dZ only for a uniform-window weight gradient without its own dX",
+            ));
+        }
 
-        let mut dz_written = false;
+        let mut dz_written = gradients.dz_from_chain;
         let input_grad = match gradients.input_grad {
             None => None,
             Some(input_grad) => {
@@ -410,6 +423,7 @@ impl DenseBackward {
         };
         let uniform = uniform_buffer_from(ctx, &label, &dims);
 
+        let dz_kept = dz.clone();
         let partial_sums = match dz {
             Some(dz) => WeightPartials::Uniform(
                 UniformWeightPartials::new(
@@ -479,7 +493,19 @@ impl DenseBackward {
             partial_sums,
             reduce,
             chunks,
+            dz: dz_kept,
+            row_count: rows,
         })
+    }
+
+    /// The buffer of padded dZ rows its weight gradient reads, where it reads one.
+    pub fn dz_buffer(&self) -> Option<&wgpu::Buffer> {
+        self.dz.as_ref()
+    }
+
+    /// The row-count word its kernels read.
+    pub(super) fn row_count(&self) -> &wgpu::Buffer {
+        &self.row_count
     }
 
     /// Bytes its dispatches move through global memory over `rows` rows (every element a

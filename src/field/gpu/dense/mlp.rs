@@ -1,4 +1,5 @@
 //! Whole MLPs on the dense layers: the twin of `reference::mlp`.
+use super::chain::{BackwardChain, ChainDesc, chain_block};
 use super::layer::{DenseBackward, DenseForward, DenseGradients, DenseLayerSpec};
 use super::pipelines::ProductKind;
 use super::uniform::MlpPacking;
@@ -44,9 +45,12 @@ pub struct MlpPass {
     packing: MlpPacking,
     forward: Vec<DenseForward>,
     backward: Option<Vec<DenseBackward>>,
+    /// Every layer's input gradient in one dispatch, where the MLP qualifies (CPU devices;
+    /// `chain.rs`); the layers' backwards then record their weight gradients alone.
+    chain: Option<BackwardChain>,
     /// Output of layer k (the input of layer k + 1; the last is the MLP's output).
     outputs: Vec<RowView>,
-    /// dL/d(input of layer k) for k ≥ 1, packed, owned.
+    /// dL/d(input of layer k) for k ≥ 1, packed, owned (none in a chain: registers).
     hidden_grads: Vec<wgpu::Buffer>,
 }
 
@@ -120,10 +124,13 @@ impl MlpPass {
         }
 
         let mut hidden_grads = Vec::new();
+        let mut chain = None;
         let backward = match gradients {
             None => None,
             Some(gradients) => {
-                for spec in &specs[1..] {
+                let chain_block = chain_block(ctx, pipelines, &specs, &packing, gradients.input_grad.is_some());
+                let chained = chain_block.is_some();
+                for spec in specs[1..].iter().filter(|_| !chained) {
                     let count = rows as usize * spec.in_dim as usize;
                     hidden_grads.push(storage_buffer_zeroed::<f32>(
                         ctx,
@@ -139,12 +146,18 @@ impl MlpPass {
                 let mut backward = Vec::with_capacity(layers);
                 for (k, spec) in specs.iter().enumerate() {
                     let layer_input = if k == 0 { &input } else { &outputs[k - 1] };
+                    // In a chain a hidden layer's dY never leaves the registers: its backward
+                    // gets its own output as a view of the right shape, which it does not read.
                     let output_grad = if k + 1 == layers {
                         &gradients.output_grad
+                    } else if chained {
+                        &outputs[k]
                     } else {
                         &hidden_views[k]
                     };
-                    let input_grad = if k == 0 {
+                    let input_grad = if chained {
+                        None
+                    } else if k == 0 {
                         gradients.input_grad.as_ref()
                     } else {
                         Some(&hidden_views[k - 1])
@@ -154,6 +167,7 @@ impl MlpPass {
                         output_grad,
                         input_grad,
                         kept,
+                        dz_from_chain: chained,
                     };
                     let window = packing.window(k, ProductKind::BackwardInput);
                     backward.push(
@@ -169,6 +183,25 @@ impl MlpPass {
                         .await?,
                     );
                 }
+                if let Some(block) = chain_block {
+                    let dz = backward
+                        .iter()
+                        .map(|layer: &DenseBackward| layer.dz_buffer().cloned())
+                        .collect::<Option<Vec<_>>>()
+                        .ok_or_else(|| GpuError::invalid_argument(label, "a chained layer has no dZ windows"))?;
+                    let desc = ChainDesc {
+                        label,
+                        specs: &specs,
+                        block,
+                        outputs: &outputs,
+                        output_grad: &gradients.output_grad,
+                        input_grad: gradients.input_grad.as_ref(),
+                        dz,
+                        row_count: backward[0].row_count(),
+                        kept,
+                    };
+                    chain = Some(BackwardChain::new(ctx, pipelines, &packing, desc).await?);
+                }
                 Some(backward)
             }
         };
@@ -176,6 +209,7 @@ impl MlpPass {
             packing,
             forward,
             backward,
+            chain,
             outputs,
             hidden_grads,
         })
@@ -198,6 +232,9 @@ impl MlpPass {
             let label = self.forward.first().map_or("mlp", |layer| layer.spec().label.as_str());
             GpuError::invalid_argument(label, "backward recorded on a pass built without gradients")
         })?;
+        if let Some(chain) = &self.chain {
+            chain.record(pass);
+        }
         for layer in backward.iter().rev() {
             layer.record(pass);
         }
@@ -213,11 +250,25 @@ impl MlpPass {
     /// Bytes its backward moves over `rows` rows ([`DenseBackward::global_bytes`] of every
     /// layer); 0 for a forward-only pass.
     pub fn backward_bytes(&self, rows: u64) -> u64 {
-        self.backward
-            .iter()
-            .flatten()
-            .map(|layer| layer.global_bytes(rows))
-            .sum()
+        let chain = self.chain.as_ref().map_or(0, |chain| chain.global_bytes(rows));
+        chain
+            + self
+                .backward
+                .iter()
+                .flatten()
+                .map(|layer| layer.global_bytes(rows))
+                .sum::<u64>()
+    }
+
+    /// The padded dZ rows layer `k`'s weight gradient reads, where it reads them through
+    /// uniform windows (written by the chain, dX's kernel or a masking kernel each step).
+    pub fn layer_dz(&self, k: usize) -> Option<&wgpu::Buffer> {
+        self.backward.as_ref()?.get(k)?.dz_buffer()
+    }
+
+    /// Whether the input gradients run as one chain (`chain.rs`).
+    pub fn chains_input_gradients(&self) -> bool {
+        self.chain.is_some()
     }
 
     /// The MLP's (linear) output.
@@ -230,7 +281,7 @@ impl MlpPass {
         self.outputs.get(k)
     }
 
-    /// dL/d(input of layer k) for k ≥ 1, as written by the backward.
+    /// dL/d(input of layer k) for k ≥ 1, as written by the backward (`None` in a chain).
     pub fn hidden_gradient(&self, k: usize) -> Option<&wgpu::Buffer> {
         k.checked_sub(1).and_then(|i| self.hidden_grads.get(i))
     }

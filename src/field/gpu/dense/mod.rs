@@ -33,10 +33,14 @@
 //! X and Y (and dY and dX) of one layer must be different buffers: WebGPU forbids binding one
 //! buffer both read-only and writable in a dispatch.
 //!
+//! On lavapipe an MLP of 2 or 3 such layers whose hidden widths fit one invocation runs all its
+//! input gradients as one kernel ([`chain`]), each hidden layer's dX kept in registers.
+//!
 //! Where things live: [`tiled`] (tile shapes and the tiled weight-gradient chunking),
-//! [`uniform`] (the uniform-weight family), [`pipelines`] (the pipeline cache and the choice of
+//! [`uniform`] (the uniform-weight family), [`chain`] (the input-gradient chain), [`pipelines`] (the pipeline cache and the choice of
 //! kernel per product), [`layer`] (layer specs, one layer's forward and backward) and [`mlp`]
 //! (whole MLPs). Everything a caller needs is re-exported here.
+mod chain;
 mod layer;
 mod mlp;
 mod pipelines;

@@ -17,6 +17,7 @@ pub(super) enum DenseKernel {
     ReduceChunks,
     ForwardUniform,
     BackwardInputUniform,
+    BackwardChainUniform,
     MaskOutputGradient,
     ChunkPartialSums,
     PackWeights,
@@ -50,6 +51,11 @@ impl DenseKernel {
                 shaders::DENSE_BACKWARD_INPUT_UNIFORM,
                 "backward_input",
             ),
+            DenseKernel::BackwardChainUniform => (
+                "dense backward chain (uniform weights)",
+                shaders::DENSE_BACKWARD_CHAIN_UNIFORM,
+                "backward_chain",
+            ),
             DenseKernel::MaskOutputGradient => (
                 "dense output gradient mask",
                 shaders::DENSE_BACKWARD_WEIGHT_UNIFORM,
@@ -76,6 +82,9 @@ pub struct DensePipelines {
     /// The widest block of outputs one uniform-weight invocation computes; `None`: the device's
     /// (`widest_uniform_block`).
     uniform_block_limit: Option<u32>,
+    /// Whether MLPs that qualify run their input gradients as one chain (`chain.rs`); `None`:
+    /// where the device is faster with it (`chain::chains_on`).
+    input_gradient_chain: Option<bool>,
 }
 
 impl Default for DensePipelines {
@@ -94,7 +103,22 @@ impl DensePipelines {
         DensePipelines {
             family,
             uniform_block_limit: None,
+            input_gradient_chain: None,
         }
+    }
+
+    /// The same with the input-gradient chain on or off whatever the device, so tests can run
+    /// it on one device at every block width.
+    pub fn with_input_gradient_chain(self, chain: bool) -> DensePipelines {
+        DensePipelines {
+            input_gradient_chain: Some(chain),
+            ..self
+        }
+    }
+
+    pub(super) fn input_gradient_chain(&self, ctx: &GpuContext) -> bool {
+        self.input_gradient_chain
+            .unwrap_or_else(|| super::chain::chains_on(ctx))
     }
 
     /// The same with the uniform-weight kernels' blocks at most `limit` (a multiple of 4 up to 64)

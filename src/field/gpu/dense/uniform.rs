@@ -255,7 +255,8 @@ pub(super) fn dz_windows_buffer(
     Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(&format!("{label} dZ")),
         size: dz_floats as u64 * 4,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::UNIFORM,
+        // COPY_DST: tests fill it with garbage.
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     }))
 }
@@ -387,8 +388,8 @@ const MAX_PACK_JOBS: usize = 8;
 /// dispatch that refreshes them all (`shaders/dense_pack_weights.wgsl`), recorded before the
 /// MLP's forward: one dispatch per MLP and step instead of one per product.
 pub(super) struct MlpPacking {
-    /// (layer, product) → byte offset of its packed copy in `buffer`.
-    slots: Vec<((usize, ProductKind), u64)>,
+    /// (layer, product) → byte offset and size of its packed copy in `buffer`.
+    slots: Vec<((usize, ProductKind), u64, u64)>,
     /// What refreshing them moves: every copied weight read, every packed value written.
     bytes: u64,
     buffer: Option<wgpu::Buffer>,
@@ -442,13 +443,13 @@ impl MlpPacking {
                 dst: (offset / 4) as u32,
                 _pad: [0; 3],
             });
-            slots.push(((k, kind), offset));
             let floats = rows * padded_to_vec4(columns);
+            slots.push(((k, kind), offset, u64::from(floats) * 4));
             bytes += 4 * (u64::from(rows) * u64::from(columns) + u64::from(floats));
             offset = (offset + u64::from(floats) * 4).div_ceil(align) * align;
         }
         // Each kernel binds a whole 64 KiB window from its copy's start, the last one included.
-        let last = slots.last().map_or(0, |(_, at)| *at);
+        let last = slots.last().map_or(0, |(_, at, _)| *at);
         let size = last + UNIFORM_WEIGHT_FLOATS as u64 * 4;
         ctx.ensure_storage_binding_fits(label, size)?;
         let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
@@ -491,12 +492,23 @@ impl MlpPacking {
     /// The 64 KiB window holding layer `layer`'s packed copy for `kind`, if it has one.
     pub(super) fn window(&self, layer: usize, kind: ProductKind) -> Option<wgpu::BindingResource<'_>> {
         let buffer = self.buffer.as_ref()?;
-        let &(_, offset) = self.slots.iter().find(|(slot, _)| *slot == (layer, kind))?;
+        let &(_, offset, _) = self.slots.iter().find(|(slot, _, _)| *slot == (layer, kind))?;
         Some(wgpu::BindingResource::Buffer(wgpu::BufferBinding {
             buffer,
             offset,
             size: NonZeroU64::new(UNIFORM_WEIGHT_FLOATS as u64 * 4),
         }))
+    }
+
+    /// Where layer `layer`'s packed copy for `kind` starts, in vec4s from the start of the window
+    /// of layer `from`'s input-gradient copy; `None` unless both exist and the copy ends inside
+    /// that window.
+    pub(super) fn vec4_index_from(&self, from: usize, layer: usize, kind: ProductKind) -> Option<u32> {
+        let find = |layer, kind| self.slots.iter().find(|(slot, _, _)| *slot == (layer, kind));
+        let &(_, start, _) = find(from, ProductKind::BackwardInput)?;
+        let &(_, offset, size) = find(layer, kind)?;
+        let end = offset.checked_sub(start)? + size;
+        (end <= UNIFORM_WEIGHT_FLOATS as u64 * 4).then_some(((offset - start) / 16) as u32)
     }
 
     /// Bytes one refresh moves: every copied weight read and every packed value written.

@@ -1,0 +1,263 @@
+// The input gradients of a whole MLP of 2 or 3 layers in one kernel, weights from a uniform
+// binding (`_dense_uniform.wgsl`; src/field/gpu/dense/chain.rs): CPU devices only, where every
+// storage load and store is a loop over the SIMD lanes. One invocation per row n walks the
+// layers from the last to the first:
+//   dZ of the last (linear) layer = dY;
+//   dX of layer k = Σ_o dZ_k[o] · W_k[o][·], kept in registers (`Acc`), not written;
+//   dZ of layer k - 1 = that dX ⊙ ReLU'(Y_{k-1}) (0 at 0, as the reference);
+// and writes every layer's dZ in the padded rows its uniform-window weight gradient reads
+// (`dense_backward_weight_uniform.wgsl`, `padded_to_vec4(width)` per row, zeros in the
+// padding) and dX of the first layer. Per layer boundary that saves the store of dX and its
+// load as the next layer's dY, and a dispatch. Every sum adds in the order of
+// `dense_backward_input_uniform.wgsl`, o = 0, 1, ...
+//
+// BLOCK covers every hidden width (uniform.rs keeps hidden widths within the device's widest
+// block), so a hidden layer's dX is one invocation's accumulators; the first layer's dX is
+// split into blocks of BLOCK along workgroup z, and the invocations of the later blocks redo
+// the walk without writing dZ again.
+//!include _dense_uniform.wgsl
+
+// Layers (2 or 3) and widths: D0 in, D1 .. the hidden and output widths (D3 unused with 2).
+override LAYERS: u32 = 3u;
+override D0: u32 = 16u;
+override D1: u32 = 32u;
+override D2: u32 = 32u;
+override D3: u32 = 16u;
+// Whether the MLP's input wants its gradient; without, the walk stops at dZ of layer 0.
+override WRITE_DX: bool = true;
+
+// Mirrors `ChainDims` in src/field/gpu/dense/chain.rs: where the hidden outputs Y_0 and Y_1
+// are, and each layer's packed [out][in] copy in `weights` (vec4 index).
+struct ChainDims {
+    y0_stride: u32,
+    y0_offset: u32,
+    y1_stride: u32,
+    y1_offset: u32,
+    w0: u32,
+    w1: u32,
+    w2: u32,
+    _pad: u32,
+}
+
+// dims: rows, dy and dx views (the MLP's output gradient and input gradient).
+@group(0) @binding(0) var<uniform> dims: DenseDims;
+@group(0) @binding(1) var<storage, read> dy: array<f32>;
+// Y_0, the first hidden layer's output (named `y` as `_dense_tile.wgsl` expects).
+@group(0) @binding(2) var<storage, read> y: array<f32>;
+@group(0) @binding(3) var<uniform> weights: array<vec4<f32>, UNIFORM_WEIGHT_VEC4S>;
+@group(0) @binding(4) var<storage, read_write> dx: array<f32>;
+// Y_1 (3 layers).
+@group(0) @binding(5) var<storage, read> y_upper: array<f32>;
+@group(0) @binding(8) var<uniform> chain: ChainDims;
+// dZ of each layer, rows of padded_to_vec4(its output width) vec4-aligned.
+@group(0) @binding(9) var<storage, read_write> dz0: array<vec4<f32>>;
+@group(0) @binding(10) var<storage, read_write> dz1: array<vec4<f32>>;
+@group(0) @binding(11) var<storage, read_write> dz2: array<vec4<f32>>;
+
+// Width j of the MLP: D0 (its input) .. D_LAYERS (its output).
+fn width(j: u32) -> u32 {
+    switch j {
+        case 0u: {
+            return D0;
+        }
+        case 1u: {
+            return D1;
+        }
+        case 2u: {
+            return D2;
+        }
+        default: {
+            return D3;
+        }
+    }
+}
+
+fn weight_base(k: u32) -> u32 {
+    switch k {
+        case 0u: {
+            return chain.w0;
+        }
+        case 1u: {
+            return chain.w1;
+        }
+        default: {
+            return chain.w2;
+        }
+    }
+}
+
+// Y_k[n][j] (k = 0 or 1: only hidden layers are masked).
+fn hidden_output(k: u32, n: u32, j: u32) -> f32 {
+    if k == 0u {
+        return y[n * chain.y0_stride + chain.y0_offset + j];
+    }
+    return y_upper[n * chain.y1_stride + chain.y1_offset + j];
+}
+
+// Quad q of row n of layer k's dZ.
+fn store_dz(k: u32, n: u32, q: u32, value: vec4<f32>) {
+    let index = n * quads_per_row(width(k + 1u)) + q;
+    switch k {
+        case 0u: {
+            dz0[index] = value;
+        }
+        case 1u: {
+            dz1[index] = value;
+        }
+        default: {
+            dz2[index] = value;
+        }
+    }
+}
+
+// 1 where Y_k[n][o0 + c] > 0 and o0 + c is inside the width, else 0.
+fn relu_mask(k: u32, n: u32, o0: u32, w: u32) -> vec4<f32> {
+    var mask = vec4<f32>(0.0);
+    if hidden_output(k, n, o0) > 0.0 {
+        mask.x = 1.0;
+    }
+    if o0 + 1u < w && hidden_output(k, n, o0 + 1u) > 0.0 {
+        mask.y = 1.0;
+    }
+    if o0 + 2u < w && hidden_output(k, n, o0 + 2u) > 0.0 {
+        mask.z = 1.0;
+    }
+    if o0 + 3u < w && hidden_output(k, n, o0 + 3u) > 0.0 {
+        mask.w = 1.0;
+    }
+    return mask;
+}
+
+// Quad q of layer k's dZ from quad q of `upstream` (dX of layer k + 1): masked, stored (first
+// block only), and, if `feeds`, added into `to` (dX of layer k, quads from `i0_quad` of each
+// packed row).
+fn back_quad(k: u32, n: u32, q: u32, upstream: vec4<f32>, to: ptr<function, Acc>, stores: bool, feeds: bool, i0_quad: u32) {
+    let w = width(k + 1u);
+    let o0 = 4u * q;
+    if o0 >= w {
+        return;
+    }
+    // A select, not a product: an infinite upstream value where Y is 0 gives 0, as the
+    // reference's mask does.
+    let g = select(vec4<f32>(0.0), upstream, relu_mask(k, n, o0, w) > vec4<f32>(0.0));
+    if stores {
+        store_dz(k, n, q, g);
+    }
+    if !feeds {
+        return;
+    }
+    let quads = quads_per_row(width(k));
+    let base = weight_base(k) + o0 * quads + i0_quad;
+    accumulate(to, g.x, base);
+    if o0 + 1u < w {
+        accumulate(to, g.y, base + quads);
+    }
+    if o0 + 2u < w {
+        accumulate(to, g.z, base + 2u * quads);
+    }
+    if o0 + 3u < w {
+        accumulate(to, g.w, base + 3u * quads);
+    }
+}
+
+// Layer k's dZ from `upstream` (dX of layer k + 1, quad by quad in order), and dX of layer k into
+// `to`. The quads past BLOCK are dropped when the pipeline is specialised.
+fn back_through(k: u32, n: u32, upstream: ptr<function, Acc>, to: ptr<function, Acc>, stores: bool, feeds: bool, i0_quad: u32) {
+    back_quad(k, n, 0u, (*upstream).a0, to, stores, feeds, i0_quad);
+    if BLOCK > 4u {
+        back_quad(k, n, 1u, (*upstream).a1, to, stores, feeds, i0_quad);
+    }
+    if BLOCK > 8u {
+        back_quad(k, n, 2u, (*upstream).a2, to, stores, feeds, i0_quad);
+    }
+    if BLOCK > 12u {
+        back_quad(k, n, 3u, (*upstream).a3, to, stores, feeds, i0_quad);
+    }
+    if BLOCK > 16u {
+        back_quad(k, n, 4u, (*upstream).a4, to, stores, feeds, i0_quad);
+    }
+    if BLOCK > 20u {
+        back_quad(k, n, 5u, (*upstream).a5, to, stores, feeds, i0_quad);
+    }
+    if BLOCK > 24u {
+        back_quad(k, n, 6u, (*upstream).a6, to, stores, feeds, i0_quad);
+    }
+    if BLOCK > 28u {
+        back_quad(k, n, 7u, (*upstream).a7, to, stores, feeds, i0_quad);
+    }
+    if BLOCK > 32u {
+        back_quad(k, n, 8u, (*upstream).a8, to, stores, feeds, i0_quad);
+    }
+    if BLOCK > 36u {
+        back_quad(k, n, 9u, (*upstream).a9, to, stores, feeds, i0_quad);
+    }
+    if BLOCK > 40u {
+        back_quad(k, n, 10u, (*upstream).a10, to, stores, feeds, i0_quad);
+    }
+    if BLOCK > 44u {
+        back_quad(k, n, 11u, (*upstream).a11, to, stores, feeds, i0_quad);
+    }
+    if BLOCK > 48u {
+        back_quad(k, n, 12u, (*upstream).a12, to, stores, feeds, i0_quad);
+    }
+    if BLOCK > 52u {
+        back_quad(k, n, 13u, (*upstream).a13, to, stores, feeds, i0_quad);
+    }
+    if BLOCK > 56u {
+        back_quad(k, n, 14u, (*upstream).a14, to, stores, feeds, i0_quad);
+    }
+    if BLOCK > 60u {
+        back_quad(k, n, 15u, (*upstream).a15, to, stores, feeds, i0_quad);
+    }
+}
+
+@compute @workgroup_size(WORKGROUP)
+fn backward_chain(
+    @builtin(workgroup_id) workgroup_id: vec3<u32>,
+    @builtin(num_workgroups) num_workgroups: vec3<u32>,
+    @builtin(local_invocation_index) local_index: u32,
+) {
+    let n = linear_item_index(vec3<u32>(workgroup_id.xy, 0u), num_workgroups, local_index, WORKGROUP);
+    if n >= active_rows() {
+        return;
+    }
+    let stores = workgroup_id.z == 0u;
+    let i0 = workgroup_id.z * BLOCK;
+    let last = LAYERS - 1u;
+    // The last layer is linear: its dZ is dY, read as the per-layer kernel reads it.
+    let w_out = width(LAYERS);
+    let quads = quads_per_row(width(last));
+    let dy_row = n * dims.dy_stride + dims.dy_offset;
+    var upper: Acc;
+    var row_quad = vec4<f32>(0.0);
+    for (var o = 0u; o < w_out; o++) {
+        let g = dy[dy_row + o];
+        row_quad[o & 3u] = g;
+        if stores && (o & 3u) == 3u {
+            store_dz(last, n, o >> 2u, row_quad);
+            row_quad = vec4<f32>(0.0);
+        }
+        accumulate(&upper, g, weight_base(last) + o * quads);
+    }
+    if stores && (w_out & 3u) != 0u {
+        store_dz(last, n, w_out >> 2u, row_quad);
+    }
+    var lower: Acc;
+    var first: Acc;
+    if LAYERS == 3u {
+        back_through(1u, n, &upper, &lower, stores, true, 0u);
+        back_through(0u, n, &lower, &first, stores, WRITE_DX, i0 >> 2u);
+    } else {
+        back_through(0u, n, &upper, &first, stores, WRITE_DX, i0 >> 2u);
+    }
+    if !WRITE_DX {
+        return;
+    }
+    let dx_row = n * dims.dx_stride + dims.dx_offset;
+    for (var j = 0u; j < BLOCK; j++) {
+        let i = i0 + j;
+        if i < D0 {
+            dx[dx_row + i] = acc_value(&first, j);
+        }
+    }
+}
