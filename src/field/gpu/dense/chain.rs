@@ -13,7 +13,7 @@
 use super::layer::{DenseDims, DenseLayerSpec, bound};
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
 use super::uniform::{
-    MlpPacking, UNIFORM_WORKGROUP, padded_to_vec4, uniform_block, uniform_dispatch, uniform_weight_chunks,
+    MlpPacking, UNIFORM_WORKGROUP, is_lavapipe, padded_to_vec4, uniform_block, uniform_dispatch, uniform_weight_chunks,
 };
 use super::{DenseFamily, RowView};
 use crate::field::gpu::keep::HeadRows;
@@ -42,8 +42,7 @@ const CHAIN_STORAGE_BINDINGS: u32 = 8;
 /// SwiftShader ran every MLP's backward slower with it (docs/results/bench.md), and GPUs run
 /// the tiled kernels.
 pub(super) fn chains_on(ctx: &GpuContext) -> bool {
-    let name = ctx.adapter_info.name.to_ascii_lowercase();
-    name.contains("llvmpipe") || name.contains("lavapipe")
+    is_lavapipe(ctx)
 }
 
 /// Whether the MLP of `specs` (with the packed copies of `packing`) can run its input gradients

@@ -31,12 +31,14 @@ pub(super) fn uniform_block(width: u32, limit: u32) -> u32 {
 /// per block of 16; SwiftShader's Subzero compiler ran 16 faster, natively and in the page, and
 /// a browser's CPU device has no name to tell which it is (docs/results/bench.md).
 pub(super) fn widest_uniform_block(ctx: &GpuContext) -> u32 {
+    if is_lavapipe(ctx) { 64 } else { 16 }
+}
+
+/// Whether `ctx`'s adapter is Mesa's lavapipe (llvmpipe, LLVM), whose compiler some kernels
+/// suit better than other CPU devices' (SwiftShader's Subzero).
+pub(super) fn is_lavapipe(ctx: &GpuContext) -> bool {
     let name = ctx.adapter_info.name.to_ascii_lowercase();
-    if name.contains("llvmpipe") || name.contains("lavapipe") {
-        64
-    } else {
-        16
-    }
+    name.contains("llvmpipe") || name.contains("lavapipe")
 }
 
 pub(super) fn uniform_dispatch(ctx: &GpuContext, rows: u32, width: u32, block: u32) -> Result<[u32; 3], GpuError> {
