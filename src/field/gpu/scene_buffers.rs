@@ -178,7 +178,14 @@ impl SceneBuffers {
             &pack_u16_pairs(&depth_units),
         )?;
         let poses = storage_buffer_from(ctx, &format!("scene poses ({frames} frames)"), &poses)?;
-        let features = storage_buffer_from(ctx, &format!("scene feature codes ({size})"), &feature_words)?;
+        // Past the binding limit, what the user can change is how the archive was packed.
+        let codes = scene.features.as_ref().map_or_else(String::new, |c| {
+            format!(
+                "{frames} frames of {} x {} cells x {} values; pack it with fewer feature cells (--feature-stride) or a smaller longest side (--max-size)",
+                c.width, c.height, c.dim
+            )
+        });
+        let features = storage_buffer_from(ctx, &format!("scene feature codes ({codes})"), &feature_words)?;
         let label_index = LabelIndex::from_labels(
             scene.labels.as_ref(),
             scene.frames.len() as u32,
