@@ -21,6 +21,11 @@ use crate::scene::Scene;
 const NEIGHBOURS: usize = 10;
 /// Points per occupied cell the neighbour search aims at.
 const POINTS_PER_CELL: f64 = 4.0;
+/// How much each step of the walk fades when the strokes' points hold a single class (see
+/// [`PointLabeller::point_classes_pausing`]): a walk of about ten million steps, which crosses any
+/// surface the reconstruction joins but hardly ever a link of [`MIN_WEIGHT`], or a jump across
+/// a colour edge between clusters (docs/quality.md, "one class under the strokes").
+const LONE_CLASS_FADE: f64 = 1e-7;
 /// Smallest edge weight: keeps the graph connected so each system has one solution.
 const MIN_WEIGHT: f64 = 1e-9;
 
@@ -132,7 +137,11 @@ impl PointGraph {
     /// here without fading). The system is the same for every class (only its right-hand side
     /// differs), so it is factored once and solved exactly; should the factorization fail,
     /// conjugate gradients solve it as they did before.
-    async fn walk(&self, seeds: &[u16], classes: &[u16], pause: &mut impl Pause) -> Vec<Vec<f64>> {
+    ///
+    /// With `fade` above 0, each step also ends the walk with probability about
+    /// `fade / (1 + fade)`, so a point's probabilities sum to less than 1 the more steps its
+    /// seeds lie away: with one class, that is how far the class reaches.
+    async fn walk(&self, seeds: &[u16], classes: &[u16], fade: f64, pause: &mut impl Pause) -> Vec<Vec<f64>> {
         let n = seeds.len();
         let free: Vec<usize> = (0..n).filter(|&i| seeds[i] == UNLABELLED).collect();
         let mut slot = vec![u32::MAX; n];
@@ -158,6 +167,9 @@ impl PointGraph {
             }
         }
         starts.push(links.len());
+        for d in &mut degree {
+            *d *= 1.0 + fade;
+        }
         pause.pause().await;
         let negated: Vec<(u32, f64)> = links.iter().map(|&(j, w)| (j, -w)).collect();
         let factored = Factored::new(&degree, &starts, &negated);
@@ -239,14 +251,19 @@ impl PointLabeller {
     /// clearly wins, and everywhere unless the strokes cover points of two classes), in the
     /// order of [`PointLabeller::positions`].
     pub fn point_classes(&self, strokes: &[(u32, Vec<u16>)], classes: usize) -> Vec<u16> {
-        run_to_end(self.point_classes_pausing(strokes, classes, &mut NoPause))
+        run_to_end(self.point_classes_pausing(strokes, classes, None, &mut NoPause))
     }
 
-    /// [`PointLabeller::point_classes`], pausing between iterations of its walks.
+    /// [`PointLabeller::point_classes`], pausing between iterations of its walks. `far_class`
+    /// is the class the strokes give what the reconstruction missed (`view_seeds::region_class`),
+    /// if they give it one: when the points under the strokes then hold a single other class,
+    /// that class is the reconstruction's and the far pixels are the rest. The points take it
+    /// where a walk that fades reaches them clearly ([`LONE_CLASS_FADE`]), not everywhere.
     pub async fn point_classes_pausing(
         &self,
         strokes: &[(u32, Vec<u16>)],
         classes: usize,
+        far_class: Option<u16>,
         pause: &mut impl Pause,
     ) -> Vec<u16> {
         let seeds: Vec<u16> = self
@@ -263,10 +280,25 @@ impl PointLabeller {
             })
             .collect();
         let present: Vec<u16> = (0..classes as u16).filter(|c| seeds.contains(c)).collect();
-        if present.len() < 2 {
-            return vec![UNLABELLED; seeds.len()];
+        match (present.as_slice(), far_class) {
+            ([_, _, ..], _) => {}
+            (&[lone], Some(far)) if far != lone => {
+                let reached = self.graph.walk(&seeds, &present, LONE_CLASS_FADE, pause).await;
+                // The walk's other outcome, fading out, is the competing class.
+                return reached[0]
+                    .iter()
+                    .map(|&p| {
+                        if p - (1.0 - p) >= self.min_margin {
+                            lone
+                        } else {
+                            UNLABELLED
+                        }
+                    })
+                    .collect();
+            }
+            _ => return vec![UNLABELLED; seeds.len()],
         }
-        let probabilities = self.graph.walk(&seeds, &present, pause).await;
+        let probabilities = self.graph.walk(&seeds, &present, 0.0, pause).await;
         (0..seeds.len())
             .map(|p| {
                 let (mut best, mut first, mut second) = (0, f64::MIN, f64::MIN);
@@ -406,9 +438,8 @@ mod tests {
         }
     }
 
-    #[test]
-    fn two_clusters_take_the_classes_of_their_own_seeds() {
-        // Two blobs of points a distance apart, one seed each: every point follows its blob.
+    /// Two blobs of points a distance apart.
+    fn two_blobs() -> Points {
         let mut xyz = Vec::new();
         for (centre, n) in [(DVec3::ZERO, 200), (DVec3::new(10.0, 0.0, 0.0), 150)] {
             for i in 0..n {
@@ -416,16 +447,67 @@ mod tests {
                 xyz.push(centre + DVec3::new((t * 0.37).sin(), (t * 0.61).cos(), (t * 0.13).sin()));
             }
         }
-        let points = Points {
+        Points {
             lab: vec![[50.0, 0.0, 0.0]; xyz.len()],
             at: (0..xyz.len() as u32).map(|i| (0, i)).collect(),
             xyz,
+        }
+    }
+
+    #[test]
+    fn one_seeded_class_follows_its_surface_but_not_the_weakest_links() {
+        // A chain of 500 points (a surface's longest walk, and then some) seeded at one end, and
+        // a cluster of 100 joined to its other end by one link of the smallest weight. The
+        // strokes cover a point of class 1; the far pixels are class 0.
+        const CHAIN: usize = 500;
+        const CLUSTER: usize = 100;
+        let n = CHAIN + CLUSTER;
+        let mut edges: Vec<Vec<(u32, f64)>> = vec![Vec::new(); n];
+        for i in 0..n - 1 {
+            let w = if i == CHAIN - 1 { MIN_WEIGHT } else { 1.0 };
+            edges[i].push((i as u32 + 1, w));
+            edges[i + 1].push((i as u32, w));
+        }
+        let labeller = PointLabeller {
+            points: Points {
+                xyz: vec![DVec3::ZERO; n],
+                lab: vec![[50.0, 0.0, 0.0]; n],
+                at: (0..n as u32).map(|i| (0, i)).collect(),
+            },
+            graph: PointGraph { edges },
+            width: n as u32,
+            height: 1,
+            frames: 1,
+            min_margin: PointWalkOptions::default().min_margin,
         };
+        let mut strokes = vec![UNLABELLED; n];
+        strokes[0] = 1;
+        let strokes = [(0, strokes)];
+        let classes = |far| run_to_end(labeller.point_classes_pausing(&strokes, 2, far, &mut NoPause));
+        let with_far = classes(Some(0));
+        assert!(
+            with_far[..CHAIN].iter().all(|&c| c == 1),
+            "the chain takes the class to its end"
+        );
+        assert!(
+            with_far[CHAIN..].iter().all(|&c| c == UNLABELLED),
+            "the weakly joined cluster is left"
+        );
+        // Without a class for the far pixels, or with the seeds' own, one class says nothing.
+        for far in [None, Some(1)] {
+            assert!(classes(far).iter().all(|&c| c == UNLABELLED), "far class {far:?}");
+        }
+    }
+
+    #[test]
+    fn two_clusters_take_the_classes_of_their_own_seeds() {
+        // Two blobs of points a distance apart, one seed each: every point follows its blob.
+        let points = two_blobs();
         let graph = PointGraph::new(&points, &PointWalkOptions::default());
         let mut seeds = vec![UNLABELLED; points.xyz.len()];
         seeds[3] = 0;
         seeds[260] = 1;
-        let p = run_to_end(graph.walk(&seeds, &[0, 1], &mut NoPause));
+        let p = run_to_end(graph.walk(&seeds, &[0, 1], 0.0, &mut NoPause));
         assert!(p[1][..200].iter().all(|&v| v < 0.1), "the first blob is class 0");
         assert!(p[1][200..].iter().all(|&v| v > 0.9), "the second blob is class 1");
         for (zero, one) in p[0].iter().zip(&p[1]) {

@@ -413,8 +413,9 @@ impl PointRegions {
 /// Per frame (by index), a label map.
 type FrameMaps = Vec<(u32, Vec<u16>)>;
 
-/// The classes and seed maps a walk over the points started from, and each point's class.
-type LastPointWalk = (usize, FrameMaps, Vec<u16>);
+/// The classes, far pixels' class and seed maps a walk over the points started from, and each
+/// point's class.
+type LastPointWalk = (usize, Option<u16>, FrameMaps, Vec<u16>);
 
 impl SparseCapture {
     async fn new(scene: &Scene, pause: &mut impl Pause) -> SparseCapture {
@@ -457,14 +458,25 @@ impl SparseCapture {
         });
     }
 
-    /// Each point's class from the walk over the points seeded by `walked`.
-    async fn point_classes(&mut self, walked: FrameMaps, classes: usize, pause: &mut impl Pause) -> &[u16] {
-        let stale = !matches!(&self.last, Some((c, seen, _)) if *c == classes && *seen == walked);
+    /// Each point's class from the walk over the points seeded by `walked`
+    /// (`PointLabeller::point_classes_pausing`).
+    async fn point_classes(
+        &mut self,
+        walked: FrameMaps,
+        classes: usize,
+        far_class: Option<u16>,
+        pause: &mut impl Pause,
+    ) -> &[u16] {
+        let stale =
+            !matches!(&self.last, Some((c, far, seen, _)) if *c == classes && *far == far_class && *seen == walked);
         if stale {
-            let point_classes = self.labeller.point_classes_pausing(&walked, classes, pause).await;
-            self.last = Some((classes, walked, point_classes));
+            let point_classes = self
+                .labeller
+                .point_classes_pausing(&walked, classes, far_class, pause)
+                .await;
+            self.last = Some((classes, far_class, walked, point_classes));
         }
-        self.last.as_ref().map_or(&[], |(_, _, p)| p.as_slice())
+        self.last.as_ref().map_or(&[], |(_, _, _, p)| p.as_slice())
     }
 }
 
@@ -550,12 +562,15 @@ async fn frame_seeds(
         None => SparseCapture::new(scene, pause).await,
     };
     let sparse = cache.sparse.insert(sparse);
-    let point_classes = sparse.point_classes(walked, classes, pause).await.to_vec();
     let drawn: Vec<(&[u16], &[bool])> = strokes
         .iter()
         .map(|(f, map)| (map.as_slice(), sparse.far[*f as usize].as_slice()))
         .collect();
     let unreconstructed = region_class(&drawn, classes);
+    let point_classes = sparse
+        .point_classes(walked, classes, unreconstructed, pause)
+        .await
+        .to_vec();
     if let Some(class) = unreconstructed {
         sparse.find_regions(&point_classes, class, pause).await;
     }
