@@ -134,9 +134,9 @@ impl PointGraph {
 
     /// For each class of `classes`, the probability that a walk from each point reaches a seed
     /// of that class before a seed of another (seeds fixed at 1 or 0; see `propagate`'s walk,
-    /// here without fading). The system is the same for every class (only its right-hand side
-    /// differs), so it is factored once and solved exactly; should the factorization fail,
-    /// conjugate gradients solve it as they did before.
+    /// here fading only where `fade` asks for it). The system is the same for every class (only
+    /// its right-hand side differs), so it is factored once and solved exactly; should the
+    /// factorization fail, conjugate gradients solve it as they did before.
     ///
     /// With `fade` above 0, each step also ends the walk with probability about
     /// `fade / (1 + fade)`, so a point's probabilities sum to less than 1 the more steps its
@@ -438,22 +438,6 @@ mod tests {
         }
     }
 
-    /// Two blobs of points a distance apart.
-    fn two_blobs() -> Points {
-        let mut xyz = Vec::new();
-        for (centre, n) in [(DVec3::ZERO, 200), (DVec3::new(10.0, 0.0, 0.0), 150)] {
-            for i in 0..n {
-                let t = i as f64;
-                xyz.push(centre + DVec3::new((t * 0.37).sin(), (t * 0.61).cos(), (t * 0.13).sin()));
-            }
-        }
-        Points {
-            lab: vec![[50.0, 0.0, 0.0]; xyz.len()],
-            at: (0..xyz.len() as u32).map(|i| (0, i)).collect(),
-            xyz,
-        }
-    }
-
     #[test]
     fn one_seeded_class_follows_its_surface_but_not_the_weakest_links() {
         // A chain of 500 points (a surface's longest walk, and then some) seeded at one end, and
@@ -502,7 +486,18 @@ mod tests {
     #[test]
     fn two_clusters_take_the_classes_of_their_own_seeds() {
         // Two blobs of points a distance apart, one seed each: every point follows its blob.
-        let points = two_blobs();
+        let mut xyz = Vec::new();
+        for (centre, n) in [(DVec3::ZERO, 200), (DVec3::new(10.0, 0.0, 0.0), 150)] {
+            for i in 0..n {
+                let t = i as f64;
+                xyz.push(centre + DVec3::new((t * 0.37).sin(), (t * 0.61).cos(), (t * 0.13).sin()));
+            }
+        }
+        let points = Points {
+            lab: vec![[50.0, 0.0, 0.0]; xyz.len()],
+            at: (0..xyz.len() as u32).map(|i| (0, i)).collect(),
+            xyz,
+        };
         let graph = PointGraph::new(&points, &PointWalkOptions::default());
         let mut seeds = vec![UNLABELLED; points.xyz.len()];
         seeds[3] = 0;
