@@ -143,15 +143,15 @@ fn generate_binding_tables(stages: &[shader_check::ExpandedShader]) -> String {
             Ok(module) => module,
             Err(error) => fail("shader", &[format!("{}: {}", stage.file, error.message())]),
         };
-        let info = match naga::valid::Validator::new(
-            naga::valid::ValidationFlags::all(),
-            shader_check::webgpu_baseline_capabilities(),
-        )
-        .validate(&module)
-        {
-            Ok(info) => info,
-            Err(error) => fail("shader", &[format!("{}: {error}", stage.file)]),
+        let capabilities = match shader_check::capabilities_of(stage) {
+            Ok(capabilities) => capabilities,
+            Err(problem) => fail("shader", &[problem.to_string()]),
         };
+        let info =
+            match naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities).validate(&module) {
+                Ok(info) => info,
+                Err(error) => fail("shader", &[format!("{}: {error}", stage.file)]),
+            };
         let _ = writeln!(
             out,
             "/// The bindings each entry point of `shaders/{}` uses.\npub const {name}_BINDINGS: &[ShaderBinding] = &[",

@@ -3,7 +3,7 @@
 //! multiples of the workgroup size. Throughput: `cargo test --release --test gpu_field_encoding
 //! -- --ignored --nocapture`.
 use scribblefield::field::gpu::encoding::{
-    BackwardStrategy, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
+    AtomicAdd, BackwardStrategy, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
     PositionEncodeBuffers, PositionEncodePass, ShOutputLayout, WORKGROUP_SIZE,
 };
 use scribblefield::field::reference::hash_grid::{self, HashGrid};
@@ -203,6 +203,13 @@ fn position_encoding_matches_reference() {
     }
 }
 
+/// The ∂L/∂encoding rows `check_backward` draws: uniform in [-1, 1], or their magnitudes.
+#[derive(Clone, Copy)]
+struct Gradients {
+    seed: u64,
+    same_sign: bool,
+}
+
 /// The table gradient of the GPU backward (after clearing a garbage-filled gradient buffer) and
 /// the reference's, summed in f64, over positions and ∂L/∂encoding rows. Also checks that values
 /// outside the table range keep their garbage and that the frequency columns of the gradient
@@ -213,13 +220,14 @@ fn check_backward(
     cfg: &FieldConfig,
     positions: &[[f32; 4]],
     strategy: BackwardStrategy,
-    seed: u64,
+    atomics: AtomicAdd,
+    gradients: Gradients,
 ) -> f64 {
     let n = positions.len();
     let grid = HashGrid::from_config(cfg);
     let dim = cfg.encoding_dim();
     let hash_dim = grid.output_dim();
-    let mut rng = SplitMix64::new(seed);
+    let mut rng = SplitMix64::new(gradients.seed);
     let mut encoding_grad: Vec<f32> = GARBAGE_WORDS
         .iter()
         .cycle()
@@ -229,6 +237,9 @@ fn check_backward(
     for row in encoding_grad.chunks_exact_mut(dim) {
         for g in &mut row[..hash_dim] {
             *g = rng.uniform(-1.0, 1.0) as f32;
+            if gradients.same_sign {
+                *g = g.abs();
+            }
         }
     }
 
@@ -242,12 +253,23 @@ fn check_backward(
         gradient: &gradient,
         table_offset: TABLE_OFFSET,
     };
-    let pass = pollster::block_on(HashGridBackwardPass::with_strategy(ctx, cfg, n, buffers, strategy)).unwrap();
+    let pass = pollster::block_on(HashGridBackwardPass::with_atomics(
+        ctx, cfg, n, buffers, strategy, atomics,
+    ))
+    .unwrap();
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     pass.record_clear(&mut encoder);
     pass.record(&mut encoder.begin_compute_pass(&Default::default()));
     ctx.queue.submit([encoder.finish()]);
     let words: Vec<u32> = read_buffer_blocking(ctx, &gradient).unwrap();
+    let exponents = pass.read_exponents(ctx).map(|read| pollster::block_on(read).unwrap());
+    assert_eq!(
+        exponents.is_some(),
+        atomics == AtomicAdd::FixedPoint && grid.levels > 0,
+        "{name}"
+    );
+    let mut decoded: Vec<f32> = words.iter().map(|&w| f32::from_bits(w)).collect();
+    pollster::block_on(pass.decode_fixed_point(&mut decoded, pass.read_exponents(ctx))).unwrap();
 
     let garbage_at = |i: usize| GARBAGE_WORDS[i % GARBAGE_WORDS.len()];
     for i in (0..TABLE_OFFSET).chain(TABLE_OFFSET + table_len..TABLE_OFFSET + table_len + TAIL) {
@@ -263,28 +285,54 @@ fn check_backward(
     // cannot shrink.
     let mut expect = vec![0.0f64; table_len];
     let mut magnitude = vec![0.0f64; table_len];
+    let mut terms = vec![0u32; table_len];
+    let mut bounds = vec![0.0f64; grid.levels];
     for (p, row) in positions.iter().zip(encoding_grad.chunks_exact(dim)) {
         for level in 0..grid.levels {
+            for f in 0..grid.features {
+                bounds[level] += f64::from(row[level * grid.features + f].abs());
+            }
             for corner in grid.corners::<f32>(level, xyz(p)) {
                 for f in 0..grid.features {
                     let term = f64::from(corner.weight) * f64::from(row[level * grid.features + f]);
                     expect[corner.offset + f] += term;
                     magnitude[corner.offset + f] += term.abs();
+                    terms[corner.offset + f] += 1;
                 }
             }
         }
     }
+    // Fixed point: each level's exponent scales the bound on its sums (Σ|∂L/∂encoding| of the
+    // level, summed here in f64, on the GPU in f32) to at most 2^30, and by no less than half.
+    if let Some(exponents) = &exponents {
+        for (level, &bound) in bounds.iter().enumerate() {
+            let scaled = bound * 2f64.powi(exponents[level]);
+            assert!(
+                scaled <= f64::from(1u32 << 30) * (1.0 + 1e-5) && scaled > f64::from(1u32 << 28),
+                "{name}: level {level}: bound {bound} scaled by 2^{} to {scaled}",
+                exponents[level]
+            );
+        }
+    }
     let mut worst = 0.0f64;
     for (i, (&e, &m)) in expect.iter().zip(&magnitude).enumerate() {
-        let g = f64::from(f32::from_bits(words[TABLE_OFFSET + i]));
+        let level = grid.level_of_value(i);
+        let g = f64::from(decoded[TABLE_OFFSET + i]);
         // f32 sums of K terms in an arbitrary order: error ≲ √K·2^-24·Σ|terms| in practice,
         // bounded by K·2^-24·Σ|terms|. 2e-5 covers K up to ~10^5 random-order terms with
-        // margin; the measured worst case is printed.
-        let relative = if m > 0.0 { (g - e).abs() / m } else { (g - e).abs() };
+        // margin; the measured worst case is printed. Fixed point adds up to half a unit
+        // (2^-exponent) per add, and no add of fewer terms than samples: K half units at most.
+        let rounding = exponents
+            .as_ref()
+            .map_or(0.0, |x| 0.5 * f64::from(terms[i]) * 2f64.powi(-x[level]));
+        let relative = if m > 0.0 {
+            ((g - e).abs() - rounding).max(0.0) / m
+        } else {
+            (g - e).abs() - rounding
+        };
         assert!(
             relative <= 2e-5,
-            "{name}: table gradient {i} (level {}): GPU {g}, reference {e}, Σ|terms| {m}",
-            grid.level_of_value(i)
+            "{name}: table gradient {i} (level {level}): GPU {g}, reference {e}, Σ|terms| {m}, rounding {rounding:e}",
         );
         worst = worst.max(relative);
     }
@@ -301,6 +349,84 @@ fn contended_positions(rng: &mut SplitMix64) -> Vec<[f32; 4]> {
     positions
 }
 
+/// Every atomic add the device runs: the portable compare-exchange loop and fixed point
+/// always, float atomics where the device has them (lavapipe does; SwiftShader and browsers do
+/// not).
+fn atomic_adds(ctx: &GpuContext) -> Vec<AtomicAdd> {
+    let mut adds = vec![AtomicAdd::CompareExchange, AtomicAdd::FixedPoint];
+    if AtomicAdd::best_for(ctx) == AtomicAdd::Float {
+        adds.push(AtomicAdd::Float);
+    } else {
+        eprintln!(
+            "{}: no float atomics, only the compare-exchange loop is tested",
+            ctx.describe()
+        );
+    }
+    adds
+}
+
+/// The fixed-point sums' worst case: every sample on one vertex of every level (all its weight
+/// on one entry) with gradients of one sign, so that entry's sum is the whole bound the scale
+/// was picked for, plus every add's rounding. It must not wrap.
+#[test]
+fn fixed_point_sums_reach_their_bound_without_overflowing() {
+    let Some(ctx) = gpu_for_tests("fixed_point_sums_reach_their_bound_without_overflowing") else {
+        return;
+    };
+    let cfg = FieldConfig::small();
+    // 0.5 lies on a vertex of every level (resolutions are even): weight 1 on one corner.
+    let positions = vec![[0.5f32, 0.5, 0.5, 0.0]; 5000];
+    for strategy in [BackwardStrategy::MergeRuns, BackwardStrategy::PerSample] {
+        let worst = check_backward(
+            &ctx,
+            "one vertex",
+            &cfg,
+            &positions,
+            strategy,
+            AtomicAdd::FixedPoint,
+            Gradients {
+                seed: 9,
+                same_sign: true,
+            },
+        );
+        eprintln!("one vertex {strategy:?}: max |GPU − ref| / Σ|terms| = {worst:.2e}");
+    }
+}
+
+#[test]
+fn float_atomics_are_refused_on_a_device_without_them() {
+    let Some(ctx) = gpu_for_tests("float_atomics_are_refused_on_a_device_without_them") else {
+        return;
+    };
+    let cfg = FieldConfig::default();
+    let layout = scribblefield::field::ParamLayout::new(&cfg);
+    let positions = storage_buffer_garbage::<[f32; 4]>(&ctx, "positions", 64).unwrap();
+    let encoding_grad = storage_buffer_garbage::<f32>(&ctx, "encoding grad", 64 * cfg.encoding_dim()).unwrap();
+    let gradient = storage_buffer_garbage::<f32>(&ctx, "gradient", layout.total).unwrap();
+    let buffers = HashGridBackwardBuffers {
+        positions: &positions,
+        encoding_grad: &encoding_grad,
+        gradient: &gradient,
+        table_offset: layout.hash_table.start,
+    };
+    let made = pollster::block_on(HashGridBackwardPass::with_atomics(
+        &ctx,
+        &cfg,
+        64,
+        buffers,
+        BackwardStrategy::MergeRuns,
+        AtomicAdd::Float,
+    ));
+    let has_them = ctx.features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC);
+    match made {
+        Ok(_) => assert!(has_them, "float atomics were built on a device without them"),
+        Err(error) => {
+            assert!(!has_them, "{error}");
+            assert!(error.to_string().contains("SHADER_FLOAT32_ATOMIC"), "{error}");
+        }
+    }
+}
+
 #[test]
 fn hash_backward_matches_reference_sum() {
     let Some(ctx) = gpu_for_tests("hash_backward_matches_reference_sum") else {
@@ -311,11 +437,24 @@ fn hash_backward_matches_reference_sum() {
         let positions = contended_positions(&mut rng);
         assert_ne!(positions.len() % WORKGROUP_SIZE as usize, 0);
         for strategy in [BackwardStrategy::MergeRuns, BackwardStrategy::PerSample] {
-            let worst = check_backward(&ctx, name, &cfg, &positions, strategy, 5);
-            eprintln!(
-                "{name} {strategy:?}: {} samples, max |GPU − ref| / Σ|terms| = {worst:.2e}",
-                positions.len()
-            );
+            for atomics in atomic_adds(&ctx) {
+                let worst = check_backward(
+                    &ctx,
+                    name,
+                    &cfg,
+                    &positions,
+                    strategy,
+                    atomics,
+                    Gradients {
+                        seed: 5,
+                        same_sign: false,
+                    },
+                );
+                eprintln!(
+                    "{name} {strategy:?} {atomics:?}: {} samples, max |GPU − ref| / Σ|terms| = {worst:.2e}",
+                    positions.len()
+                );
+            }
         }
     }
 }
@@ -348,7 +487,19 @@ fn default_size_batch_spans_more_than_65535_workgroups() {
             worst = worst.max((g - e).abs());
         }
     }
-    let backward = check_backward(&ctx, "default", &cfg, &positions, BackwardStrategy::MergeRuns, 7);
+    let atomics = AtomicAdd::best_for(&ctx);
+    let backward = check_backward(
+        &ctx,
+        "default",
+        &cfg,
+        &positions,
+        BackwardStrategy::MergeRuns,
+        atomics,
+        Gradients {
+            seed: 7,
+            same_sign: false,
+        },
+    );
     eprintln!("default config, {n} samples: forward max error {worst:.2e}, backward {backward:.2e}");
 }
 
@@ -566,13 +717,17 @@ fn encoding_throughput_report() {
         seconds * 1e3,
         n as f64 / seconds / 1e6
     );
-    for strategy in [BackwardStrategy::MergeRuns, BackwardStrategy::PerSample] {
-        let backward = pollster::block_on(HashGridBackwardPass::with_strategy(
+    let ways = [BackwardStrategy::MergeRuns, BackwardStrategy::PerSample]
+        .into_iter()
+        .flat_map(|strategy| atomic_adds(&ctx).into_iter().map(move |atomics| (strategy, atomics)));
+    for (strategy, atomics) in ways {
+        let backward = pollster::block_on(HashGridBackwardPass::with_atomics(
             &ctx,
             &cfg,
             n,
             backward_buffers,
             strategy,
+            atomics,
         ))
         .unwrap();
         let seconds = time_runs(&ctx, runs, &|encoder, timer| {
@@ -584,7 +739,7 @@ fn encoding_throughput_report() {
             }));
         });
         eprintln!(
-            "hash grid backward {strategy:?} (incl. clearing 64 MiB only when wall-clock timed): {:.3} ms, {:.2} M samples/s",
+            "hash grid backward {strategy:?} {atomics:?} (incl. clearing 64 MiB only when wall-clock timed): {:.3} ms, {:.2} M samples/s",
             seconds * 1e3,
             n as f64 / seconds / 1e6
         );

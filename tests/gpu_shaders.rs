@@ -81,6 +81,32 @@ fn native_only_capabilities_are_rejected() {
 }
 
 #[test]
+fn an_optional_feature_must_be_declared_and_known() {
+    let adds = "@group(0) @binding(0) var<storage, read_write> sum: array<atomic<f32>>;\n\
+@compute @workgroup_size(1)\nfn main() {\n    atomicAdd(&sum[0], 1.0);\n}\n";
+    let problems = check_all(&files(&[("adds.wgsl", adds)])).unwrap_err();
+    assert_eq!(problems[0].file, "adds.wgsl", "{}", problems[0]);
+    assert!(problems[0].message.contains("FLOAT32_ATOMIC"), "{}", problems[0]);
+
+    let declared = format!("//!requires float32-atomics\n{adds}");
+    check_all(&files(&[("adds.wgsl", &declared)])).unwrap_or_else(|problems| panic!("{problems:#?}"));
+
+    let unknown = format!("//!requires float64\n{adds}");
+    let problems = check_all(&files(&[("adds.wgsl", &unknown)])).unwrap_err();
+    assert_eq!(
+        (problems[0].file.as_str(), problems[0].line),
+        ("adds.wgsl", 1),
+        "{}",
+        problems[0]
+    );
+    assert!(
+        problems[0].message.contains("`float64`") && problems[0].message.contains("float32-atomics"),
+        "{}",
+        problems[0]
+    );
+}
+
+#[test]
 fn webgpu_core_builtins_that_naga_gates_are_accepted() {
     // unpack2x16float is core WGSL but needs a naga capability: the baseline must include it.
     let unpacks = "@group(0) @binding(0) var<storage, read_write> out: array<f32>;\n\
@@ -151,6 +177,11 @@ fn every_embedded_stage_compiles_on_the_device() {
         return;
     };
     for (file, source) in shaders::ALL {
+        let float_atomics = ctx.features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC);
+        if source.contains("//!requires float32-atomics") && !float_atomics {
+            eprintln!("{file}: needs float atomics, which {} lacks", ctx.describe());
+            continue;
+        }
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(file),
             source: wgpu::ShaderSource::Wgsl((*source).into()),

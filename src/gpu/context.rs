@@ -65,11 +65,13 @@ pub struct GpuContext {
 
 impl GpuContext {
     /// Finds an adapter (a real GPU if there is one, else any, e.g. lavapipe) and opens a device
-    /// with all of the adapter's limits and, when offered, timestamp queries.
+    /// with all of the adapter's limits and, when offered, timestamp queries and float atomics.
     pub async fn new(options: &GpuOptions) -> Result<Self, GpuError> {
         let adapter = find_adapter(options).await?;
         let adapter_info = adapter.get_info();
-        let wanted_features = wgpu::Features::TIMESTAMP_QUERY;
+        // Float atomics let the hash grid's backward add with one atomic instead of a
+        // compare-exchange loop (`field::gpu::encoding::AtomicAdd`).
+        let wanted_features = wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::SHADER_FLOAT32_ATOMIC;
         let descriptor = wgpu::DeviceDescriptor {
             label: Some("scribblefield"),
             required_features: adapter.features() & wanted_features,

@@ -11,12 +11,20 @@
 //! - `_name.wgsl` is a shared snippet: never embedded on its own, pasted where a file has a line
 //!   `//!include _name.wgsl`. A snippet is pasted at most once per stage (so two snippets may
 //!   include the same third one), and snippets may include snippets.
+//! - A stage with a line `//!requires float32-atomics` is validated with that optional device
+//!   feature too; Rust runs it only on a device that has it, and keeps a portable stage beside it.
 use std::collections::BTreeMap;
 use std::fmt;
 
 use super::naga;
 
 const INCLUDE_DIRECTIVE: &str = "//!include ";
+const REQUIRES_DIRECTIVE: &str = "//!requires ";
+
+/// Optional device features a stage may declare with `//!requires NAME`, and the naga
+/// capability each grants the validator.
+const OPTIONAL_FEATURES: [(&str, naga::valid::Capabilities); 1] =
+    [("float32-atomics", naga::valid::Capabilities::SHADER_FLOAT32_ATOMIC)];
 
 /// A stage after include expansion, with a map back to the original files for error messages.
 #[derive(Debug, Clone)]
@@ -190,8 +198,35 @@ pub fn webgpu_baseline_capabilities() -> naga::valid::Capabilities {
         | naga::valid::Capabilities::CUBE_ARRAY_TEXTURES
 }
 
+/// What naga may assume of a stage: the WebGPU baseline, plus each optional feature the stage
+/// declares with `//!requires NAME`; an unknown name is a problem at its line.
+pub fn capabilities_of(shader: &ExpandedShader) -> Result<naga::valid::Capabilities, ShaderProblem> {
+    let mut capabilities = webgpu_baseline_capabilities();
+    for (index, line) in shader.source.lines().enumerate() {
+        let Some(name) = line.trim().strip_prefix(REQUIRES_DIRECTIVE) else {
+            continue;
+        };
+        let name = name.trim();
+        let Some((_, capability)) = OPTIONAL_FEATURES.iter().find(|(known, _)| *known == name) else {
+            let known: Vec<&str> = OPTIONAL_FEATURES.iter().map(|(known, _)| *known).collect();
+            let (file, line) = shader.origin_of_line(index as u32 + 1);
+            return Err(ShaderProblem {
+                file: file.to_string(),
+                stage: shader.file.clone(),
+                line,
+                column: 1,
+                message: format!("unknown optional feature `{name}` (known: {})", known.join(", ")),
+                report: String::new(),
+            });
+        };
+        capabilities |= *capability;
+    }
+    Ok(capabilities)
+}
+
 /// Parses and validates an expanded stage with naga, as strictly as WebGPU (see
-/// [`webgpu_baseline_capabilities`]), so a shader that passes here needs no native-only feature.
+/// [`webgpu_baseline_capabilities`]), so a shader that passes here needs no native-only feature
+/// unless it says so with `//!requires NAME` (one of [`OPTIONAL_FEATURES`]).
 pub fn validate(shader: &ExpandedShader) -> Result<(), ShaderProblem> {
     let module = naga::front::wgsl::parse_str(&shader.source).map_err(|error| {
         let location = error.location(&shader.source);
@@ -202,8 +237,8 @@ pub fn validate(shader: &ExpandedShader) -> Result<(), ShaderProblem> {
             error.emit_to_string_with_path(&shader.source, &shader.file),
         )
     })?;
-    let mut validator =
-        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), webgpu_baseline_capabilities());
+    let capabilities = capabilities_of(shader)?;
+    let mut validator = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities);
     validator.validate(&module).map_err(|error| {
         let location = error.location(&shader.source);
         locate(

@@ -11,6 +11,7 @@
 //! Buffers longer than one storage binding are updated in segments, each bound at an aligned
 //! offset; the kernel itself only ever sees one segment.
 use crate::field::config::AdamConfig;
+use crate::field::gpu::encoding::FixedPointTable;
 use crate::gpu::buffers::uniform_buffer_from;
 use crate::gpu::dispatch::{Dispatch, bind_named};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
@@ -27,15 +28,25 @@ pub struct AdamConstants {
     pub beta2: f32,
     pub epsilon: f32,
     pub count: u32,
+    /// The segment's first element in the whole flat buffer.
+    pub first: u32,
+    /// The fixed-point table's elements in the whole flat buffer (0..0 without one).
+    pub table_start: u32,
+    pub table_end: u32,
+    pub _pad0: u32,
 }
 
 /// The four flat buffers Adam walks (all of `count` f32, ParamLayout order).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct AdamBuffers<'a> {
     pub params: &'a wgpu::Buffer,
     pub grads: &'a wgpu::Buffer,
     pub first_moment: &'a wgpu::Buffer,
     pub second_moment: &'a wgpu::Buffer,
+    /// Where `grads` holds the hash table's gradient in fixed point (the backward's
+    /// [`HashGridBackwardPass::fixed_point_table`](crate::field::gpu::encoding::HashGridBackwardPass::fixed_point_table)),
+    /// to be decoded before the update; `None` when all of it is f32.
+    pub fixed_point_table: Option<FixedPointTable<'a>>,
 }
 
 /// One Adam step over `count` parameters: one dispatch per segment of the buffers.
@@ -95,7 +106,21 @@ impl AdamPass {
                 ));
             }
         }
-        let spec = KernelSpec::new("adam", shaders::ADAM, "adam");
+        let table = buffers.fixed_point_table.as_ref().map(|t| t.table.clone());
+        if let Some(table) = &table
+            && (table.start > table.end || table.end > count)
+        {
+            return Err(GpuError::invalid_argument(
+                "adam",
+                format!("fixed-point table {table:?} is not inside the {count} parameters"),
+            ));
+        }
+        let entry = if table.is_some() {
+            "adam_fixed_point_table"
+        } else {
+            "adam"
+        };
+        let spec = KernelSpec::new("adam", shaders::ADAM, entry);
         let pipeline = create_compute_pipeline(ctx, &spec).await?;
         let layout = pipeline.get_bind_group_layout(0);
 
@@ -103,11 +128,16 @@ impl AdamPass {
         let mut start = 0u64;
         while start < count as u64 {
             let len = (count as u64 - start).min(segment_len);
+            let table = table.clone().unwrap_or(0..0);
             let constants = AdamConstants {
                 beta1: config.beta1,
                 beta2: config.beta2,
                 epsilon: config.epsilon,
                 count: len as u32,
+                first: start as u32,
+                table_start: table.start as u32,
+                table_end: table.end as u32,
+                _pad0: 0,
             };
             let uniform = uniform_buffer_from(ctx, "adam constants", &constants);
             let size = std::num::NonZeroU64::new(len * 4)
@@ -119,7 +149,7 @@ impl AdamPass {
                     size: Some(size),
                 })
             };
-            let bindings = [
+            let mut bindings = vec![
                 ("constants", uniform.as_entire_binding()),
                 ("step_info", step.as_entire_binding()),
                 ("params", slice(buffers.params)),
@@ -127,6 +157,10 @@ impl AdamPass {
                 ("first_moment", slice(buffers.first_moment)),
                 ("second_moment", slice(buffers.second_moment)),
             ];
+            if let Some(fixed) = &buffers.fixed_point_table {
+                bindings.push(("grid", fixed.grid.as_entire_binding()));
+                bindings.push(("exponents", fixed.exponents.as_entire_binding()));
+            }
             let bind_group = bind_named(ctx, &spec, &layout, 0, &bindings)?;
             let groups = Dispatch1d::for_device(ctx, len, WORKGROUP)?;
             segments.push(Dispatch::new(pipeline.clone(), bind_group, groups));
@@ -164,6 +198,6 @@ mod tests {
 
     #[test]
     fn uniforms_match_the_wgsl_layout() {
-        assert_eq!(size_of::<AdamConstants>(), 16);
+        assert_eq!(size_of::<AdamConstants>(), 32);
     }
 }

@@ -17,9 +17,10 @@
 use std::ops::Range;
 
 use crate::field::config::FieldConfig;
+use crate::field::gpu::fixed_point::decode_table;
 use crate::field::reference::hash_grid::HashGrid;
 use crate::field::reference::sh::SH_COEFFS;
-use crate::gpu::buffers::uniform_buffer_from;
+use crate::gpu::buffers::{PendingRead, read_buffer_async, storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::{Dispatch, whole};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec};
 use crate::gpu::{GpuContext, GpuError, shaders};
@@ -210,8 +211,59 @@ pub enum BackwardStrategy {
     /// ray are adjacent) are summed in registers and added once. The default.
     #[default]
     MergeRuns,
-    /// Every sample adds its own 8 corners: the plain baseline, kept for measurements.
+    /// Every sample adds its own 8 corners: no workgroup memory, no barrier.
     PerSample,
+}
+
+impl BackwardStrategy {
+    /// Per sample on a CPU device with float atomics, where an atomic add is cheap and the
+    /// workgroup memory and barrier of merging cost more than they save (lavapipe:
+    /// docs/results/bench.md, "Float atomics"); merged runs everywhere else, where adds to one
+    /// coarse cell contend.
+    pub fn best_for(ctx: &GpuContext, atomics: AtomicAdd) -> BackwardStrategy {
+        if atomics == AtomicAdd::Float && ctx.is_software() {
+            BackwardStrategy::PerSample
+        } else {
+            BackwardStrategy::MergeRuns
+        }
+    }
+}
+
+/// How the hash-grid backward adds a float into the gradient buffer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AtomicAdd {
+    /// An atomic load, then a compare-exchange loop on the f32's bits (`hash_backward.wgsl`):
+    /// what WebGPU allows.
+    CompareExchange,
+    /// One float `atomicAdd` (`hash_backward_float_atomics.wgsl`): native devices with
+    /// `SHADER_FLOAT32_ATOMIC` (Vulkan's VK_EXT_shader_atomic_float, Metal 3).
+    Float,
+    /// One i32 `atomicAdd` of the value in fixed point (`hash_backward_fixed_point.wgsl`), at a
+    /// per-level scale `hash_gradient_scale.wgsl` picks each step so that no sum can overflow;
+    /// Adam decodes the table's integers (`field::gpu::fixed_point`). Core WebGPU.
+    FixedPoint,
+}
+
+impl AtomicAdd {
+    /// Float atomics where the device has them, else fixed point.
+    pub fn best_for(ctx: &GpuContext) -> AtomicAdd {
+        if ctx.features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC) {
+            AtomicAdd::Float
+        } else {
+            AtomicAdd::FixedPoint
+        }
+    }
+}
+
+/// Where a fixed-point table gradient's scales are, for the pass that decodes it (Adam).
+#[derive(Debug, Clone)]
+pub struct FixedPointTable<'a> {
+    /// The backward's `HashGridUniforms` (`shaders/_hash_grid.wgsl`): the levels' first entries.
+    pub grid: &'a wgpu::Buffer,
+    /// One i32 exponent per level (`MAX_HASH_LEVELS`): level l's values are in units of 2^-e.
+    pub exponents: &'a wgpu::Buffer,
+    /// The table's elements in the flat gradient buffer.
+    pub table: Range<usize>,
 }
 
 /// The buffers of [`HashGridBackwardPass`].
@@ -221,7 +273,7 @@ pub struct HashGridBackwardBuffers<'a> {
     pub positions: &'a wgpu::Buffer,
     /// ∂L/∂encoding: N rows of `cfg.encoding_dim()` f32 (only the hash columns are read).
     pub encoding_grad: &'a wgpu::Buffer,
-    /// The flat gradient buffer, bound as `array<atomic<u32>>`.
+    /// The flat gradient buffer, bound as `array<atomic<u32>>` (or `array<atomic<f32>>`).
     pub gradient: &'a wgpu::Buffer,
     /// Index of the table's first value in `gradient` (`ParamLayout::hash_table.start`).
     pub table_offset: usize,
@@ -235,25 +287,38 @@ pub struct HashGridBackwardPass {
     gradient: wgpu::Buffer,
     /// Bytes of the table's range in the gradient buffer.
     table_bytes: Range<u64>,
+    atomics: AtomicAdd,
 }
 
 #[derive(Debug)]
 struct BoundKernel {
+    /// Fixed point only: the levels' exponents for this step, before the adds.
+    scale: Option<Dispatch>,
     dispatch: Dispatch,
-    _uniforms: wgpu::Buffer,
+    uniforms: wgpu::Buffer,
+    /// Fixed point only: `MAX_HASH_LEVELS` i32, written by `scale`.
+    exponents: Option<wgpu::Buffer>,
+    /// Each level's first entry in the table, and the values per entry (for decoding).
+    level_starts: Vec<u32>,
+    features: usize,
 }
 
 impl HashGridBackwardPass {
-    /// A pass for `samples` samples with the default [`BackwardStrategy`].
+    /// A pass for `samples` samples with the best atomic add the device has and the strategy
+    /// that suits it ([`BackwardStrategy::best_for`]).
     pub async fn new(
         ctx: &GpuContext,
         cfg: &FieldConfig,
         samples: usize,
         buffers: HashGridBackwardBuffers<'_>,
     ) -> Result<Self, GpuError> {
-        Self::with_strategy(ctx, cfg, samples, buffers, BackwardStrategy::default()).await
+        let atomics = AtomicAdd::best_for(ctx);
+        let strategy = BackwardStrategy::best_for(ctx, atomics);
+        Self::with_atomics(ctx, cfg, samples, buffers, strategy, atomics).await
     }
 
+    /// As [`HashGridBackwardPass::new`] with the given strategy, and the best atomic add the
+    /// device has ([`AtomicAdd::best_for`]).
     pub async fn with_strategy(
         ctx: &GpuContext,
         cfg: &FieldConfig,
@@ -261,7 +326,29 @@ impl HashGridBackwardPass {
         buffers: HashGridBackwardBuffers<'_>,
         strategy: BackwardStrategy,
     ) -> Result<Self, GpuError> {
+        Self::with_atomics(ctx, cfg, samples, buffers, strategy, AtomicAdd::best_for(ctx)).await
+    }
+
+    /// As [`HashGridBackwardPass::with_strategy`] with the given atomic add; [`AtomicAdd::Float`]
+    /// on a device without float atomics is an error.
+    pub async fn with_atomics(
+        ctx: &GpuContext,
+        cfg: &FieldConfig,
+        samples: usize,
+        buffers: HashGridBackwardBuffers<'_>,
+        strategy: BackwardStrategy,
+        atomics: AtomicAdd,
+    ) -> Result<Self, GpuError> {
         const WHAT: &str = "hash grid backward";
+        if atomics == AtomicAdd::Float && !ctx.features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC) {
+            return Err(GpuError::invalid_argument(
+                WHAT,
+                format!(
+                    "float atomics asked for, but {} has no SHADER_FLOAT32_ATOMIC",
+                    ctx.describe()
+                ),
+            ));
+        }
         let uniforms = HashGridUniforms::new(cfg, samples, buffers.table_offset)?;
         check_samples(WHAT, samples)?;
         let table_len = HashGrid::from_config(cfg).param_count();
@@ -284,6 +371,7 @@ impl HashGridBackwardPass {
                 kernel: None,
                 gradient: buffers.gradient.clone(),
                 table_bytes,
+                atomics,
             });
         }
 
@@ -298,23 +386,108 @@ impl HashGridBackwardPass {
         let constants = [("MERGE_RUNS", merge_runs)];
         let spec = KernelSpec {
             constants: &constants,
-            ..KernelSpec::new(WHAT, shaders::HASH_BACKWARD, "hash_backward")
+            ..match atomics {
+                AtomicAdd::CompareExchange => KernelSpec::new(WHAT, shaders::HASH_BACKWARD, "hash_backward"),
+                AtomicAdd::Float => KernelSpec::new(WHAT, shaders::HASH_BACKWARD_FLOAT_ATOMICS, "hash_backward"),
+                AtomicAdd::FixedPoint => KernelSpec::new(WHAT, shaders::HASH_BACKWARD_FIXED_POINT, "hash_backward"),
+            }
         };
         let uniform_buffer = uniform_buffer_from(ctx, "hash grid backward uniforms", &uniforms);
-        let bindings = whole(&[
+        let exponents = (atomics == AtomicAdd::FixedPoint)
+            .then(|| storage_buffer_zeroed::<i32>(ctx, "hash gradient exponents", MAX_HASH_LEVELS))
+            .transpose()?;
+        let scale = match &exponents {
+            Some(exponents) => {
+                let spec = KernelSpec::new(
+                    "hash gradient scale",
+                    shaders::HASH_GRADIENT_SCALE,
+                    "hash_gradient_scale",
+                );
+                let bindings = whole(&[
+                    ("grid", &uniform_buffer),
+                    ("encoding_grad", buffers.encoding_grad),
+                    ("exponents", exponents),
+                ]);
+                Some(Dispatch::build(ctx, &spec, &bindings, [uniforms.levels, 1, 1]).await?)
+            }
+            None => None,
+        };
+        let mut named = vec![
             ("grid", &uniform_buffer),
             ("positions", buffers.positions),
             ("encoding_grad", buffers.encoding_grad),
             ("gradient", buffers.gradient),
-        ]);
-        let dispatch = Dispatch::build(ctx, &spec, &bindings, groups).await?;
+        ];
+        if let Some(exponents) = &exponents {
+            named.push(("exponents", exponents));
+        }
+        let dispatch = Dispatch::build(ctx, &spec, &whole(&named), groups).await?;
         Ok(HashGridBackwardPass {
             kernel: Some(BoundKernel {
+                scale,
                 dispatch,
-                _uniforms: uniform_buffer,
+                uniforms: uniform_buffer,
+                exponents,
+                level_starts: uniforms.level_geometry[..uniforms.levels as usize]
+                    .iter()
+                    .map(|g| g[2])
+                    .collect(),
+                features: uniforms.features as usize,
             }),
             gradient: buffers.gradient.clone(),
             table_bytes,
+            atomics,
+        })
+    }
+
+    /// Starts reading the levels' exponents back when the adds are fixed point.
+    pub fn read_exponents(&self, ctx: &GpuContext) -> Option<PendingRead<i32>> {
+        let kernel = self.kernel.as_ref()?;
+        Some(read_buffer_async::<i32>(ctx, kernel.exponents.as_ref()?))
+    }
+
+    /// Decodes the table's range of `flat` (the whole gradient buffer read back as f32) with the
+    /// exponents [`HashGridBackwardPass::read_exponents`] read; nothing to do without them.
+    pub async fn decode_fixed_point(
+        &self,
+        flat: &mut [f32],
+        exponents: Option<PendingRead<i32>>,
+    ) -> Result<(), GpuError> {
+        let (Some(kernel), Some(exponents)) = (&self.kernel, exponents) else {
+            return Ok(());
+        };
+        let exponents = exponents.await?;
+        let range = (self.table_bytes.start / F32_BYTES) as usize..(self.table_bytes.end / F32_BYTES) as usize;
+        let Some(table) = flat.get_mut(range.clone()) else {
+            return Err(GpuError::invalid_argument(
+                "hash grid backward",
+                format!("{} values read back, the table spans {range:?}", flat.len()),
+            ));
+        };
+        decode_table(table, &exponents, &kernel.level_starts, kernel.features);
+        Ok(())
+    }
+
+    /// How this pass adds into the gradient buffer.
+    pub fn atomics(&self) -> AtomicAdd {
+        self.atomics
+    }
+
+    /// Dispatches [`HashGridBackwardPass::record`] records (0 for the frequency-only encoding).
+    pub fn dispatches(&self) -> usize {
+        self.kernel.as_ref().map_or(0, |k| 1 + usize::from(k.scale.is_some()))
+    }
+
+    /// With fixed-point adds, where the table's integers and their scales are; the gradient
+    /// buffer's table range holds i32 until the pass given this decodes it.
+    pub fn fixed_point_table(&self) -> Option<FixedPointTable<'_>> {
+        let kernel = self.kernel.as_ref()?;
+        let exponents = kernel.exponents.as_ref()?;
+        let bytes = &self.table_bytes;
+        Some(FixedPointTable {
+            grid: &kernel.uniforms,
+            exponents,
+            table: (bytes.start / F32_BYTES) as usize..(bytes.end / F32_BYTES) as usize,
         })
     }
 
@@ -330,6 +503,9 @@ impl HashGridBackwardPass {
     /// Records the accumulation of ∂L/∂table into the (zeroed) gradient buffer.
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         let Some(kernel) = &self.kernel else { return };
+        if let Some(scale) = &kernel.scale {
+            scale.record(pass);
+        }
         kernel.dispatch.record(pass);
     }
 }

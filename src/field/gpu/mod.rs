@@ -11,6 +11,7 @@ pub mod adam;
 pub mod composite;
 pub mod dense;
 pub mod encoding;
+pub mod fixed_point;
 pub mod head_glue;
 pub mod keep;
 pub mod rays;

@@ -421,6 +421,7 @@ impl Trainer {
                 grads,
                 first_moment: &optimizer.first_moment,
                 second_moment: &optimizer.second_moment,
+                fixed_point_table: hash_backward.fixed_point_table(),
             },
             &step_uniforms,
         )
@@ -679,18 +680,22 @@ impl Trainer {
         read_elements_async::<f32>(&self.ctx, &self.optimizer.params, 0..self.layout.total as u64)
     }
 
-    /// Reads back the gradient buffer as it is. Between steps it is all zeros: each step's Adam
+    /// Reads back the gradient buffer as it is, as f32 (a fixed-point table decoded). Between
+    /// steps it is all zeros: each step's Adam
     /// zeroes the gradient it consumed (tests check that; [`Trainer::step_gradient`] reads a
     /// step's gradient).
-    pub fn read_gradients(&self) -> PendingRead<f32> {
-        read_buffer_async::<f32>(&self.ctx, &self.optimizer.grads)
+    pub async fn read_gradients(&self) -> Result<Vec<f32>, GpuError> {
+        let exponents = self.hash_backward.read_exponents(&self.ctx);
+        let mut values = read_buffer_async::<f32>(&self.ctx, &self.optimizer.grads).await?;
+        self.hash_backward.decode_fixed_point(&mut values, exponents).await?;
+        Ok(values)
     }
 
     /// Runs one training step up to, not including, its Adam update and reads back the gradient
     /// it produced (tests: compare with the reference). The step counts (its losses can be
     /// read), the parameters do not move, and the gradient buffer is cleared after the copy so
     /// the next step starts from zero as it would after Adam.
-    pub fn step_gradient(&mut self) -> PendingRead<f32> {
+    pub async fn step_gradient(&mut self) -> Result<Vec<f32>, GpuError> {
         let mut encoder = self.begin_step();
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -703,12 +708,15 @@ impl Trainer {
         }
         self.ctx.queue.submit([encoder.finish()]);
         let read = read_buffer_async::<f32>(&self.ctx, &self.optimizer.grads);
+        let exponents = self.hash_backward.read_exponents(&self.ctx);
         let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("clearing the gradient read back"),
         });
         encoder.clear_buffer(&self.optimizer.grads, 0, None);
         self.ctx.queue.submit([encoder.finish()]);
-        read
+        let mut values = read.await?;
+        self.hash_backward.decode_fixed_point(&mut values, exponents).await?;
+        Ok(values)
     }
 
     /// Everything a training run depends on besides the scene, the config and the labels: the
