@@ -1,4 +1,5 @@
 //! The assembled GPU trainer on the demo scene: it trains (losses fall) and nothing is NaN.
+use scribblefield::field::gpu::encoding::AtomicAdd;
 use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::field::{AdamConfig, FieldConfig, SemanticInput};
 use scribblefield::gpu::test_support::gpu_for_tests;
@@ -184,7 +185,7 @@ fn one_step_gradient_matches_the_reference() {
         "one_step_gradient_matches_the_reference",
         SemanticInput::FeatureAndGeometry,
         FieldConfig::default().head_weight_threshold,
-        Kernels::OfThisDevice,
+        Kernels::Chosen,
     );
 }
 
@@ -195,7 +196,7 @@ fn one_step_gradient_matches_the_reference_with_every_sample_at_the_heads() {
         "one_step_gradient_matches_the_reference_with_every_sample_at_the_heads",
         SemanticInput::FeatureAndGeometry,
         0.0,
-        Kernels::OfThisDevice,
+        Kernels::Chosen,
     );
 }
 
@@ -208,7 +209,7 @@ fn one_step_gradient_matches_the_reference_with_most_samples_kept_from_the_heads
         "one_step_gradient_matches_the_reference_with_most_samples_kept_from_the_heads",
         SemanticInput::FeatureAndGeometry,
         0.02,
-        Kernels::OfThisDevice,
+        Kernels::Chosen,
     );
 }
 
@@ -219,7 +220,7 @@ fn one_step_gradient_matches_the_reference_with_the_feature_only_semantic_head()
         "one_step_gradient_matches_the_reference_with_the_feature_only_semantic_head",
         SemanticInput::Feature,
         FieldConfig::default().head_weight_threshold,
-        Kernels::OfThisDevice,
+        Kernels::Chosen,
     );
 }
 
@@ -231,29 +232,30 @@ fn one_step_gradient_matches_the_reference_with_the_kernels_of_a_gpu() {
         "one_step_gradient_matches_the_reference_with_the_kernels_of_a_gpu",
         SemanticInput::FeatureAndGeometry,
         FieldConfig::default().head_weight_threshold,
-        Kernels::OfAGpu,
+        Kernels::Gpu,
     );
 }
 
-/// A device without float atomics, as every browser is: the hash table's gradient is summed in
-/// fixed point and decoded by Adam (lavapipe has float atomics, so they are taken away here).
+/// What a GPU in a browser runs: a GPU's kernels without float atomics, so the hash table's
+/// gradient is summed in fixed point and decoded by Adam (lavapipe has float atomics, so they
+/// are taken away here).
 #[test]
 fn one_step_gradient_matches_the_reference_with_fixed_point_table_gradients() {
     check_one_step_gradient(
         "one_step_gradient_matches_the_reference_with_fixed_point_table_gradients",
         SemanticInput::FeatureAndGeometry,
         FieldConfig::default().head_weight_threshold,
-        Kernels::WithoutFloatAtomics,
+        Kernels::BrowserGpu,
     );
 }
 
 /// Which kernels the trainer runs: those chosen for this device, a GPU's whatever it is, or
-/// this device's without float atomics.
+/// those of a GPU without float atomics (a browser's).
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Kernels {
-    OfThisDevice,
-    OfAGpu,
-    WithoutFloatAtomics,
+    Chosen,
+    Gpu,
+    BrowserGpu,
 }
 
 fn check_one_step_gradient(name: &str, semantic_input: SemanticInput, head_weight_threshold: f32, kernels: Kernels) {
@@ -266,10 +268,10 @@ fn check_one_step_gradient(name: &str, semantic_input: SemanticInput, head_weigh
         return;
     };
     let ctx = match kernels {
-        Kernels::OfThisDevice => ctx,
-        Kernels::OfAGpu => ctx.treated_as_software(false),
-        Kernels::WithoutFloatAtomics => {
-            let mut ctx = ctx;
+        Kernels::Chosen => ctx,
+        Kernels::Gpu => ctx.treated_as_software(false),
+        Kernels::BrowserGpu => {
+            let mut ctx = ctx.treated_as_software(false);
             ctx.features.remove(wgpu::Features::SHADER_FLOAT32_ATOMIC);
             ctx
         }
@@ -305,6 +307,9 @@ fn check_one_step_gradient(name: &str, semantic_input: SemanticInput, head_weigh
     };
     let seed = 3;
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, seed)).unwrap();
+    if kernels == Kernels::BrowserGpu {
+        assert_eq!(trainer.hash_atomics(), AtomicAdd::FixedPoint);
+    }
     let params = pollster::block_on(trainer.read_params()).unwrap();
     let gpu = pollster::block_on(trainer.step_gradient()).unwrap();
     let kept_on_gpu = pollster::block_on(trainer.kept_tally()).unwrap();

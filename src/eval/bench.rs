@@ -4,6 +4,7 @@
 use serde_json::{Map, Value, json};
 
 use crate::field::FieldConfig;
+use crate::field::gpu::encoding::AtomicAdd;
 use crate::field::gpu::trainer::{StageShape, Trainer};
 use crate::gpu::GpuContext;
 use crate::gpu::matmul_bench::MatmulBenchReport;
@@ -61,7 +62,9 @@ pub fn mean_kept(before: &[u32], after: &[u32]) -> Option<f64> {
 /// stage name where timestamp queries measured them. `samples_to_heads`: the mean samples per
 /// step that reached the heads over the timed steps ([`mean_kept`]; `None`: all of them), which
 /// the traffic and the MLP products are counted for. With the adapter and the dense kernels'
-/// family (`uniform` on CPU devices, `tiled` on GPUs); the caller adds `config`.
+/// family (`uniform` on CPU devices, `tiled` on GPUs) and the hash backward's atomic add
+/// (`float`, `fixed_point` or `compare_exchange`: `AtomicAdd::best_for`); the caller adds
+/// `config`.
 pub fn step_report(
     ctx: &GpuContext,
     trainer: &Trainer,
@@ -94,6 +97,11 @@ pub fn step_report(
     let Value::Object(mut fields) = json!({
         "adapter": ctx.describe(),
         "kernels": if ctx.is_software() { "uniform" } else { "tiled" },
+        "hash_atomics": match trainer.hash_atomics() {
+            AtomicAdd::Float => "float",
+            AtomicAdd::FixedPoint => "fixed_point",
+            AtomicAdd::CompareExchange => "compare_exchange",
+        },
         "rays": cfg.batch_rays,
         "samples_per_ray": cfg.samples_per_ray(),
         "steps_timed": steps,

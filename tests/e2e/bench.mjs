@@ -72,10 +72,15 @@ await runBrowserTest("bench", { checks, consoleLog }, async (context) => {
     assert(report && report.state === "done", `data-bench is ${JSON.stringify(report)}`);
   });
   if (!report || report.state !== "done") return;
-  await check("it names the adapter, the preset and the kernels", async () => {
+  await check("it names the adapter, the preset, the kernels and the atomics", async () => {
     assert(typeof report.adapter === "string" && report.adapter.length > 0, `adapter ${report.adapter}`);
     assert(report.config === preset, `config ${report.config}, asked for ${preset}`);
     assert(["uniform", "tiled"].includes(report.kernels), `kernels ${report.kernels}`);
+    // Browsers have no float atomics: the hash backward adds in fixed point on a GPU and with a
+    // compare-exchange loop on a CPU rasterizer (AtomicAdd::best_for; kernels=tiled makes the
+    // page treat SwiftShader as a GPU).
+    const atomics = report.kernels === "tiled" ? "fixed_point" : "compare_exchange";
+    assert(report.hash_atomics === atomics, `hash_atomics ${report.hash_atomics} with kernels ${report.kernels}`);
   });
   await check("it timed the steps asked for, at a positive finite rate", async () => {
     assert(report.steps_timed === steps, `steps_timed ${report.steps_timed}, asked for ${steps}`);

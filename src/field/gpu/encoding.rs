@@ -211,22 +211,9 @@ pub enum BackwardStrategy {
     /// ray are adjacent) are summed in registers and added once. The default.
     #[default]
     MergeRuns,
-    /// Every sample adds its own 8 corners: no workgroup memory, no barrier.
+    /// Every sample adds its own 8 corners: the plain baseline, kept for measurements (with
+    /// float atomics on lavapipe it is no faster: docs/results/bench.md, "Float atomics").
     PerSample,
-}
-
-impl BackwardStrategy {
-    /// Per sample on a CPU device with float atomics, where an atomic add is cheap and the
-    /// workgroup memory and barrier of merging cost more than they save (lavapipe:
-    /// docs/results/bench.md, "Float atomics"); merged runs everywhere else, where adds to one
-    /// coarse cell contend.
-    pub fn best_for(ctx: &GpuContext, atomics: AtomicAdd) -> BackwardStrategy {
-        if atomics == AtomicAdd::Float && ctx.is_software() {
-            BackwardStrategy::PerSample
-        } else {
-            BackwardStrategy::MergeRuns
-        }
-    }
 }
 
 /// How the hash-grid backward adds a float into the gradient buffer.
@@ -245,10 +232,15 @@ pub enum AtomicAdd {
 }
 
 impl AtomicAdd {
-    /// Float atomics where the device has them, else fixed point.
+    /// Float atomics where the device has them; otherwise fixed point on a GPU, where a
+    /// compare-exchange loop retries under contention, and the loop on a CPU device, where
+    /// every atomic is a loop over the SIMD lanes anyway and fixed point's extra pass made a
+    /// SwiftShader step 3 % slower (docs/results/bench.md, "Float atomics, fixed point").
     pub fn best_for(ctx: &GpuContext) -> AtomicAdd {
         if ctx.features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC) {
             AtomicAdd::Float
+        } else if ctx.is_software() {
+            AtomicAdd::CompareExchange
         } else {
             AtomicAdd::FixedPoint
         }
@@ -304,17 +296,15 @@ struct BoundKernel {
 }
 
 impl HashGridBackwardPass {
-    /// A pass for `samples` samples with the best atomic add the device has and the strategy
-    /// that suits it ([`BackwardStrategy::best_for`]).
+    /// A pass for `samples` samples with the default [`BackwardStrategy`] and the atomic add
+    /// that suits the device ([`AtomicAdd::best_for`]).
     pub async fn new(
         ctx: &GpuContext,
         cfg: &FieldConfig,
         samples: usize,
         buffers: HashGridBackwardBuffers<'_>,
     ) -> Result<Self, GpuError> {
-        let atomics = AtomicAdd::best_for(ctx);
-        let strategy = BackwardStrategy::best_for(ctx, atomics);
-        Self::with_atomics(ctx, cfg, samples, buffers, strategy, atomics).await
+        Self::with_strategy(ctx, cfg, samples, buffers, BackwardStrategy::default()).await
     }
 
     /// As [`HashGridBackwardPass::new`] with the given strategy, and the best atomic add the

@@ -27,7 +27,7 @@ use super::adam::{AdamBuffers, AdamPass};
 use super::composite::{CompositeInputs, CompositeLayout, CompositePass, LOSS_WORDS};
 use super::dense::{DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView};
 use super::encoding::{
-    DirectionLayout, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
+    AtomicAdd, DirectionLayout, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
     PositionEncodeBuffers, PositionEncodePass, ShOutputLayout,
 };
 use super::head_glue::{GlueBuffers, GlueDims, GlueRows, HeadGluePass};
@@ -539,6 +539,11 @@ impl Trainer {
 
     pub fn has_labels(&self) -> bool {
         self.labelled_pixels > 0
+    }
+
+    /// How the hash grid's backward adds into the gradient buffer on this device.
+    pub fn hash_atomics(&self) -> AtomicAdd {
+        self.hash_backward.atomics()
     }
 
     /// The learning rate of the next step: warm-up until labels exist, then the annotating one.

@@ -116,7 +116,7 @@ impl StepStage {
     /// | an MLP backward (K rows for the heads, N for density) | see `DenseBackward::global_bytes` | |
     /// | glue backward (feature) | K·f semantic-input and K·f feature-loss gradients | K·f |
     /// | glue backward (geometry) | N slots and ∂L/∂h₀, K·(g + g + sg) gradients | N·(1 + g) |
-    /// | encoding backward | N hash-grid gradients and positions | an atomic add (read and write) per corner, level and feature |
+    /// | encoding backward | N hash-grid gradients and positions (fixed point: the gradients twice, `Trainer::stage_bytes`) | an atomic add (read and write) per corner, level and feature (fixed point: and an exponent per level) |
     /// | adam | parameters, gradients, both moments: 4·P | parameters, gradients (zeroed), both moments: 4·P |
     ///
     /// The MLPs' stages are `None`: their passes know which kernels they record, and count
@@ -230,6 +230,16 @@ impl Trainer {
             StepStage::FeatureBackward => self.feature.backward_bytes(k),
             StepStage::ColorBackward => self.color.backward_bytes(k),
             StepStage::DensityBackward => self.density.backward_bytes(n),
+            StepStage::EncodingBackward => {
+                let adds = stage.global_bytes(&self.cfg, samples_to_heads).unwrap_or(0);
+                // Fixed point first bounds each level's sums: one more read of the hash
+                // columns of every gradient row, one exponent written per level.
+                let scale = match self.hash_backward.fixed_point_table() {
+                    Some(_) => n * self.cfg.hash_encoding_dim() as u64 * WORD + u64::from(self.cfg.hash_levels) * WORD,
+                    None => 0,
+                };
+                adds + scale
+            }
             _ => stage.global_bytes(&self.cfg, samples_to_heads).unwrap_or(0),
         }
     }
