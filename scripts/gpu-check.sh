@@ -80,6 +80,9 @@ run() {
   done
   timeout 60 "$b" bench --preset full --rays 16384 --json --steps 10 --warmup 3 >> "$out/bench.jsonl" 2>> "$out/bench.log"
   echo "full, 16384 rays: rc $? at $(elapsed) s" >> "$out/bench.log"
+  # The hash backward's three atomic adds (float, fixed point, compare-exchange) timed alone.
+  timeout 60 "$work/gpu_field_encoding" encoding_throughput_report --ignored --nocapture 2>&1 |
+    grep -E 'adapter|ms' >> "$out/bench.log"
   # The kernel tests beside the quality runs (they are short and mostly wait on the CPU).
   (
     for test in "$work"/gpu_*; do

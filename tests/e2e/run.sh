@@ -2,7 +2,8 @@
 # Browser end-to-end test: builds the web app, serves it on a free localhost port, and runs
 # smoke.mjs, annotate.mjs, durable.mjs and (with ../shared/data beside the repository)
 # spread.mjs and pack.mjs in headless Chromium (WebGPU on SwiftShader), then bench.mjs (the page's
-# training bench, its report checked, no timings asserted). Installs Chromium (apt) and the node
+# training bench, its report checked, no timings asserted) with the kernels of a CPU device and
+# with those of a GPU. Installs Chromium (apt) and the node
 # modules (npm ci) when they are missing. Screenshots go to $E2E_OUT (default /tmp/e2e).
 #
 # With test names as arguments it runs only those: `tests/e2e/run.sh bench` (E2E_BENCH=budget
@@ -93,5 +94,9 @@ if [ -n "$SPARSE" ]; then
 fi
 if wanted bench; then
   E2E_URL="$URL" CHROMIUM="$CHROMIUM" node "$HERE/bench.mjs" || STATUS=1
+  # A GPU's kernels on SwiftShader, as a browser on a GPU runs them: the workgroup-tiled dense
+  # layers and the hash gradient in fixed point (the report must say `fixed_point`).
+  E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_BENCH_STEPS=1 E2E_BENCH_OPTIONS=kernels=tiled \
+    node "$HERE/bench.mjs" || STATUS=1
 fi
 exit $STATUS
