@@ -11,8 +11,11 @@ const MAX_EXPONENT: i32 = 126;
 // The largest exponent e with bound · 2^e ≤ 2^FIXED_POINT_BITS (0 for a bound of zero, or one
 // that is not finite), clamped to ±MAX_EXPONENT.
 fn fixed_point_exponent(bound: f32) -> i32 {
-    // Not finite or not positive: nothing to scale (a zero bound means every add is zero).
-    if !(bound > 0.0 && bound <= 3.4028235e38) {
+    // Not positive (NaN included) or not finite (all exponent bits set): nothing to scale (a
+    // zero bound means every add is zero). The bits, not a literal of f32's largest value,
+    // which Tint refuses as not representable.
+    let finite = (bitcast<u32>(bound) & 0x7f800000u) != 0x7f800000u;
+    if !(bound > 0.0 && finite) {
         return 0;
     }
     // bound = m · 2^k with m in [0.5, 1), so bound ≤ 2^k.
