@@ -116,7 +116,7 @@ fn train_and_score(
         |i, mut rendered| {
             let clock = std::time::Instant::now();
             rendered
-                .refine(Guide::of_frame(scene, i).unwrap(), &RefineOptions::default())
+                .refine(Guide::of_frame(scene, i).unwrap(), &RefineOptions::for_scene(scene))
                 .unwrap();
             refine_seconds += clock.elapsed().as_secs_f64();
             refined.add(scene.frames[i].gt.as_ref().unwrap().as_raw(), &rendered.classes);

@@ -51,9 +51,10 @@ pub(super) struct MaskArgs {
     #[arg(short, long)]
     output: PathBuf,
     /// Rounds of edge-aware refinement of each mask with its frame's colour and depth (0: the
-    /// field's own argmax); see `field::refine`.
-    #[arg(long, default_value_t = RefineOptions::default().iterations)]
-    refine_iterations: u32,
+    /// field's own argmax); default: 3 where the frames have dense depth, 10 where they do not
+    /// (photo captures); see `field::refine`.
+    #[arg(long)]
+    refine_iterations: Option<u32>,
     /// The capture folder the archive was packed from (any layout `pack` reads): the masks are
     /// rendered and refined at its images' resolution instead of the archive's. Every archive
     /// frame must be found there by name with the same pose.
@@ -148,8 +149,10 @@ impl MaskArgs {
     /// `archive`): before any GPU work, and before the output folder is created.
     pub(super) fn check<'a>(&'a self, scene: &Scene, archive: &'a Path) -> Result<Masks<'a>, Box<dyn Error>> {
         let refine = RefineOptions {
-            iterations: self.refine_iterations,
-            ..RefineOptions::default()
+            iterations: self
+                .refine_iterations
+                .unwrap_or(RefineOptions::for_scene(scene).iterations),
+            ..RefineOptions::for_scene(scene)
         };
         refine.validate()?;
         let source = match &self.source {

@@ -48,6 +48,32 @@ impl RefineOptions {
         depth_sigma: 0.05,
         spatial_sigma: 0.02,
     };
+    /// Rounds on a capture without dense depth (`for_scene`).
+    pub const ROUNDS_WITHOUT_DENSE_DEPTH: u32 = 10;
+
+    /// The defaults for `scene`: [`RefineOptions::DEFAULT`]'s 3 rounds where most frames have
+    /// dense depth, [`RefineOptions::ROUNDS_WITHOUT_DENSE_DEPTH`] where they do not (a photo
+    /// capture: no depth, or a reconstruction's sparse points). Without depth to train on, the
+    /// field's silhouettes are soft and its class runs several pixels past an object's outline;
+    /// more rounds pull that ring back to the colour edge. With dense depth the ring is thin,
+    /// and more rounds only let regions of one colour leak into each other (docs/quality.md,
+    /// "Refinement rounds without dense depth").
+    pub fn for_scene(scene: &Scene) -> RefineOptions {
+        let with_depth = scene.frames.iter().filter_map(|f| f.depth.as_ref());
+        let dense = with_depth
+            .filter(|d| d.pixels().filter(|p| p.0[0] > 0).count() * 2 > d.len())
+            .count();
+        let iterations = if dense * 2 > scene.frames.len() {
+            RefineOptions::DEFAULT.iterations
+        } else {
+            RefineOptions::ROUNDS_WITHOUT_DENSE_DEPTH
+        };
+        RefineOptions {
+            iterations,
+            ..RefineOptions::DEFAULT
+        }
+    }
+
     /// The field's own class map.
     pub const OFF: RefineOptions = RefineOptions {
         iterations: 0,
@@ -276,7 +302,45 @@ pub fn argmax_and_confidence(probabilities: &[f32], classes: usize) -> (Vec<u8>,
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::demo::{DemoOptions, demo_scene};
     use image::{ImageBuffer, Luma};
+
+    #[test]
+    fn photo_captures_get_more_rounds_than_captures_with_dense_depth() {
+        let mut scene = demo_scene(&DemoOptions {
+            width: 24,
+            height: 16,
+            frames: 4,
+            ..DemoOptions::default()
+        })
+        .unwrap();
+        assert_eq!(RefineOptions::for_scene(&scene), RefineOptions::DEFAULT);
+        // A reconstruction's points: a reading at one pixel in ten, on 3 frames of 4.
+        for frame in &mut scene.frames[1..] {
+            let depth = frame.depth.as_mut().unwrap();
+            for (i, p) in depth.pixels_mut().enumerate() {
+                if i % 10 != 0 {
+                    p.0[0] = 0;
+                }
+            }
+        }
+        let sparse = RefineOptions::for_scene(&scene);
+        assert_eq!(sparse.iterations, RefineOptions::ROUNDS_WITHOUT_DENSE_DEPTH);
+        assert_eq!(
+            RefineOptions {
+                iterations: 3,
+                ..sparse
+            },
+            RefineOptions::DEFAULT
+        );
+        for frame in &mut scene.frames {
+            frame.depth = None;
+        }
+        assert_eq!(
+            RefineOptions::for_scene(&scene).iterations,
+            RefineOptions::ROUNDS_WITHOUT_DENSE_DEPTH
+        );
+    }
 
     fn one_hot(classes: &[u8], count: usize, softness: f32) -> Vec<f32> {
         classes

@@ -8,6 +8,7 @@ use super::super::page_options::{Kernels, PageOptions};
 use super::super::training::scene::{auto_factor, downscale};
 use super::super::training::{Phase, Refresh, Training, TrainingOptions, TrainingSetup};
 use super::document::Document;
+use crate::field::refine::RefineOptions;
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
 use crate::scene::Scene;
@@ -81,6 +82,7 @@ impl TrainingControl {
             // second, so there the panel is updated every few seconds.
             repaint_ms: if gpu.is_software() { 3000 } else { 250 },
             split_steps: self.options.split,
+            refine: RefineOptions::for_scene(&train_scene),
             ..TrainingOptions::default()
         };
         if let Some(n) = self.options.refine {

@@ -77,8 +77,8 @@ pub struct TrainingOptions {
     /// Measure where a step's time goes before training (`#profile`).
     pub profile: bool,
     /// Edge-aware refinement of the full renders and the export with each frame's colour and
-    /// depth (`#refine=N` rounds, 0: the field's own class map); the quick coarse render stays
-    /// unrefined.
+    /// depth (`RefineOptions::for_scene` unless `#refine=N` rounds, 0: the field's own class
+    /// map); the quick coarse render stays unrefined.
     pub refine: RefineOptions,
 }
 
