@@ -5,10 +5,11 @@
 //! - [`PositionEncodePass`] (`shaders/hash_encode.wgsl`): N positions (`vec4<f32>`, xyz in
 //!   [0,1]³) → N rows of `cfg.encoding_dim()` values, `[hash levels… | frequencies]`, exactly
 //!   `FieldModel::encode_position`.
-//! - [`HashGridBackwardPass`] (`shaders/hash_backward.wgsl`): N rows of ∂L/∂encoding → adds
-//!   ∂L/∂table into the table range of the flat gradient buffer with f32 compare-exchange
-//!   atomics. The table range must be zero first: [`HashGridBackwardPass::record_clear`] does
-//!   that (or the trainer clears the whole gradient buffer, once per step, before any backward).
+//! - [`HashGridBackwardPass`] (`shaders/hash_backward*.wgsl`): N rows of ∂L/∂encoding → adds
+//!   ∂L/∂table into the table range of the flat gradient buffer with atomics: float atomics,
+//!   fixed point or an f32 compare-exchange loop, by device ([`AtomicAdd`];
+//!   docs/architecture.md, "Fixed-point hash gradients"). The table range must be zero first:
+//!   [`HashGridBackwardPass::record_clear`] does that (in the trainer, the previous step's Adam).
 //! - [`DirectionShPass`] (`shaders/sh_encode.wgsl`): one unit direction per ray → the 16 SH
 //!   values of every sample of the ray, in given columns of a strided per-sample buffer.
 //!
@@ -212,7 +213,8 @@ pub enum BackwardStrategy {
     #[default]
     MergeRuns,
     /// Every sample adds its own 8 corners: the plain baseline, kept for measurements (with
-    /// float atomics on lavapipe it is no faster: docs/results/bench.md, "Float atomics").
+    /// float atomics on lavapipe it is no faster: docs/results/bench.md, "Float atomics, fixed
+    /// point").
     PerSample,
 }
 
@@ -265,7 +267,8 @@ pub struct HashGridBackwardBuffers<'a> {
     pub positions: &'a wgpu::Buffer,
     /// ∂L/∂encoding: N rows of `cfg.encoding_dim()` f32 (only the hash columns are read).
     pub encoding_grad: &'a wgpu::Buffer,
-    /// The flat gradient buffer, bound as `array<atomic<u32>>` (or `array<atomic<f32>>`).
+    /// The flat gradient buffer, bound as `array<atomic<u32>>`, `array<atomic<f32>>` or
+    /// `array<atomic<i32>>` ([`AtomicAdd`]).
     pub gradient: &'a wgpu::Buffer,
     /// Index of the table's first value in `gradient` (`ParamLayout::hash_table.start`).
     pub table_offset: usize,
