@@ -148,11 +148,10 @@ impl MaskArgs {
     /// Checks the refinement and finds the `--source` capture's frames for `scene` (read from
     /// `archive`): before any GPU work, and before the output folder is created.
     pub(super) fn check<'a>(&'a self, scene: &Scene, archive: &'a Path) -> Result<Masks<'a>, Box<dyn Error>> {
+        let defaults = RefineOptions::for_scene(scene);
         let refine = RefineOptions {
-            iterations: self
-                .refine_iterations
-                .unwrap_or(RefineOptions::for_scene(scene).iterations),
-            ..RefineOptions::for_scene(scene)
+            iterations: self.refine_iterations.unwrap_or(defaults.iterations),
+            ..defaults
         };
         refine.validate()?;
         let source = match &self.source {

@@ -15,6 +15,7 @@
 //! `shaders/refine.wgsl`); the CLI runs this one.
 use image::RgbImage;
 
+use crate::field::point_walk::has_sparse_depth;
 use crate::scene::{DepthImage, Scene};
 use serde::{Deserialize, Serialize};
 
@@ -59,14 +60,11 @@ impl RefineOptions {
     /// and more rounds only let regions of one colour leak into each other (docs/quality.md,
     /// "Refinement rounds without dense depth").
     pub fn for_scene(scene: &Scene) -> RefineOptions {
-        let with_depth = scene.frames.iter().filter_map(|f| f.depth.as_ref());
-        let dense = with_depth
-            .filter(|d| d.pixels().filter(|p| p.0[0] > 0).count() * 2 > d.len())
-            .count();
-        let iterations = if dense * 2 > scene.frames.len() {
-            RefineOptions::DEFAULT.iterations
-        } else {
+        let no_depth = scene.frames.iter().all(|f| f.depth.is_none());
+        let iterations = if no_depth || has_sparse_depth(scene) {
             RefineOptions::ROUNDS_WITHOUT_DENSE_DEPTH
+        } else {
+            RefineOptions::DEFAULT.iterations
         };
         RefineOptions {
             iterations,

@@ -466,11 +466,6 @@ impl HashGridBackwardPass {
         self.atomics
     }
 
-    /// Dispatches [`HashGridBackwardPass::record`] records (0 for the frequency-only encoding).
-    pub fn dispatches(&self) -> usize {
-        self.kernel.as_ref().map_or(0, |k| 1 + usize::from(k.scale.is_some()))
-    }
-
     /// With fixed-point adds, where the table's integers and their scales are; the gradient
     /// buffer's table range holds i32 until the pass given this decodes it.
     pub fn fixed_point_table(&self) -> Option<FixedPointTable<'_>> {
