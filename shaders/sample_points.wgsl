@@ -8,8 +8,9 @@
 //!include _step.wgsl
 //!include _ray_random.wgsl
 //!include _ray_layout.wgsl
+//!include _density.wgsl
 
-// Mirrors `field::gpu::rays::SamplePlanUniforms` (32 bytes).
+// Mirrors `field::gpu::rays::SamplePlanUniforms` (48 bytes).
 struct SamplePlanUniforms {
     bounds_min: vec3<f32>,
     // Half-width of the band around the measured surface, metres of t.
@@ -17,6 +18,8 @@ struct SamplePlanUniforms {
     bounds_max: vec3<f32>,
     // Samples in the band; the other S - fine are coarse.
     fine: u32,
+    // 1: the last sample is opaque (its interval is OPAQUE_INTERVAL, _density.wgsl).
+    opaque_last: u32,
 }
 
 const WORKGROUP_SIZE: u32 = 64u;
@@ -100,5 +103,9 @@ fn sample_points(
         }
         previous_t = t;
     }
-    intervals[first + samples - 1u] = vec2<f32>(r.far - previous_t, previous_t * r.z_per_t);
+    var last_interval = r.far - previous_t;
+    if plan.opaque_last != 0u {
+        last_interval = OPAQUE_INTERVAL;
+    }
+    intervals[first + samples - 1u] = vec2<f32>(last_interval, previous_t * r.z_per_t);
 }

@@ -103,8 +103,11 @@ impl Batch {
         let color = (0..n * 3).map(|_| rng.uniform(-4.0, 4.0) as f32).collect();
         let logits_and_feature = (0..n * (c + d + 1)).map(|_| rng.uniform(-2.0, 2.0) as f32).collect();
         let intervals = (0..n)
-            .map(|_| {
-                let delta = if rng.next_f64() < 0.05 {
+            .map(|i| {
+                // Every other ray ends in an opaque sample (`LastSample::Opaque`).
+                let delta = if i % s == s - 1 && (i / s) % 2 == 0 {
+                    f64::from(render::OPAQUE_INTERVAL)
+                } else if rng.next_f64() < 0.05 {
                     0.0
                 } else {
                     rng.uniform(0.0, 0.25)

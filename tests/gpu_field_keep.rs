@@ -8,7 +8,7 @@
 use scribblefield::field::FieldConfig;
 use scribblefield::field::gpu::keep::{HeadRows, KeepBuffers, KeepPass, KeepShape, NOT_KEPT, workgroup_counts};
 use scribblefield::field::gpu::rays::{RAY_HITS_BOX, StepUniforms, TARGET_FLAGS, TARGET_HEADER_WORDS};
-use scribblefield::field::reference::render::kept_samples;
+use scribblefield::field::reference::render::{self, kept_samples};
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{
     GARBAGE_WORDS, fill_with_garbage, read_buffer_blocking, storage_buffer_from, storage_buffer_garbage,
@@ -54,7 +54,8 @@ impl Batch {
         for i in 0..n {
             let (ray, _) = (i / s, i % s);
             let h0 = match ray {
-                // Empty space all along: every weight about exp(-15)·δ, nothing kept.
+                // Empty space all along: every weight about exp(-15)·δ, nothing kept but the
+                // opaque last sample.
                 0 => -40.0,
                 // Thin fog: every sample keeps a weight of about 0.03.
                 1 => 0.0,
@@ -62,7 +63,15 @@ impl Batch {
             };
             density.push(h0 as f32);
             density.extend((0..GEOMETRY).map(|_| rng.uniform(-3.0, 3.0) as f32));
-            let delta = if ray == 1 { 0.03 } else { rng.uniform(0.0, 0.3) };
+            // Rays 0 and 2 end in an opaque sample (`LastSample::Opaque`): ray 0
+            // keeps only that one.
+            let delta = if (ray == 0 || ray == 2) && i % s == s - 1 {
+                f64::from(render::OPAQUE_INTERVAL)
+            } else if ray == 1 {
+                0.03
+            } else {
+                rng.uniform(0.0, 0.3)
+            };
             intervals.push([delta as f32, rng.uniform(0.1, 3.0) as f32]);
         }
         let stride = TARGET_HEADER_WORDS + FEATURE;
@@ -224,7 +233,10 @@ fn keep_matches_its_cpu_twin() {
     let kept = check_batch(&ctx, &batch);
     let (slot, _) = batch.expected();
     let s = batch.samples();
-    assert!(slot[..s].iter().all(|&p| p == NOT_KEPT), "ray 0 keeps nothing");
+    assert!(
+        slot[..s - 1].iter().all(|&p| p == NOT_KEPT) && slot[s - 1] != NOT_KEPT,
+        "ray 0 keeps its opaque last sample alone"
+    );
     assert!(slot[s..2 * s].iter().all(|&p| p != NOT_KEPT), "ray 1 keeps everything");
     let n = slot.len();
     assert!(kept > n / 10 && kept < n * 9 / 10, "{kept} of {n} kept");

@@ -5,7 +5,6 @@
 use std::time::Instant;
 
 use half::f16;
-use scribblefield::field::FieldConfig;
 use scribblefield::field::gpu::rays::{
     NO_LABEL, RAY_HAS_CODE, RAY_HITS_BOX, RayBatchPass, RayGeometry, SamplePlanUniforms, SamplePointsPass,
     StepUniforms, TARGET_DEPTH, TARGET_FLAGS, TARGET_HEADER_WORDS, TARGET_LABEL, TARGET_PIXEL, TARGET_RGB, pick_pixel,
@@ -13,6 +12,7 @@ use scribblefield::field::gpu::rays::{
 };
 use scribblefield::field::gpu::scene_buffers::{LabelIndex, SceneBuffers, SceneUniforms};
 use scribblefield::field::reference::sampling::{self, SamplePlan};
+use scribblefield::field::{FieldConfig, LastSample};
 use scribblefield::gpu::buffers::{fill_with_garbage, read_buffer_blocking, uniform_buffer_from};
 use scribblefield::gpu::test_support::gpu_for_tests;
 use scribblefield::gpu::{GpuContext, GpuError};
@@ -147,7 +147,7 @@ fn uniform_blocks_match_wgsl_sizes() {
     assert_eq!(size_of::<StepUniforms>(), 32);
     assert_eq!(size_of::<RayGeometry>(), 48);
     assert_eq!(size_of::<SceneUniforms>(), 80);
-    assert_eq!(size_of::<SamplePlanUniforms>(), 32);
+    assert_eq!(size_of::<SamplePlanUniforms>(), 48);
 }
 
 #[test]
@@ -292,10 +292,14 @@ fn sample_points_match_reference_placement() {
     };
     let scene = test_scene();
     for cfg in [
-        test_config(300),
+        FieldConfig {
+            last_sample: LastSample::Opaque,
+            ..test_config(300)
+        },
         FieldConfig {
             samples_coarse: 16,
             samples_fine: 48,
+            last_sample: LastSample::Clear,
             ..test_config(130)
         },
     ] {
@@ -314,7 +318,7 @@ fn sample_points_match_reference_placement() {
             let jitter = sample_jitter(&uniforms, ray as u32, s_count);
             let surface = (g.depth > 0.0).then(|| g.depth / g.z_per_t);
             let ts = sampling::place_samples(&plan, g.near, g.far, surface, &jitter);
-            let deltas = sampling::interval_lengths(&ts, g.far);
+            let deltas = sampling::interval_lengths(&ts, g.far, cfg.opaque_last_sample());
             let r = sampling::Ray {
                 origin: g.origin,
                 dir: g.dir,

@@ -1,7 +1,7 @@
 //! The assembled GPU trainer on the demo scene: it trains (losses fall) and nothing is NaN.
 use scribblefield::field::gpu::encoding::AtomicAdd;
 use scribblefield::field::gpu::trainer::Trainer;
-use scribblefield::field::{AdamConfig, FieldConfig, SemanticInput};
+use scribblefield::field::{AdamConfig, FieldConfig, LastSample, SemanticInput};
 use scribblefield::gpu::test_support::gpu_for_tests;
 use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
 use scribblefield::scene::demo::{DemoOptions, demo_scene};
@@ -186,6 +186,7 @@ fn one_step_gradient_matches_the_reference() {
         SemanticInput::FeatureAndGeometry,
         FieldConfig::default().head_weight_threshold,
         Kernels::Chosen,
+        LastSample::Clear,
     );
 }
 
@@ -197,6 +198,7 @@ fn one_step_gradient_matches_the_reference_with_every_sample_at_the_heads() {
         SemanticInput::FeatureAndGeometry,
         0.0,
         Kernels::Chosen,
+        LastSample::Clear,
     );
 }
 
@@ -210,6 +212,7 @@ fn one_step_gradient_matches_the_reference_with_most_samples_kept_from_the_heads
         SemanticInput::FeatureAndGeometry,
         0.02,
         Kernels::Chosen,
+        LastSample::Clear,
     );
 }
 
@@ -221,6 +224,19 @@ fn one_step_gradient_matches_the_reference_with_the_feature_only_semantic_head()
         SemanticInput::Feature,
         FieldConfig::default().head_weight_threshold,
         Kernels::Chosen,
+        LastSample::Clear,
+    );
+}
+
+/// Rays that end in an opaque sample (what a photo capture trains with), through a whole step.
+#[test]
+fn one_step_gradient_matches_the_reference_with_an_opaque_last_sample() {
+    check_one_step_gradient(
+        "one_step_gradient_matches_the_reference_with_an_opaque_last_sample",
+        SemanticInput::FeatureAndGeometry,
+        FieldConfig::default().head_weight_threshold,
+        Kernels::Chosen,
+        LastSample::Opaque,
     );
 }
 
@@ -233,6 +249,7 @@ fn one_step_gradient_matches_the_reference_with_the_kernels_of_a_gpu() {
         SemanticInput::FeatureAndGeometry,
         FieldConfig::default().head_weight_threshold,
         Kernels::Gpu,
+        LastSample::Clear,
     );
 }
 
@@ -246,6 +263,7 @@ fn one_step_gradient_matches_the_reference_with_fixed_point_table_gradients() {
         SemanticInput::FeatureAndGeometry,
         FieldConfig::default().head_weight_threshold,
         Kernels::BrowserGpu,
+        LastSample::Clear,
     );
 }
 
@@ -258,7 +276,13 @@ enum Kernels {
     BrowserGpu,
 }
 
-fn check_one_step_gradient(name: &str, semantic_input: SemanticInput, head_weight_threshold: f32, kernels: Kernels) {
+fn check_one_step_gradient(
+    name: &str,
+    semantic_input: SemanticInput,
+    head_weight_threshold: f32,
+    kernels: Kernels,
+    last_sample: LastSample,
+) {
     use scribblefield::field::gpu::rays::{StepUniforms, pick_pixel, sample_jitter};
     use scribblefield::field::gpu::scene_buffers::LabelIndex;
     use scribblefield::field::propagate::propagate_labels;
@@ -303,6 +327,7 @@ fn check_one_step_gradient(name: &str, semantic_input: SemanticInput, head_weigh
         semantic_trunk_gradient: 0.5,
         semantic_input,
         head_weight_threshold,
+        last_sample,
         ..FieldConfig::small()
     };
     let seed = 3;

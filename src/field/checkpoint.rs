@@ -22,7 +22,7 @@
 use std::collections::BTreeMap;
 use std::ops::Range;
 
-use super::config::FieldConfig;
+use super::config::{FieldConfig, LastSample};
 use super::gpu::trainer::{Trainer, TrainerState};
 use super::params::ParamLayout;
 use crate::gpu::GpuError;
@@ -158,8 +158,8 @@ impl Checkpoint {
         let step: u32 = step
             .parse()
             .map_err(|_| bad(format!("`__metadata__` step {step:?} is not a whole number")))?;
-        let config: FieldConfig = serde_json::from_str(get("config")?)
-            .map_err(|e| bad(format!("`__metadata__` config is not a field config: {e}")))?;
+        let config =
+            config_of(get("config")?).map_err(|e| bad(format!("`__metadata__` config is not a field config: {e}")))?;
         config.validate().map_err(|e| bad(format!("`__metadata__` {e}")))?;
         let layout = ParamLayout::new(&config);
         let list = tensors(&config, &layout);
@@ -506,6 +506,19 @@ impl Trainer {
     }
 }
 
+/// A checkpoint's config. One written before `last_sample` existed was trained with nothing
+/// behind the last sample, so it renders that way too.
+fn config_of(json: &str) -> Result<FieldConfig, serde_json::Error> {
+    let written_with_it = serde_json::from_str::<serde_json::Value>(json)?
+        .get("last_sample")
+        .is_some();
+    let mut config: FieldConfig = serde_json::from_str(json)?;
+    if !written_with_it {
+        config.last_sample = LastSample::Clear;
+    }
+    Ok(config)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -546,6 +559,23 @@ mod tests {
         freq.encoding = crate::field::config::Encoding::freq_only_baseline();
         let ck = sample(freq);
         assert_eq!(Checkpoint::from_bytes("t.safetensors", ck.to_bytes()).unwrap(), ck);
+    }
+
+    #[test]
+    fn a_checkpoint_from_before_the_opaque_last_sample_renders_without_it() {
+        let mut cfg = tiny();
+        cfg.last_sample = LastSample::Opaque;
+        let ck = sample(cfg);
+        assert_eq!(Checkpoint::from_bytes("t.safetensors", ck.to_bytes()).unwrap(), ck);
+        // The field blanked out of the config in the header (spaces keep its length and are
+        // whitespace to JSON), as a checkpoint written before the field existed has it.
+        let mut bytes = ck.to_bytes();
+        let field = br#"\"last_sample\":\"opaque\","#;
+        let at = bytes.windows(field.len()).position(|w| w == field).unwrap();
+        bytes[at..at + field.len()].fill(b' ');
+        let back = Checkpoint::from_bytes("old.safetensors", bytes).unwrap();
+        assert_eq!(back.config.last_sample, LastSample::Clear);
+        assert_eq!(back.state, ck.state);
     }
 
     #[test]

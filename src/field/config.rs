@@ -63,6 +63,26 @@ pub enum SemanticInput {
     Feature,
 }
 
+/// What a ray renders behind its last sample.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LastSample {
+    /// `Opaque` on a capture without dense depth (a photo capture: no depth, or a
+    /// reconstruction's sparse points), `Clear` otherwise; the trainer decides from its scene
+    /// (`FieldConfig::for_scene`).
+    #[default]
+    Auto,
+    /// The last sample takes all the transmittance the ray has left
+    /// (`reference::render::OPAQUE_INTERVAL`), so what lies beyond the scene box (a photo
+    /// capture's room, which the box drawn around the reconstruction's points leaves out) is
+    /// painted on the samples at the box's far side, without density that would stand in front
+    /// of the box's contents in other views. With dense depth everything seen is in the box,
+    /// and it made the masks worse (docs/quality.md, "The room beyond the box").
+    Opaque,
+    /// Nothing behind the last sample: a ray that meets nothing in the box renders 0.
+    Clear,
+}
+
 /// Weights of the four loss terms (docs/architecture.md, "The model").
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -162,6 +182,8 @@ pub struct FieldConfig {
     /// far below it, so the heads run on a fraction of the samples. 0 keeps every sample (the
     /// heads see exactly what they would without the rule).
     pub head_weight_threshold: f32,
+    /// What a ray renders behind its last sample (see `LastSample`).
+    pub last_sample: LastSample,
     /// What the semantic head sees (see `SemanticInput`).
     pub semantic_input: SemanticInput,
     /// How strokes spread inside their own frame before training (`field::propagate`).
@@ -196,6 +218,7 @@ impl Default for FieldConfig {
             batch_rays: 4096,
             semantic_trunk_gradient: 1.0,
             head_weight_threshold: 1e-4,
+            last_sample: LastSample::Auto,
             semantic_input: SemanticInput::Auto,
             scribble_propagation: PropagationOptions::default(),
         }
@@ -276,6 +299,25 @@ impl FieldConfig {
             self.feature_layers,
             self.feature_dim as usize,
         )
+    }
+
+    /// Whether rays end in an opaque sample; `LastSample::Auto` counts as `Clear` here (the
+    /// trainer resolves it first, `for_scene`).
+    pub fn opaque_last_sample(&self) -> bool {
+        self.last_sample == LastSample::Opaque
+    }
+
+    /// This config with what it leaves to the scene decided for `scene`: `LastSample::Auto`.
+    pub fn for_scene(&self, scene: &crate::scene::Scene) -> FieldConfig {
+        let mut cfg = self.clone();
+        if cfg.last_sample == LastSample::Auto {
+            cfg.last_sample = if crate::field::point_walk::lacks_dense_depth(scene) {
+                LastSample::Opaque
+            } else {
+                LastSample::Clear
+            };
+        }
+        cfg
     }
 
     /// Columns of the geometry feature in the semantic head's input (0 or `geometry_dim`).

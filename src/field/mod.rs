@@ -24,7 +24,7 @@ pub mod sparse_solve;
 pub mod support_plane;
 pub mod view_seeds;
 
-pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LossWeights, SemanticInput};
+pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LastSample, LossWeights, SemanticInput};
 pub use params::{MlpLayout, ParamLayout};
 pub use presets::Preset;
 pub mod gpu;

@@ -51,6 +51,14 @@ impl Default for PointWalkOptions {
     }
 }
 
+/// Whether most of `scene`'s frames lack dense depth: no depth at all, or a reconstruction's
+/// sparse points ([`has_sparse_depth`]). Such a capture's field trains without surfaces to
+/// follow, which the refinement's rounds (`RefineOptions::for_scene`) and what rays render
+/// behind their last sample (`FieldConfig::for_scene`) both depend on.
+pub fn lacks_dense_depth(scene: &Scene) -> bool {
+    scene.frames.iter().all(|f| f.depth.is_none()) || has_sparse_depth(scene)
+}
+
 /// True when most frames with depth have readings at fewer than half their pixels: the depth of
 /// a reconstruction's points, not of a sensor.
 pub fn has_sparse_depth(scene: &Scene) -> bool {

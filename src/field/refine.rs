@@ -15,7 +15,7 @@
 //! `shaders/refine.wgsl`); the CLI runs this one.
 use image::RgbImage;
 
-use crate::field::point_walk::has_sparse_depth;
+use crate::field::point_walk::lacks_dense_depth;
 use crate::scene::{DepthImage, Scene};
 use serde::{Deserialize, Serialize};
 
@@ -60,8 +60,7 @@ impl RefineOptions {
     /// and more rounds only let regions of one colour leak into each other (docs/quality.md,
     /// "Refinement rounds without dense depth").
     pub fn for_scene(scene: &Scene) -> RefineOptions {
-        let no_depth = scene.frames.iter().all(|f| f.depth.is_none());
-        let iterations = if no_depth || has_sparse_depth(scene) {
+        let iterations = if lacks_dense_depth(scene) {
             RefineOptions::ROUNDS_WITHOUT_DENSE_DEPTH
         } else {
             RefineOptions::DEFAULT.iterations
@@ -304,7 +303,9 @@ mod tests {
     use image::{ImageBuffer, Luma};
 
     #[test]
-    fn photo_captures_get_more_rounds_than_captures_with_dense_depth() {
+    fn photo_captures_get_more_rounds_and_an_opaque_last_sample() {
+        use crate::field::{FieldConfig, LastSample};
+        let last_sample = |scene: &Scene| FieldConfig::default().for_scene(scene).last_sample;
         let mut scene = demo_scene(&DemoOptions {
             width: 24,
             height: 16,
@@ -313,6 +314,12 @@ mod tests {
         })
         .unwrap();
         assert_eq!(RefineOptions::for_scene(&scene), RefineOptions::DEFAULT);
+        assert_eq!(last_sample(&scene), LastSample::Clear);
+        let forced = FieldConfig {
+            last_sample: LastSample::Opaque,
+            ..FieldConfig::default()
+        };
+        assert!(forced.for_scene(&scene).opaque_last_sample());
         // A reconstruction's points: a reading at one pixel in ten, on 3 frames of 4.
         for frame in &mut scene.frames[1..] {
             let depth = frame.depth.as_mut().unwrap();
@@ -323,6 +330,7 @@ mod tests {
             }
         }
         let sparse = RefineOptions::for_scene(&scene);
+        assert_eq!(last_sample(&scene), LastSample::Opaque);
         assert_eq!(sparse.iterations, RefineOptions::ROUNDS_WITHOUT_DENSE_DEPTH);
         assert_eq!(
             RefineOptions {
@@ -338,6 +346,7 @@ mod tests {
             RefineOptions::for_scene(&scene).iterations,
             RefineOptions::ROUNDS_WITHOUT_DENSE_DEPTH
         );
+        assert_eq!(last_sample(&scene), LastSample::Opaque);
     }
 
     fn one_hot(classes: &[u8], count: usize, softness: f32) -> Vec<f32> {

@@ -330,7 +330,7 @@ impl FrameTilePass {
     }
 }
 
-/// Uniform block mirrored by `SamplePlanUniforms` in `shaders/sample_points.wgsl` (32 bytes).
+/// Uniform block mirrored by `SamplePlanUniforms` in `shaders/sample_points.wgsl` (48 bytes).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct SamplePlanUniforms {
@@ -338,6 +338,10 @@ pub struct SamplePlanUniforms {
     pub band_half_width: f32,
     pub bounds_max: [f32; 3],
     pub fine: u32,
+    /// 1: the last sample's interval is `reference::render::OPAQUE_INTERVAL`
+    /// (`FieldConfig::opaque_last_sample`: `LastSample::Auto` must be resolved before).
+    pub opaque_last: u32,
+    pub _pad: [u32; 3],
 }
 
 impl SamplePlanUniforms {
@@ -350,6 +354,8 @@ impl SamplePlanUniforms {
             ),
             bounds_max: bounds.max.map(|v| v as f32),
             fine: cfg.samples_fine,
+            opaque_last: u32::from(cfg.opaque_last_sample()),
+            _pad: [0; 3],
         }
     }
 }

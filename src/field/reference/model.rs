@@ -110,13 +110,14 @@ impl SampledRay {
             .filter(|d| d.is_finite() && *d > 0.0)
             .map(|d| d / ray.z_per_t);
         let ts = sampling::place_samples(&plan, near, far, surface_t, jitter);
+        let deltas = sampling::interval_lengths(&ts, far, cfg.opaque_last_sample());
         Some(SampledRay {
             dir: ray.dir,
             positions: ts
                 .iter()
                 .map(|&t| sampling::normalize_position(bounds, ray.at(t)))
                 .collect(),
-            deltas: sampling::interval_lengths(&ts, far),
+            deltas,
             depths: ts.iter().map(|t| t * ray.z_per_t).collect(),
         })
     }

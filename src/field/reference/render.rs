@@ -3,8 +3,14 @@
 //! Samples i = 0…n−1 (front to back) have density σ_i, interval length δ_i (metres) and a
 //! value vector h_i of `k` channels. With optical depth τ_i = Σ_{j<i} σ_j δ_j,
 //! transmittance T_i = e^(−τ_i), α_i = 1 − e^(−σ_i δ_i) and weight w_i = T_i α_i, the
-//! rendered value is R = Σ_i w_i h_i. Nothing is composited behind the last sample (an
-//! empty ray renders 0): the scene box is clipped so the background is never trained.
+//! rendered value is R = Σ_i w_i h_i.
+//!
+//! A ray's last sample may be opaque (`FieldConfig::last_sample`, marked by an interval
+//! of [`OPAQUE_INTERVAL`]): it takes all the transmittance left, w = T_last, whatever its
+//! density, so what lies beyond the scene box (a photo capture's room) is painted on the
+//! samples at the box's far side instead of on density inside the box (docs/quality.md, "The
+//! room beyond the box"). Otherwise nothing is composited behind the last sample and an empty
+//! ray renders 0.
 //!
 //! All channels are rendered by the same weights, so the model concatenates them per sample
 //! in the order of [`Channels`]: colour (3), z-depth (1), semantic logits (C), feature (D).
@@ -31,6 +37,23 @@ impl Channels {
     }
 }
 
+/// The interval that marks a ray's opaque last sample (any negative value would do: an
+/// interval is never negative otherwise). Its length does not matter: the sample's weight is
+/// the transmittance left whatever its density, and its density gets no gradient.
+pub const OPAQUE_INTERVAL: f32 = -1.0;
+
+/// One sample's step along the ray: (weight T·α, transmittance after it), advancing the summed
+/// optical depth. Shared by `composite` and `kept_samples` (and `shaders/_density.wgsl`).
+fn transmittance_step<R: Real>(sigma: R, delta: R, optical_depth: &mut R) -> (R, R) {
+    let t_before = (-*optical_depth).exp();
+    if delta < R::ZERO {
+        return (t_before, R::ZERO);
+    }
+    *optical_depth += sigma * delta;
+    let t_after = (-*optical_depth).exp();
+    (t_before - t_after, t_after)
+}
+
 /// Forward results kept for the backward pass.
 #[derive(Clone, Debug)]
 pub struct Composite<R> {
@@ -54,10 +77,7 @@ pub fn composite<R: Real>(sigmas: &[R], deltas: &[R], values: &[R], k: usize) ->
     // but no drift from multiplying many factors near 1.
     let mut optical_depth = R::ZERO;
     for i in 0..n {
-        let t_before = (-optical_depth).exp();
-        optical_depth += sigmas[i] * deltas[i];
-        let t_after = (-optical_depth).exp();
-        let w = t_before - t_after;
+        let (w, t_after) = transmittance_step(sigmas[i], deltas[i], &mut optical_depth);
         for (o, h) in output.iter_mut().zip(&values[i * k..(i + 1) * k]) {
             *o += w * *h;
         }
@@ -85,10 +105,7 @@ pub fn kept_samples(h0: &[f32], deltas: &[f32], threshold: f32) -> Vec<bool> {
     h0.iter()
         .zip(deltas)
         .map(|(&h, &delta)| {
-            let t_before = (-optical_depth).exp();
-            optical_depth += super::activations::density(h) * delta;
-            let t_after = (-optical_depth).exp();
-            t_before - t_after >= threshold
+            transmittance_step(super::activations::density(h), delta, &mut optical_depth).0 >= threshold
         })
         .collect()
 }
@@ -98,7 +115,8 @@ pub fn kept_samples(h0: &[f32], deltas: &[f32], threshold: f32) -> Vec<bool> {
 /// - ∂L/∂h_i = w_i · g
 /// - ∂L/∂σ_i = δ_i (T_{i+1} u_i − Σ_{j>i} w_j u_j), with u_i = g · h_i,
 ///
-/// because ∂w_i/∂σ_i = δ_i T_{i+1} and ∂w_j/∂σ_i = −δ_i w_j for j > i. The suffix sum is
+/// because ∂w_i/∂σ_i = δ_i T_{i+1} and ∂w_j/∂σ_i = −δ_i w_j for j > i (an opaque last sample
+/// gets 0: its T_{i+1} and its suffix are both 0). The suffix sum is
 /// accumulated back to front, so the pass is O(n·k). (instant-ngp gets the suffix as
 /// `total − prefix` in a forward scan instead; the same value up to rounding.)
 pub fn composite_backward<R: Real>(
@@ -151,11 +169,43 @@ mod tests {
     }
 
     #[test]
+    fn an_opaque_last_sample_takes_what_the_ray_has_left() {
+        let opaque = f64::from(OPAQUE_INTERVAL);
+        // A nearly empty ray: the last sample takes the rest, whatever its own density.
+        for last_sigma in [1e-7, 1.0, 1e6] {
+            let c = composite(&[0.5f64, 1e-7, last_sigma], &[0.2, 0.2, opaque], &[1.0, 0.0, 3.0], 1);
+            let first = 1.0 - (-0.1f64).exp();
+            assert!((c.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+            assert!((c.weights[2] - (1.0 - first) * (-2e-8f64).exp()).abs() < 1e-12);
+            assert_eq!(c.transmittance_after[2], 0.0);
+        }
+        // Behind an opaque surface it gets nothing, as any other sample.
+        let c = composite(&[1e6f64, 1.0], &[0.1, opaque], &[0.2, 0.9], 1);
+        assert!(c.weights[1].abs() < 1e-12);
+        // The keep rule sees the same weights: an empty ray keeps its last sample.
+        let empty = [-30.0, -30.0, -30.0];
+        assert_eq!(kept_samples(&empty, &[0.1, 0.1, 0.1], 1e-4), [false; 3]);
+        assert_eq!(
+            kept_samples(&empty, &[0.1, 0.1, OPAQUE_INTERVAL], 1e-4),
+            [false, false, true]
+        );
+    }
+
+    #[test]
     fn backward_matches_finite_differences() {
+        for opaque_last in [false, true] {
+            backward_matches_finite_differences_with(opaque_last);
+        }
+    }
+
+    fn backward_matches_finite_differences_with(opaque_last: bool) {
         let (n, k) = (9, 4);
         let mut rng = SplitMix64::new(21);
         let sigmas: Vec<f64> = (0..n).map(|_| rng.uniform(0.0, 6.0)).collect();
-        let deltas: Vec<f64> = (0..n).map(|_| rng.uniform(0.01, 0.3)).collect();
+        let mut deltas: Vec<f64> = (0..n).map(|_| rng.uniform(0.01, 0.3)).collect();
+        if opaque_last {
+            deltas[n - 1] = f64::from(OPAQUE_INTERVAL);
+        }
         let values = random_vec(&mut rng, n * k, 1.0);
         let probe = random_vec(&mut rng, k, 1.0);
         let loss = |s: &[f64], v: &[f64]| {

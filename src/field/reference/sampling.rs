@@ -136,10 +136,16 @@ pub fn merge_sorted(a: &[f32], b: &[f32]) -> Vec<f32> {
     out
 }
 
-/// δ_i = t_{i+1} − t_i, and far − t_last for the last sample.
-pub fn interval_lengths(ts: &[f32], far: f32) -> Vec<f32> {
+/// δ_i = t_{i+1} − t_i, and far − t_last for the last sample, or
+/// [`OPAQUE_INTERVAL`](super::render::OPAQUE_INTERVAL) when it is opaque
+/// (`FieldConfig::opaque_last_sample()`).
+pub fn interval_lengths(ts: &[f32], far: f32, opaque_last: bool) -> Vec<f32> {
     (0..ts.len())
-        .map(|i| ts.get(i + 1).copied().unwrap_or(far) - ts[i])
+        .map(|i| match ts.get(i + 1) {
+            Some(next) => next - ts[i],
+            None if opaque_last => super::render::OPAQUE_INTERVAL,
+            None => far - ts[i],
+        })
         .collect()
 }
 
@@ -234,9 +240,12 @@ mod tests {
         let uniform = place_samples(&plan, 1.0, 3.0, None, &jitter);
         assert_eq!(uniform, stratified(1.0, 3.0, &jitter));
         assert_eq!(place_samples(&plan, 1.0, 3.0, Some(7.0), &jitter), uniform);
-        let deltas = interval_lengths(&ts, 3.0);
+        let deltas = interval_lengths(&ts, 3.0, false);
         assert!((deltas.iter().sum::<f32>() - (3.0 - ts[0])).abs() < 1e-5);
         assert!(deltas.iter().all(|d| *d >= 0.0));
+        let opaque = interval_lengths(&ts, 3.0, true);
+        assert_eq!(opaque[..15], deltas[..15]);
+        assert_eq!(opaque[15], crate::field::reference::render::OPAQUE_INTERVAL);
     }
 
     #[test]

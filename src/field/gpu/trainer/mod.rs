@@ -158,6 +158,7 @@ impl Trainer {
     /// Uploads `scene` and builds every pass for `cfg` (whose `num_classes` must cover the
     /// labels' classes). Parameters start from `ParamLayout::init(seed)`.
     pub async fn new(ctx: &GpuContext, scene: &Scene, cfg: &FieldConfig, seed: u32) -> Result<Self, GpuError> {
+        let cfg = &cfg.for_scene(scene);
         cfg.validate()
             .map_err(|e| GpuError::invalid_argument("field config", e.to_string()))?;
         let layout = ParamLayout::new(cfg);
