@@ -253,7 +253,11 @@ fn colmap_scribbles_on_two_photos_propagate_to_every_photo() {
         ..budget_config(scene.classes.len())
     };
     let scores = train_and_score(&ctx, &scene, &labels, &cfg, COLMAP_STEPS, 0..scene.frames.len());
-    scores.assert_above(MEASURED_COLMAP_FIELD_FLOOR, MEASURED_COLMAP_REFINED_FLOOR, "all 52 photos");
+    scores.assert_above(
+        MEASURED_COLMAP_FIELD_FLOOR,
+        MEASURED_COLMAP_REFINED_FLOOR,
+        "all 52 photos",
+    );
 }
 
 const COLMAP_STEPS: u32 = 800;
