@@ -145,10 +145,7 @@ fn demo_scribbles_on_two_frames_propagate_to_every_frame() {
     };
     let scene = demo_with_features();
     let labels = scribble_frames(&scene, &[0, 12], &ScribbleOptions::default());
-    let cfg = FieldConfig {
-        feature_supervision: true,
-        ..budget_config(scene.classes.len())
-    };
+    let cfg = supervised_budget(&scene);
     let scores = train_and_score(&ctx, &scene, &labels, &cfg, DEMO_STEPS, 0..scene.frames.len());
     scores.assert_above(MEASURED_DEMO_FIELD_FLOOR, MEASURED_DEMO_REFINED_FLOOR, "all frames");
 }
@@ -192,30 +189,49 @@ fn encoding_ablation_on_the_demo_scene() {
 /// from sparse scribbles to whole objects on real colour and depth within nearly one view.
 #[test]
 fn ycb_scribbles_on_frame_0_propagate_to_frames_1_to_9() {
+    let Some((ctx, scene)) = real_capture(
+        "ycb_scribbles_on_frame_0_propagate_to_frames_1_to_9",
+        "ycb-video-0000",
+        160,
+    ) else {
+        return;
+    };
+    let labels = scribble_frames(&scene, &[0], &ScribbleOptions::default());
+    let cfg = supervised_budget(&scene);
+    let scores = train_and_score(&ctx, &scene, &labels, &cfg, YCB_STEPS, 1..scene.frames.len());
+    scores.assert_above(MEASURED_YCB_FIELD_FLOOR, MEASURED_YCB_REFINED_FLOOR, "frames 1-9");
+}
+
+/// A capture of ../shared/data imported at a longest side of `max_size` with baseline features
+/// baked in, and the device to train it on; None (the test checks nothing) without the data or a
+/// GPU.
+fn real_capture(test: &str, folder: &str, max_size: u32) -> Option<(GpuContext, Scene)> {
     use scribblefield::scene::import::{ImportOptions, import};
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/ycb-video-0000");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data")
+        .join(folder);
     if !dir.is_dir() {
         eprintln!(
             "\n!!! SKIPPING: real data {} is absent; this test checks nothing here !!!\n",
             dir.display()
         );
-        return;
+        return None;
     }
-    let Some(ctx) = gpu_for_tests("ycb_scribbles_on_frame_0_propagate_to_frames_1_to_9") else {
-        return;
-    };
+    let ctx = gpu_for_tests(test)?;
     let options = ImportOptions {
-        max_size: Some(160),
+        max_size: Some(max_size),
         ..Default::default()
     };
     let scene = with_baseline_features(import(&dir, &options, &mut |_, _| {}).unwrap().scene);
-    let labels = scribble_frames(&scene, &[0], &ScribbleOptions::default());
-    let cfg = FieldConfig {
+    Some((ctx, scene))
+}
+
+/// The budget config with feature supervision, for `scene`'s classes.
+fn supervised_budget(scene: &Scene) -> FieldConfig {
+    FieldConfig {
         feature_supervision: true,
         ..budget_config(scene.classes.len())
-    };
-    let scores = train_and_score(&ctx, &scene, &labels, &cfg, YCB_STEPS, 1..scene.frames.len());
-    scores.assert_above(MEASURED_YCB_FIELD_FLOOR, MEASURED_YCB_REFINED_FLOOR, "frames 1-9");
+    }
 }
 
 const YCB_STEPS: u32 = 500;
@@ -230,28 +246,15 @@ const MEASURED_YCB_REFINED_FLOOR: f64 = 0.85;
 /// without dense depth) and its masks are refined with 10 rounds (`RefineOptions::for_scene`).
 #[test]
 fn colmap_scribbles_on_two_photos_propagate_to_every_photo() {
-    use scribblefield::scene::import::{ImportOptions, import};
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/alexander-colmap");
-    if !dir.is_dir() {
-        eprintln!(
-            "\n!!! SKIPPING: real data {} is absent; this test checks nothing here !!!\n",
-            dir.display()
-        );
-        return;
-    }
-    let Some(ctx) = gpu_for_tests("colmap_scribbles_on_two_photos_propagate_to_every_photo") else {
+    let Some((ctx, scene)) = real_capture(
+        "colmap_scribbles_on_two_photos_propagate_to_every_photo",
+        "alexander-colmap",
+        200,
+    ) else {
         return;
     };
-    let options = ImportOptions {
-        max_size: Some(200),
-        ..Default::default()
-    };
-    let scene = with_baseline_features(import(&dir, &options, &mut |_, _| {}).unwrap().scene);
     let labels = scribble_frames(&scene, &[0, 26], &ScribbleOptions::default());
-    let cfg = FieldConfig {
-        feature_supervision: true,
-        ..budget_config(scene.classes.len())
-    };
+    let cfg = supervised_budget(&scene);
     let scores = train_and_score(&ctx, &scene, &labels, &cfg, COLMAP_STEPS, 0..scene.frames.len());
     scores.assert_above(
         MEASURED_COLMAP_FIELD_FLOOR,
