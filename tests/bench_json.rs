@@ -57,12 +57,12 @@ fn bench_json_is_one_object_with_every_field() {
     assert!(to_heads > 0.0 && to_heads <= 64.0 * number("samples_per_ray"), "{v}");
     assert!(names_of(&v).contains(&"keep"), "{v}");
     assert!(v["adapter"].is_string() && v["config"] == "tiny", "{v}");
-    // Float atomics where the device has them (lavapipe), else fixed point on a GPU and the
-    // compare-exchange loop on a CPU device (`AtomicAdd::best_for`).
+    // Float atomics where the device has them (lavapipe), else one invocation per level on a
+    // CPU device and fixed point on a GPU (`AtomicAdd::best_for`).
     let atomics = v["hash_atomics"].as_str().unwrap_or_default();
-    let expected = match v["kernels"].as_str() {
-        Some("uniform") => ["float", "compare_exchange"],
-        _ => ["float", "fixed_point"],
+    let expected: &[&str] = match v["kernels"].as_str() {
+        Some("uniform") => &["float", "per_level"],
+        _ => &["float", "fixed_point"],
     };
     assert!(expected.contains(&atomics), "{v}");
     let stages = v["stages"].as_array().unwrap();

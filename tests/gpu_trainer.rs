@@ -267,13 +267,28 @@ fn one_step_gradient_matches_the_reference_with_fixed_point_table_gradients() {
     );
 }
 
-/// Which kernels the trainer runs: those chosen for this device, a GPU's whatever it is, or
-/// those of a GPU without float atomics (a browser's).
+/// A CPU device without float atomics, as the page on SwiftShader: the hash grid's backward
+/// runs one invocation per level, without atomics.
+#[test]
+fn one_step_gradient_matches_the_reference_with_a_hash_backward_per_level() {
+    check_one_step_gradient(
+        "one_step_gradient_matches_the_reference_with_a_hash_backward_per_level",
+        SemanticInput::FeatureAndGeometry,
+        FieldConfig::default().head_weight_threshold,
+        Kernels::BrowserCpu,
+        LastSample::Clear,
+    );
+}
+
+/// Which kernels the trainer runs: those chosen for this device, a GPU's whatever it is, those
+/// of a GPU without float atomics (a browser's), or those of a CPU device without them (a
+/// browser's software device).
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Kernels {
     Chosen,
     Gpu,
     BrowserGpu,
+    BrowserCpu,
 }
 
 fn check_one_step_gradient(
@@ -296,6 +311,11 @@ fn check_one_step_gradient(
         Kernels::Gpu => ctx.treated_as_software(false),
         Kernels::BrowserGpu => {
             let mut ctx = ctx.treated_as_software(false);
+            ctx.features.remove(wgpu::Features::SHADER_FLOAT32_ATOMIC);
+            ctx
+        }
+        Kernels::BrowserCpu => {
+            let mut ctx = ctx.treated_as_software(true);
             ctx.features.remove(wgpu::Features::SHADER_FLOAT32_ATOMIC);
             ctx
         }
@@ -332,8 +352,10 @@ fn check_one_step_gradient(
     };
     let seed = 3;
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, seed)).unwrap();
-    if kernels == Kernels::BrowserGpu {
-        assert_eq!(trainer.hash_atomics(), AtomicAdd::FixedPoint);
+    match kernels {
+        Kernels::BrowserGpu => assert_eq!(trainer.hash_atomics(), AtomicAdd::FixedPoint),
+        Kernels::BrowserCpu => assert_eq!(trainer.hash_atomics(), AtomicAdd::PerLevel),
+        Kernels::Chosen | Kernels::Gpu => {}
     }
     let params = pollster::block_on(trainer.read_params()).unwrap();
     let gpu = pollster::block_on(trainer.step_gradient()).unwrap();

@@ -63,7 +63,7 @@ pub fn mean_kept(before: &[u32], after: &[u32]) -> Option<f64> {
 /// step that reached the heads over the timed steps ([`mean_kept`]; `None`: all of them), which
 /// the traffic and the MLP products are counted for. With the adapter and the dense kernels'
 /// family (`uniform` on CPU devices, `tiled` on GPUs) and the hash backward's atomic add
-/// (`float`, `fixed_point` or `compare_exchange`: `AtomicAdd::best_for`); the caller adds
+/// (`float`, `fixed_point`, `compare_exchange` or `per_level`: `AtomicAdd::best_for`); the caller adds
 /// `config`.
 pub fn step_report(
     ctx: &GpuContext,
@@ -101,6 +101,7 @@ pub fn step_report(
             AtomicAdd::Float => "float",
             AtomicAdd::FixedPoint => "fixed_point",
             AtomicAdd::CompareExchange => "compare_exchange",
+            AtomicAdd::PerLevel => "per_level",
         },
         "rays": cfg.batch_rays,
         "samples_per_ray": cfg.samples_per_ray(),

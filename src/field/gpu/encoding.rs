@@ -28,6 +28,29 @@ use crate::gpu::{GpuContext, GpuError, shaders};
 
 /// Invocations per workgroup of the three kernels (their `WORKGROUP_SIZE`).
 pub const WORKGROUP_SIZE: u32 = 64;
+/// Levels per workgroup of `hash_backward_per_level.wgsl` (its `LEVELS_PER_GROUP`).
+const LEVELS_PER_GROUP: u32 = 4;
+/// Loop iterations one invocation of `hash_backward_per_level.wgsl` may run in one dispatch.
+/// lavapipe's shader compiler (gallivm) ends every loop of an invocation once all of them
+/// together have run 65,535 iterations: in one dispatch the kernel's sums came out short there
+/// from 10,240 samples on (8,192 were right), with 2 features. Each sample costs an iteration
+/// of its own and two loops over the features, each F + 1 iterations with the one that exits.
+const PER_LEVEL_LOOP_BUDGET: u64 = 60_000;
+
+/// Mirrors `SampleRange` in `hash_backward_per_level.wgsl`: the samples one dispatch walks.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+struct SampleRange {
+    first: u32,
+    end: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+/// Samples per dispatch of `hash_backward_per_level.wgsl` ([`PER_LEVEL_LOOP_BUDGET`]).
+fn per_level_chunk(features: u32) -> u64 {
+    PER_LEVEL_LOOP_BUDGET / (3 + 2 * u64::from(features))
+}
 /// Levels the uniform block has room for (`MAX_HASH_LEVELS` in `_hash_grid.wgsl`); the config
 /// allows at most this many.
 pub const MAX_HASH_LEVELS: usize = 32;
@@ -231,18 +254,24 @@ pub enum AtomicAdd {
     /// per-level scale `hash_gradient_scale.wgsl` picks each step so that no sum can overflow;
     /// Adam decodes the table's integers (`field::gpu::fixed_point`). Core WebGPU.
     FixedPoint,
+    /// No atomic at all (`hash_backward_per_level.wgsl`): one invocation per level adds its
+    /// samples in order, with plain loads and stores, into the level's own part of the table.
+    /// Always merges runs ([`BackwardStrategy`] does not apply). Core WebGPU; for CPU devices
+    /// without float atomics (SwiftShader), whose compare-exchange loops are slow.
+    PerLevel,
 }
 
 impl AtomicAdd {
-    /// Float atomics where the device has them; otherwise fixed point on a GPU, where a
-    /// compare-exchange loop retries under contention, and the loop on a CPU device, where
-    /// every atomic is a loop over the SIMD lanes anyway and fixed point's extra pass made a
-    /// SwiftShader step 3 % slower (docs/results/bench.md, "Float atomics, fixed point").
+    /// Float atomics where the device has them (lavapipe: as fast as one invocation per level
+    /// at `small` and `budget`, faster at `full`); otherwise one invocation per level on a CPU
+    /// device, whose atomics and workgroup barriers are slow, and fixed point on a GPU, where a
+    /// compare-exchange loop retries under contention (docs/results/bench.md, "Float atomics,
+    /// fixed point" and "The hash backward without atomics on CPU devices").
     pub fn best_for(ctx: &GpuContext) -> AtomicAdd {
         if ctx.features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC) {
             AtomicAdd::Float
         } else if ctx.is_software() {
-            AtomicAdd::CompareExchange
+            AtomicAdd::PerLevel
         } else {
             AtomicAdd::FixedPoint
         }
@@ -289,8 +318,11 @@ pub struct HashGridBackwardPass {
 struct BoundKernel {
     /// Fixed point only: the levels' exponents for this step, before the adds.
     scale: Option<Dispatch>,
-    dispatch: Dispatch,
+    /// One, or one per range of samples (one invocation per level: [`PER_LEVEL_LOOP_BUDGET`]).
+    dispatches: Vec<Dispatch>,
     uniforms: wgpu::Buffer,
+    /// The ranges' uniforms, kept alive with their bind groups.
+    _ranges: Vec<wgpu::Buffer>,
     /// Fixed point only: `MAX_HASH_LEVELS` i32, written by `scale`.
     exponents: Option<wgpu::Buffer>,
     /// Each level's first entry in the table, and the values per entry (for decoding).
@@ -368,24 +400,36 @@ impl HashGridBackwardPass {
             });
         }
 
-        // One workgroup per (level, WORKGROUP_SIZE consecutive samples).
-        let workgroups = u64::from(uniforms.levels) * u64::from(uniforms.groups_per_level);
-        check_index_range(WHAT, workgroups + u64::from(u16::MAX))?;
-        let groups = Dispatch1d::for_device(ctx, workgroups * u64::from(WORKGROUP_SIZE), WORKGROUP_SIZE)?;
-        let workgroup_bytes = u64::from(WORKGROUP_SIZE) * (16 + 16 + MAX_HASH_FEATURES as u64 * F32_BYTES);
-        ctx.ensure_workgroup_storage_fits("hash grid backward run merging", workgroup_bytes)?;
-
-        let merge_runs = f64::from(u8::from(strategy == BackwardStrategy::MergeRuns));
-        let constants = [("MERGE_RUNS", merge_runs)];
-        let spec = KernelSpec {
-            constants: &constants,
-            ..match atomics {
-                AtomicAdd::CompareExchange => KernelSpec::new(WHAT, shaders::HASH_BACKWARD, "hash_backward"),
-                AtomicAdd::Float => KernelSpec::new(WHAT, shaders::HASH_BACKWARD_FLOAT_ATOMICS, "hash_backward"),
-                AtomicAdd::FixedPoint => KernelSpec::new(WHAT, shaders::HASH_BACKWARD_FIXED_POINT, "hash_backward"),
+        let uniform_buffer = uniform_buffer_from(ctx, "hash grid backward uniforms", &uniforms);
+        let merge_runs = [(
+            "MERGE_RUNS",
+            f64::from(u8::from(strategy == BackwardStrategy::MergeRuns)),
+        )];
+        let atomic_kernel = |source| KernelSpec {
+            constants: &merge_runs,
+            ..KernelSpec::new(WHAT, source, "hash_backward")
+        };
+        let (spec, groups) = match atomics {
+            // One invocation per level, LEVELS_PER_GROUP to a workgroup.
+            AtomicAdd::PerLevel => (
+                KernelSpec::new(WHAT, shaders::HASH_BACKWARD_PER_LEVEL, "hash_backward"),
+                [uniforms.levels.div_ceil(LEVELS_PER_GROUP), 1, 1],
+            ),
+            _ => {
+                // One workgroup per (level, WORKGROUP_SIZE consecutive samples).
+                let workgroups = u64::from(uniforms.levels) * u64::from(uniforms.groups_per_level);
+                check_index_range(WHAT, workgroups + u64::from(u16::MAX))?;
+                let workgroup_bytes = u64::from(WORKGROUP_SIZE) * (16 + 16 + MAX_HASH_FEATURES as u64 * F32_BYTES);
+                ctx.ensure_workgroup_storage_fits("hash grid backward run merging", workgroup_bytes)?;
+                let source = match atomics {
+                    AtomicAdd::Float => shaders::HASH_BACKWARD_FLOAT_ATOMICS,
+                    AtomicAdd::FixedPoint => shaders::HASH_BACKWARD_FIXED_POINT,
+                    _ => shaders::HASH_BACKWARD,
+                };
+                let groups = Dispatch1d::for_device(ctx, workgroups * u64::from(WORKGROUP_SIZE), WORKGROUP_SIZE)?;
+                (atomic_kernel(source), <[u32; 3]>::from(groups))
             }
         };
-        let uniform_buffer = uniform_buffer_from(ctx, "hash grid backward uniforms", &uniforms);
         let exponents = (atomics == AtomicAdd::FixedPoint)
             .then(|| storage_buffer_zeroed::<i32>(ctx, "hash gradient exponents", MAX_HASH_LEVELS))
             .transpose()?;
@@ -414,12 +458,33 @@ impl HashGridBackwardPass {
         if let Some(exponents) = &exponents {
             named.push(("exponents", exponents));
         }
-        let dispatch = Dispatch::build(ctx, &spec, &whole(&named), groups).await?;
+        let mut ranges = Vec::new();
+        let mut dispatches = Vec::new();
+        if atomics == AtomicAdd::PerLevel {
+            let chunk = per_level_chunk(uniforms.features);
+            for first in (0..samples as u64).step_by(chunk as usize) {
+                let range = SampleRange {
+                    first: first as u32,
+                    end: (first + chunk).min(samples as u64) as u32,
+                    _pad0: 0,
+                    _pad1: 0,
+                };
+                ranges.push(uniform_buffer_from(ctx, "hash grid backward sample range", &range));
+            }
+            for range in &ranges {
+                let mut with_range = named.clone();
+                with_range.push(("range", range));
+                dispatches.push(Dispatch::build(ctx, &spec, &whole(&with_range), groups).await?);
+            }
+        } else {
+            dispatches.push(Dispatch::build(ctx, &spec, &whole(&named), groups).await?);
+        }
         Ok(HashGridBackwardPass {
             kernel: Some(BoundKernel {
                 scale,
-                dispatch,
+                dispatches,
                 uniforms: uniform_buffer,
+                _ranges: ranges,
                 exponents,
                 level_starts: uniforms.level_geometry[..uniforms.levels as usize]
                     .iter()
@@ -494,7 +559,9 @@ impl HashGridBackwardPass {
         if let Some(scale) = &kernel.scale {
             scale.record(pass);
         }
-        kernel.dispatch.record(pass);
+        for dispatch in &kernel.dispatches {
+            dispatch.record(pass);
+        }
     }
 }
 

@@ -4,6 +4,7 @@
 use super::Trainer;
 use crate::field::config::FieldConfig;
 use crate::field::gpu::composite::CompositeLayout;
+use crate::field::gpu::encoding::AtomicAdd;
 use crate::field::gpu::rays::TARGET_HEADER_WORDS;
 use crate::field::params::ParamLayout;
 
@@ -116,7 +117,7 @@ impl StepStage {
     /// | an MLP backward (K rows for the heads, N for density) | see `DenseBackward::global_bytes` | |
     /// | glue backward (feature) | K·f semantic-input and K·f feature-loss gradients | K·f |
     /// | glue backward (geometry) | N slots and ∂L/∂h₀, K·(g + g + sg) gradients | N·(1 + g) |
-    /// | encoding backward | N hash-grid gradients and positions (fixed point: the gradients twice, `Trainer::stage_bytes`) | an atomic add (read and write) per corner, level and feature (fixed point: and an exponent per level) |
+    /// | encoding backward | N hash-grid gradients and positions (fixed point: the gradients twice; one invocation per level: the positions once per level; `Trainer::stage_bytes`) | an atomic add (read and write) per corner, level and feature (fixed point: and an exponent per level) |
     /// | adam | parameters, gradients, both moments: 4·P | parameters, gradients (zeroed), both moments: 4·P |
     ///
     /// The MLPs' stages are `None`: their passes know which kernels they record, and count
@@ -238,7 +239,12 @@ impl Trainer {
                     Some(_) => n * self.cfg.hash_encoding_dim() as u64 * WORD + u64::from(self.cfg.hash_levels) * WORD,
                     None => 0,
                 };
-                adds + scale
+                // One invocation per level reads every position once per level.
+                let positions_again = match self.hash_backward.atomics() {
+                    AtomicAdd::PerLevel => n * 16 * u64::from(self.cfg.hash_levels.saturating_sub(1)),
+                    _ => 0,
+                };
+                adds + scale + positions_again
             }
             _ => stage.global_bytes(&self.cfg, samples_to_heads).unwrap_or(0),
         }
