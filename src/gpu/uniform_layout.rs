@@ -80,6 +80,12 @@ pub const MIRRORS: &[Mirror] = &[
     ),
     mirror(
         "src/field/gpu/encoding.rs",
+        "SampleRange",
+        "hash_backward_per_level.wgsl",
+        "SampleRange",
+    ),
+    mirror(
+        "src/field/gpu/encoding.rs",
         "ShUniforms",
         "sh_encode.wgsl",
         "ShUniforms",
