@@ -76,10 +76,10 @@ await runBrowserTest("bench", { checks, consoleLog }, async (context) => {
     assert(typeof report.adapter === "string" && report.adapter.length > 0, `adapter ${report.adapter}`);
     assert(report.config === preset, `config ${report.config}, asked for ${preset}`);
     assert(["uniform", "tiled"].includes(report.kernels), `kernels ${report.kernels}`);
-    // Browsers have no float atomics: the hash backward adds in fixed point on a GPU and with a
-    // compare-exchange loop on a CPU rasterizer (AtomicAdd::best_for; kernels=tiled makes the
-    // page treat SwiftShader as a GPU).
-    const atomics = report.kernels === "tiled" ? "fixed_point" : "compare_exchange";
+    // Browsers have no float atomics: the hash backward adds in fixed point on a GPU and with
+    // one invocation per level, without atomics, on a CPU rasterizer (AtomicAdd::best_for;
+    // kernels=tiled makes the page treat SwiftShader as a GPU).
+    const atomics = report.kernels === "tiled" ? "fixed_point" : "per_level";
     assert(report.hash_atomics === atomics, `hash_atomics ${report.hash_atomics} with kernels ${report.kernels}`);
   });
   await check("it timed the steps asked for, at a positive finite rate", async () => {
