@@ -22,7 +22,7 @@
 // the rendered block only, no loss and no backward; the forward is the same function, so the
 // rendered values are the same).
 
-// Mirrors `field::gpu::composite::CompositeUniforms` (64 bytes). Head outputs are read at
+// Mirrors `field::gpu::composite::CompositeUniforms` (80 bytes). Head outputs are read at
 // row * stride + offset from buffers other passes own.
 struct CompositeUniforms {
     classes: u32,
@@ -42,9 +42,15 @@ struct CompositeUniforms {
     weight_depth: f32,
     weight_semantic: f32,
     weight_feature: f32,
+    weight_opacity: f32,
+    // The class of what lies beyond the scene box, or NO_FAR_CLASS: no opacity term.
+    far_class: u32,
+    _pad0: u32,
+    _pad1: u32,
 }
 
 const LOSS_WORDS: u32 = 4u;
+const NO_FAR_CLASS: u32 = 0xffffffffu;
 
 @group(0) @binding(0) var<uniform> step_info: StepUniforms;
 @group(0) @binding(1) var<uniform> params: CompositeUniforms;
@@ -168,8 +174,21 @@ fn channel_value(n: u32, ch: u32) -> f32 {
     return feature_of(n, ch - 4u - params.classes);
 }
 
+// The opacity term's target for the ray (reference::loss::opacity_loss): 1 when it is labelled
+// with the far class, 0 when labelled with another, -1 where the term does not apply (no far
+// class, no label, or a last sample that is not opaque).
+fn opacity_target(rows: RayRows) -> f32 {
+    let label = targets[rows.target_row + TARGET_LABEL];
+    let last = rows.first + step_info.samples_per_ray - 1u;
+    if params.far_class == NO_FAR_CLASS || label >= params.classes || intervals[last].x >= 0.0 {
+        return -1.0;
+    }
+    return select(0.0, 1.0, label == params.far_class);
+}
+
 // The losses and dL/drendered (reference::loss::ray_loss), scaled by 1/B, from the rendered
-// channels; the rest of the gradient row must be zero already.
+// channels; the rest of the gradient row must be zero already. The opacity term is added to the
+// semantic word; it reads the opaque sample's weight, parked in its gradient row by the forward.
 fn losses(rows: RayRows, ray: u32, flags: u32) {
     let classes = params.classes;
     let feature_dim = params.feature_dim;
@@ -237,9 +256,29 @@ fn losses(rows: RayRows, ray: u32, flags: u32) {
         }
         ray_outputs[out_row + 3u] = loss * inv_dim * feature_weight;
     }
+
+    let opacity = opacity_target(rows);
+    if opacity >= 0.0 {
+        let left = grad_heads[(rows.first + step_info.samples_per_ray - 1u) * rows.k];
+        let diff = left - opacity;
+        ray_outputs[out_row + 2u] += diff * diff * (params.weight_opacity * inv_batch);
+    }
 }
 
-// u = dL/drendered . (the sample's channels), in the reference's order.
+// dL/dT of the opacity term, T = `left` being the weight of the ray's opaque last sample; 0
+// where the term does not apply.
+fn opacity_gradient(rows: RayRows, left: f32) -> f32 {
+    let opacity = opacity_target(rows);
+    if opacity < 0.0 {
+        return 0.0;
+    }
+    let diff = left - opacity;
+    return (diff + diff) * (params.weight_opacity * (1.0 / f32(step_info.batch_rays)));
+}
+
+// u = dL/drendered . (the sample's channels), in the reference's order, plus the opacity term's
+// dL/dT at an opaque last sample (reference::render::composite_backward's grad_left). Reads the
+// sample's weight from its gradient row, so it runs before the backward overwrites that row.
 fn upstream(rows: RayRows, n: u32) -> f32 {
     let grad_at = rows.grad_at;
     let interval = intervals[n];
@@ -250,6 +289,9 @@ fn upstream(rows: RayRows, n: u32) -> f32 {
     }
     for (var d = 0u; d < params.feature_dim; d++) {
         u += ray_outputs[grad_at + 4u + params.classes + d] * feature_of(n, d);
+    }
+    if interval.x < 0.0 {
+        u += opacity_gradient(rows, grad_heads[n * rows.k]);
     }
     return u;
 }

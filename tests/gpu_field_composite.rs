@@ -13,7 +13,7 @@ use scribblefield::field::gpu::rays::{
     NO_LABEL, RAY_HAS_CODE, RAY_HITS_BOX, StepUniforms, TARGET_DEPTH, TARGET_FLAGS, TARGET_HEADER_WORDS, TARGET_LABEL,
     TARGET_RGB,
 };
-use scribblefield::field::reference::loss::{RayTarget, ray_loss};
+use scribblefield::field::reference::loss::{RayTarget, opacity_loss, ray_loss};
 use scribblefield::field::reference::{Channels, activations, render};
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{fill_with_garbage, read_buffer_blocking, storage_buffer_from, uniform_buffer_from};
@@ -39,6 +39,8 @@ struct Batch {
     /// Per sample, its packed row in the head outputs, or NOT_KEPT (about a fifth dropped, as
     /// the keep pass drops samples of low weight).
     slot: Vec<u32>,
+    /// The class of what lies beyond the box, for the opacity term (`CompositePass::set_far_class`).
+    far_class: Option<u32>,
 }
 
 impl Batch {
@@ -159,6 +161,7 @@ impl Batch {
             intervals,
             targets,
             slot,
+            far_class: None,
         }
     }
 }
@@ -227,7 +230,7 @@ fn reference_ray(batch: &Batch, ray: usize) -> Expected {
         label: (row[TARGET_LABEL] != NO_LABEL).then_some(row[TARGET_LABEL]),
         code: (row[TARGET_FLAGS] & RAY_HAS_CODE != 0).then(|| (0..d).map(|i| f(TARGET_HEADER_WORDS + i)).collect()),
     };
-    let (terms, grad_rendered) = ray_loss(
+    let (mut terms, grad_rendered) = ray_loss(
         &cfg.loss,
         cfg.feature_supervision,
         &channels,
@@ -235,7 +238,20 @@ fn reference_ray(batch: &Batch, ray: usize) -> Expected {
         &target,
         cfg.batch_rays as usize,
     );
-    let (grad_sigma, grad_values) = render::composite_backward(&forward, &deltas, &values, k, &grad_rendered);
+    let opacity = opacity_loss(
+        &cfg.loss,
+        render::left_for_opaque_sample(&forward, &deltas),
+        target.label,
+        batch.far_class,
+        c,
+        cfg.batch_rays as usize,
+    );
+    let grad_left = opacity.map_or(0.0, |(term, grad)| {
+        terms.semantic += term;
+        grad
+    });
+    let (grad_sigma, grad_values) =
+        render::composite_backward(&forward, &deltas, &values, k, &grad_rendered, grad_left);
     let mut grad_heads = Vec::with_capacity(s_count * k);
     for s in 0..s_count {
         let gv = &grad_values[s * k..(s + 1) * k];
@@ -305,7 +321,8 @@ fn run_entry(ctx: &GpuContext, batch: &Batch, render: bool) -> GpuRun {
         targets: &targets,
         slot: &slot,
     };
-    let pass = pollster::block_on(CompositePass::new(ctx, cfg, &inputs)).unwrap();
+    let mut pass = pollster::block_on(CompositePass::new(ctx, cfg, &inputs)).unwrap();
+    pass.set_far_class(ctx, batch.far_class);
     assert_eq!(pass.kernel, CompositeKernel::for_device(ctx));
     fill_with_garbage(ctx, &pass.grad_heads);
     fill_with_garbage(ctx, &pass.head_grads);
@@ -500,7 +517,7 @@ fn render_entry_point_matches_the_training_render_bit_for_bit() {
 
 #[test]
 fn uniform_block_matches_wgsl_size() {
-    assert_eq!(size_of::<CompositeUniforms>(), 64);
+    assert_eq!(size_of::<CompositeUniforms>(), 80);
 }
 
 #[test]
@@ -525,6 +542,29 @@ fn composite_matches_reference_with_default_widths() {
         check_batch(&ctx, &Batch::random(on, 12));
         let off = default_widths(70, false);
         check_batch(&ctx, &Batch::random(off, 13));
+    }
+}
+
+/// Labelled rays that end in an opaque sample are pulled through the box (labelled with the far
+/// class) or into it (any other class): the term's loss in the semantic word and its gradient
+/// through every sample's density, against the reference, in both kernels.
+#[test]
+fn composite_matches_reference_with_the_opacity_term() {
+    let Some(ctx) = gpu_for_tests("composite_matches_reference_with_the_opacity_term") else {
+        return;
+    };
+    let plain = Batch::random_thin(config(3, 5, 5, 7, 300, true), 16);
+    let semantic = |batch: &Batch| -> f64 { (0..300).map(|ray| reference_ray(batch, ray).losses[2]).sum() };
+    for far_class in [0, 2] {
+        let batch = Batch {
+            far_class: Some(far_class),
+            ..Batch::random_thin(config(3, 5, 5, 7, 300, true), 16)
+        };
+        // The term is there: thin rays leave much of their light to the opaque sample.
+        assert!(semantic(&batch) > semantic(&plain) * 1.05, "far class {far_class}");
+        for ctx in with_each_kernel(&ctx) {
+            check_batch(&ctx, &batch);
+        }
     }
 }
 

@@ -83,7 +83,7 @@ pub enum LastSample {
     Clear,
 }
 
-/// Weights of the four loss terms (docs/architecture.md, "The model").
+/// Weights of the loss terms (docs/architecture.md, "The model").
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct LossWeights {
@@ -91,6 +91,11 @@ pub struct LossWeights {
     pub depth: f32,
     pub semantic: f32,
     pub feature: f32,
+    /// Where rays end in an opaque sample and the labels name the class of what lies beyond
+    /// the scene box (`PropagationCache::far_class`): a labelled ray's transmittance left for
+    /// that sample is pulled to 1 when its label is that class and to 0 otherwise
+    /// (`reference::loss::opacity_loss`; docs/quality.md, "The labels say what is empty").
+    pub opacity: f32,
 }
 
 impl Default for LossWeights {
@@ -100,6 +105,7 @@ impl Default for LossWeights {
             depth: 0.1,
             semantic: 1.0,
             feature: 0.5,
+            opacity: 1.0,
         }
     }
 }
@@ -411,6 +417,7 @@ impl FieldConfig {
             ("loss.depth", c.loss.depth),
             ("loss.semantic", c.loss.semantic),
             ("loss.feature", c.loss.feature),
+            ("loss.opacity", c.loss.opacity),
         ];
         for (field, w) in weights {
             if !(w.is_finite() && w >= 0.0) {

@@ -228,6 +228,8 @@ pub struct PropagationCache {
     drawn: HashMap<u32, (Vec<u16>, Vec<u16>)>,
     /// Per drawn frame with dense depth, its support plane (`None`: no plane found).
     planes: HashMap<u32, Option<Vec<bool>>>,
+    /// The class the last maps gave the pixels far from every point ([`PropagationCache::far_class`]).
+    far_class: Option<u16>,
 }
 
 impl PropagationCache {
@@ -257,6 +259,7 @@ impl PropagationCache {
             self.planes.clear();
             self.settings = Some((classes, *options));
         }
+        self.far_class = None;
         let seeds = frame_seeds(scene, labels, classes, options, self, pause).await;
         self.frames.retain(|frame, _| seeds.iter().any(|s| s.frame == *frame));
         let mut maps = Vec::with_capacity(seeds.len());
@@ -338,6 +341,14 @@ impl PropagationCache {
             maps.push((frame, map));
         }
         maps
+    }
+
+    /// The class the last [`PropagationCache::maps`] gave the pixels far from every point of a
+    /// capture with sparse depth: what the strokes say lies beyond the reconstruction (a photo
+    /// capture's room, `view_seeds::region_class`). `None` on captures with dense depth or none,
+    /// with propagation off, or when the strokes on such pixels name no single class.
+    pub fn far_class(&self) -> Option<u16> {
+        self.far_class
     }
 
     /// The class the strokes on a drawn frame's support plane agree on, over the plane's pixels
@@ -567,6 +578,7 @@ async fn frame_seeds(
         .map(|(f, map)| (map.as_slice(), sparse.far[*f as usize].as_slice()))
         .collect();
     let unreconstructed = region_class(&drawn, classes);
+    cache.far_class = unreconstructed;
     let point_classes = sparse
         .point_classes(walked, classes, unreconstructed, pause)
         .await

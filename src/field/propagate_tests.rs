@@ -210,6 +210,8 @@ fn the_cache_walks_again_only_a_frame_whose_strokes_changed() {
     let first = cache.maps(&scene, &labels, 2, &options);
     assert_eq!(first, propagate_labels(&scene, &labels, 2, &options));
     assert_eq!(first.iter().map(|(f, _)| *f).collect::<Vec<_>>(), vec![0, 2]);
+    // Dense depth: every pixel has a reading, so no pixel is far from the points.
+    assert_eq!(cache.far_class(), None);
     labels.push_stroke(2, dot(0, 28.5, 20.5));
     let second = cache.maps(&scene, &labels, 2, &options);
     assert_eq!(second[0], first[0], "frame 0 did not change");

@@ -269,7 +269,7 @@ fn strokes_on_two_photos_reach_the_others_through_the_points() {
 /// photo got the room's far pixels alone (37 % of pixels labelled, docs/quality.md).
 #[test]
 fn strokes_whose_points_hold_one_class_still_carry_it_to_every_photo() {
-    use scribblefield::field::propagate::{PropagationOptions, propagate_labels};
+    use scribblefield::field::propagate::{PropagationCache, PropagationOptions};
     use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
     let Some(dir) = real_data(CAPTURE) else { return };
     let opts = ImportOptions {
@@ -278,7 +278,11 @@ fn strokes_whose_points_hold_one_class_still_carry_it_to_every_photo() {
     };
     let scene = run_with(&dir, &opts).unwrap().scene;
     let labels = scribble_frames(&scene, &[0, 26], &ScribbleOptions::default());
-    let maps = propagate_labels(&scene, &labels, 2, &PropagationOptions::default());
+    let mut cache = PropagationCache::default();
+    let maps = cache.maps(&scene, &labels, 2, &PropagationOptions::default());
+    // The room (class 0, the masks' background) is what lies beyond the reconstruction: the
+    // trainer's opacity term pulls rays labelled with it through the scene box.
+    assert_eq!(cache.far_class(), Some(0));
     let iou = label_iou(&scene, &maps);
     let (frames, labelled, right) = right_share(&scene, &maps);
     eprintln!("at 400 px: {frames} frames, {labelled} labelled pixels, {right:.4} right, IoU per class {iou:?}");

@@ -14,6 +14,7 @@
 //!   `[unused, ∂L/∂colour pre-sigmoid (3), ∂L/∂logits (C), ∂L/∂feature (D)]`: what the heads'
 //!   backward passes start from (the sigmoid undone here);
 //! - `ray_outputs`, three blocks of B rows: the losses `[rgb, depth, semantic, feature]` per ray
+//!   (the semantic word holds the opacity term too, as `reference::loss` counts it)
 //!   ([`CompositeLayout::losses`]), the rendered channels (k per ray,
 //!   [`CompositeLayout::rendered`]) and ∂L/∂rendered (k per ray,
 //!   [`CompositeLayout::grad_rendered`]), channels in `reference::render::Channels` order
@@ -38,7 +39,7 @@ pub use super::row_view::RowView;
 /// Loss words at the start of a ray's output row: rgb, depth, semantic, feature.
 pub const LOSS_WORDS: usize = 4;
 
-/// Uniform block mirrored by `CompositeUniforms` in `shaders/composite.wgsl` (64 bytes).
+/// Uniform block mirrored by `CompositeUniforms` in `shaders/_composite.wgsl` (80 bytes).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct CompositeUniforms {
@@ -58,7 +59,16 @@ pub struct CompositeUniforms {
     pub weight_depth: f32,
     pub weight_semantic: f32,
     pub weight_feature: f32,
+    pub weight_opacity: f32,
+    /// The class of what lies beyond the scene box ([`CompositePass::set_far_class`]), or
+    /// [`NO_FAR_CLASS`].
+    pub far_class: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
 }
+
+/// `CompositeUniforms::far_class` when the labels name none: no opacity term.
+pub const NO_FAR_CLASS: u32 = u32::MAX;
 
 /// Everything the pass reads. Each head's outputs are a [`RowView`]: sample n's values start at
 /// `n · stride + offset`.
@@ -180,6 +190,8 @@ pub struct CompositePass {
     pub head_grads: wgpu::Buffer,
     /// [`CompositeLayout::ray_output_words`] f32 in three blocks (see the module docs).
     pub ray_outputs: wgpu::Buffer,
+    uniforms: CompositeUniforms,
+    uniform: wgpu::Buffer,
 }
 
 impl CompositePass {
@@ -226,6 +238,10 @@ impl CompositePass {
             weight_depth: cfg.loss.depth,
             weight_semantic: cfg.loss.semantic,
             weight_feature: cfg.loss.feature,
+            weight_opacity: cfg.loss.opacity,
+            far_class: NO_FAR_CLASS,
+            _pad0: 0,
+            _pad1: 0,
         };
         let grad_heads = storage_buffer_zeroed::<f32>(ctx, "density gradients", samples * layout.grad_stride())?;
         let head_grads = storage_buffer_zeroed::<f32>(ctx, "head gradients", samples * layout.grad_stride())?;
@@ -272,7 +288,21 @@ impl CompositePass {
             grad_heads,
             head_grads,
             ray_outputs,
+            uniforms,
+            uniform,
         })
+    }
+
+    /// The class of what lies beyond the scene box, for the opacity term
+    /// (`reference::loss::opacity_loss`; `None`: no term). It applies only to rays that end in
+    /// an opaque sample. Takes effect with the next recorded pass.
+    pub fn set_far_class(&mut self, ctx: &GpuContext, class: Option<u32>) {
+        let far_class = class.unwrap_or(NO_FAR_CLASS);
+        if far_class != self.uniforms.far_class {
+            self.uniforms.far_class = far_class;
+            ctx.queue
+                .write_buffer(&self.uniform, 0, bytemuck::bytes_of(&self.uniforms));
+        }
     }
 
     /// Records the whole pass: rendering, losses and their backward.

@@ -5,7 +5,11 @@
 //! - depth [0.1]: |d̂ − d|, only where the depth image has a value;
 //! - semantic [1.0]: −log softmax(ŝ)[label], only on labelled rays;
 //! - feature [0.5]: mean over the D dims of |f̂ − code|, only when feature supervision is on
-//!   and the ray has a code (the mean keeps the weight's meaning independent of D).
+//!   and the ray has a code (the mean keeps the weight's meaning independent of D);
+//! - opacity [1.0] ([`opacity_loss`]): (T − [label = far class])², T the transmittance a ray
+//!   leaves for its opaque last sample, only on labelled rays that end in one and only when the
+//!   labels name a far class. It is counted with the semantic term (both come from the labels),
+//!   so the GPU keeps four loss words.
 //!
 //! Batch averaging: every term is summed over the rays where it applies and divided by the
 //! batch size B (all rays), not by the number of rays that have it. Each ray's gradient is
@@ -97,6 +101,30 @@ pub fn feature_l1<R: Real>(pred: &[R], code: &[f32]) -> (R, Vec<R>) {
         })
         .collect();
     (loss * inv_d, grad)
+}
+
+/// The opacity term of one ray and ∂loss/∂T, scaled by `1 / batch_size`, or `None` where it
+/// does not apply. `left` is the transmittance the ray leaves for its opaque last sample (that
+/// sample's weight; `None` when the ray has none), `far_class` the class of what lies beyond
+/// the scene box (`PropagationCache::far_class`). A ray labelled with that class should pass
+/// through the box (T = 1), one labelled with another class should stop in it (T = 0): the
+/// strokes and their spread say which pixels see the room, and a room seen through the box from
+/// one view cannot have density there in another.
+pub fn opacity_loss<R: Real>(
+    weights: &LossWeights,
+    left: Option<R>,
+    label: Option<u32>,
+    far_class: Option<u32>,
+    classes: usize,
+    batch_size: usize,
+) -> Option<(f64, R)> {
+    let left = left?;
+    let label = label.filter(|l| (*l as usize) < classes)?;
+    let far_class = far_class?;
+    let target = if label == far_class { R::ONE } else { R::ZERO };
+    let w = weights.opacity as f64 / batch_size as f64;
+    let diff = left - target;
+    Some(((diff * diff).to_f64() * w, (diff + diff) * R::of(w)))
 }
 
 /// Loss of one rendered ray (`channels.count()` values) and ∂loss/∂rendered, both already
@@ -209,5 +237,24 @@ mod tests {
         assert!(terms.rgb > 0.0 && terms.depth > 0.0 && terms.semantic > 0.0 && terms.feature > 0.0);
         let numeric = central_differences(loss, &rendered, 1e-6);
         assert_close("ray loss", &analytic, &numeric, 1e-7);
+    }
+
+    #[test]
+    fn opacity_pulls_the_far_class_through_the_box_and_the_rest_into_it() {
+        let w = LossWeights::default();
+        let term = |left: f64, label| opacity_loss(&w, Some(left), Some(label), Some(0), 2, 4).unwrap();
+        // Labelled with the far class: T is pulled up to 1.
+        let (loss, grad) = term(0.25, 0);
+        assert!((loss - 0.5625 / 4.0).abs() < 1e-12 && grad < 0.0);
+        // Any other class: T is pulled down to 0.
+        let (loss, grad) = term(0.25, 1);
+        assert!((loss - 0.0625 / 4.0).abs() < 1e-12 && grad > 0.0);
+        let numeric = central_differences(|t: &[f64]| term(t[0], 1).0, &[0.25], 1e-6);
+        assert_close("opacity", &[grad], &numeric, 1e-9);
+        // No opaque sample, no label (or one out of range), or no far class: no term.
+        assert!(opacity_loss::<f64>(&w, None, Some(0), Some(0), 2, 4).is_none());
+        assert!(opacity_loss(&w, Some(0.5f64), None, Some(0), 2, 4).is_none());
+        assert!(opacity_loss(&w, Some(0.5f64), Some(5), Some(0), 2, 4).is_none());
+        assert!(opacity_loss(&w, Some(0.5f64), Some(0), None, 2, 4).is_none());
     }
 }

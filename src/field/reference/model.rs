@@ -33,6 +33,10 @@ pub struct FieldModel {
     pub layout: ParamLayout,
     pub grid: HashGrid,
     pub channels: Channels,
+    /// The class of what lies beyond the scene box, for the opacity term
+    /// (`loss::opacity_loss`); the trainer takes it from its labels
+    /// (`PropagationCache::far_class`). None: no such term.
+    pub far_class: Option<u32>,
 }
 
 /// One ray's samples, ready for the field.
@@ -134,6 +138,7 @@ impl FieldModel {
                 feature_dim: config.feature_dim as usize,
             },
             config,
+            far_class: None,
         })
     }
 
@@ -233,11 +238,18 @@ impl FieldModel {
         ray: &SampledRay,
         trace: &RayTrace<R>,
         grad_rendered: &[R],
+        grad_left: R,
         grad: &mut [R],
     ) {
         let k = self.channels.count();
-        let (grad_sigma, grad_values) =
-            render::composite_backward(&trace.composite, &trace.deltas, &trace.values, k, grad_rendered);
+        let (grad_sigma, grad_values) = render::composite_backward(
+            &trace.composite,
+            &trace.deltas,
+            &trace.values,
+            k,
+            grad_rendered,
+            grad_left,
+        );
         for (i, sample) in trace.samples.iter().enumerate() {
             self.backward_sample(
                 params,
@@ -361,18 +373,40 @@ impl FieldModel {
         let mut total = LossTerms::default();
         for ray in batch {
             let trace = self.forward_ray(params, &ray.samples);
-            let (terms, grad_rendered) = loss::ray_loss(
-                &self.config.loss,
-                self.config.feature_supervision,
-                &self.channels,
-                trace.rendered(),
-                &ray.target,
-                batch.len(),
-            );
+            let (terms, grad_rendered, grad_left) = self.ray_loss(&trace, &ray.target, batch.len());
             total.add(&terms);
-            self.backward_ray(params, &ray.samples, &trace, &grad_rendered, grad);
+            self.backward_ray(params, &ray.samples, &trace, &grad_rendered, grad_left, grad);
         }
         total
+    }
+
+    /// One rendered ray's loss terms (`loss::ray_loss`, with the opacity term counted in the
+    /// semantic one), ∂L/∂rendered and ∂L/∂(the transmittance left for an opaque last sample).
+    fn ray_loss<R: Real>(&self, trace: &RayTrace<R>, target: &RayTarget, batch_size: usize) -> (LossTerms, Vec<R>, R) {
+        let (mut terms, grad_rendered) = loss::ray_loss(
+            &self.config.loss,
+            self.config.feature_supervision,
+            &self.channels,
+            trace.rendered(),
+            target,
+            batch_size,
+        );
+        let opacity = loss::opacity_loss(
+            &self.config.loss,
+            render::left_for_opaque_sample(&trace.composite, &trace.deltas),
+            target.label,
+            self.far_class,
+            self.channels.classes,
+            batch_size,
+        );
+        let grad_left = match opacity {
+            Some((term, grad)) => {
+                terms.semantic += term;
+                grad
+            }
+            None => R::ZERO,
+        };
+        (terms, grad_rendered, grad_left)
     }
 
     /// Loss of a batch without the gradient (for evaluation and finite differences).
@@ -380,15 +414,7 @@ impl FieldModel {
         let mut total = LossTerms::default();
         for ray in batch {
             let trace = self.forward_ray(params, &ray.samples);
-            let (terms, _) = loss::ray_loss(
-                &self.config.loss,
-                self.config.feature_supervision,
-                &self.channels,
-                trace.rendered(),
-                &ray.target,
-                batch.len(),
-            );
-            total.add(&terms);
+            total.add(&self.ray_loss(&trace, &ray.target, batch.len()).0);
         }
         total
     }

@@ -7,7 +7,7 @@ use super::loss::RayTarget;
 use super::model::{FieldModel, SampledRay, TrainingRay};
 use super::sampling::ray_through_pixel;
 use super::{Adam, sh};
-use crate::field::config::{Encoding, FieldConfig, SemanticInput};
+use crate::field::config::{Encoding, FieldConfig, LastSample, SemanticInput};
 use crate::rng::SplitMix64;
 use crate::scene::{Bounds, Intrinsics, Pose};
 
@@ -100,8 +100,24 @@ fn whole_model_gradient_with_geometry_in_the_semantic_head() {
     });
 }
 
+#[test]
+fn whole_model_gradient_with_an_opaque_last_sample_and_the_opacity_term() {
+    check_whole_model_gradient_far(
+        FieldConfig {
+            last_sample: LastSample::Opaque,
+            ..tiny_config()
+        },
+        Some(0),
+    );
+}
+
 fn check_whole_model_gradient(config: FieldConfig) {
-    let model = FieldModel::new(config).unwrap();
+    check_whole_model_gradient_far(config, None);
+}
+
+fn check_whole_model_gradient_far(config: FieldConfig, far_class: Option<u32>) {
+    let mut model = FieldModel::new(config).unwrap();
+    model.far_class = far_class;
     let mut rng = SplitMix64::new(41);
     let mut batch: Vec<TrainingRay> = (0..3).map(|i| wall_ray(&model.config, &mut rng, i != 1)).collect();
     // One ray without depth (uniform samples, no depth term) and one labelled with class 2.
@@ -120,6 +136,14 @@ fn check_whole_model_gradient(config: FieldConfig) {
         "{terms:?}"
     );
     assert!((model.loss(&params, &batch).total() - terms.total()).abs() < 1e-12);
+    if far_class.is_some() {
+        let without = FieldModel {
+            far_class: None,
+            ..model.clone()
+        };
+        let plain = without.loss(&params, &batch);
+        assert!(terms.semantic > plain.semantic + 1e-9, "{terms:?} against {plain:?}");
+    }
     let numeric = central_differences(|p| model.loss(p, &batch).total(), &params, 1e-6);
     for (name, range) in [
         ("model: hash table", model.layout.hash_table.clone()),

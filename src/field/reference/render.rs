@@ -110,10 +110,22 @@ pub fn kept_samples(h0: &[f32], deltas: &[f32], threshold: f32) -> Vec<bool> {
         .collect()
 }
 
-/// Vector-Jacobian product of `composite`. Given `grad_output` = ∂L/∂R (k values) returns
+/// The transmittance a ray leaves for its opaque last sample (that sample's weight), or `None`
+/// when its last sample is not opaque.
+pub fn left_for_opaque_sample<R: Real>(forward: &Composite<R>, deltas: &[R]) -> Option<R> {
+    match (deltas.last(), forward.weights.last()) {
+        (Some(d), Some(w)) if *d < R::ZERO => Some(*w),
+        _ => None,
+    }
+}
+
+/// Vector-Jacobian product of `composite`. Given `grad_output` = ∂L/∂R (k values) and
+/// `grad_left` = ∂L/∂w of an opaque last sample (the transmittance it takes,
+/// [`left_for_opaque_sample`]; ignored when the last sample is not opaque) returns
 /// (∂L/∂σ, n values; ∂L/∂h, n × k values):
 /// - ∂L/∂h_i = w_i · g
-/// - ∂L/∂σ_i = δ_i (T_{i+1} u_i − Σ_{j>i} w_j u_j), with u_i = g · h_i,
+/// - ∂L/∂σ_i = δ_i (T_{i+1} u_i − Σ_{j>i} w_j u_j), with u_i = g · h_i (plus `grad_left` for
+///   the opaque sample, as if it rendered one more channel of value 1 that no other sample has),
 ///
 /// because ∂w_i/∂σ_i = δ_i T_{i+1} and ∂w_j/∂σ_i = −δ_i w_j for j > i (an opaque last sample
 /// gets 0: its T_{i+1} and its suffix are both 0). The suffix sum is
@@ -125,6 +137,7 @@ pub fn composite_backward<R: Real>(
     values: &[R],
     k: usize,
     grad_output: &[R],
+    grad_left: R,
 ) -> (Vec<R>, Vec<R>) {
     let n = deltas.len();
     let mut grad_sigma = vec![R::ZERO; n];
@@ -132,7 +145,10 @@ pub fn composite_backward<R: Real>(
     let mut suffix = R::ZERO;
     for i in (0..n).rev() {
         let h = &values[i * k..(i + 1) * k];
-        let u: R = grad_output.iter().zip(h).map(|(g, v)| *g * *v).sum();
+        let mut u: R = grad_output.iter().zip(h).map(|(g, v)| *g * *v).sum();
+        if deltas[i] < R::ZERO {
+            u += grad_left;
+        }
         grad_sigma[i] = deltas[i] * (forward.transmittance_after[i] * u - suffix);
         suffix += forward.weights[i] * u;
         for (gv, g) in grad_values[i * k..(i + 1) * k].iter_mut().zip(grad_output) {
@@ -208,16 +224,16 @@ mod tests {
         }
         let values = random_vec(&mut rng, n * k, 1.0);
         let probe = random_vec(&mut rng, k, 1.0);
+        // A loss on the transmittance left for an opaque last sample too.
+        let probe_left = 0.7;
         let loss = |s: &[f64], v: &[f64]| {
-            composite(s, &deltas, v, k)
-                .output
-                .iter()
-                .zip(&probe)
-                .map(|(a, b)| a * b)
-                .sum()
+            let c = composite(s, &deltas, v, k);
+            let left = left_for_opaque_sample(&c, &deltas).map_or(0.0, |t| t * probe_left);
+            c.output.iter().zip(&probe).map(|(a, b)| a * b).sum::<f64>() + left
         };
         let fwd = composite(&sigmas, &deltas, &values, k);
-        let (grad_sigma, grad_values) = composite_backward(&fwd, &deltas, &values, k, &probe);
+        assert_eq!(left_for_opaque_sample(&fwd, &deltas).is_some(), opaque_last);
+        let (grad_sigma, grad_values) = composite_backward(&fwd, &deltas, &values, k, &probe, probe_left);
         let numeric_sigma = central_differences(|s| loss(s, &values), &sigmas, 1e-6);
         let numeric_values = central_differences(|v| loss(&sigmas, v), &values, 1e-6);
         assert_close("render sigma", &grad_sigma, &numeric_sigma, 1e-7);

@@ -503,6 +503,13 @@ impl Trainer {
             scene.height,
             self.cfg.num_classes,
         );
+        // What the strokes say lies beyond the scene box: labelled rays that end in an opaque
+        // sample are pulled through the box or into it by it (`LossWeights::opacity`).
+        let far_class = match labels {
+            Some(_) => self.propagation.far_class().map(u32::from),
+            None => None,
+        };
+        self.composite.set_far_class(&self.ctx, far_class);
         self.labelled_pixels = index.labelled_pixel_count();
         self.labelled_frames = maps
             .iter()
