@@ -65,6 +65,8 @@ fn with_baseline_features(mut scene: Scene) -> Scene {
 struct Scores {
     field: EvalReport,
     refined: EvalReport,
+    /// `Trainer::opacity_far_class` after training.
+    opacity_far_class: Option<u32>,
 }
 
 impl Scores {
@@ -135,7 +137,11 @@ fn train_and_score(
         refined.pixel_accuracy,
         refined.table()
     );
-    Scores { field, refined }
+    Scores {
+        field,
+        refined,
+        opacity_far_class: trainer.opacity_far_class(),
+    }
 }
 
 #[test]
@@ -200,6 +206,8 @@ fn ycb_scribbles_on_frame_0_propagate_to_frames_1_to_9() {
     let cfg = supervised_budget(&scene);
     let scores = train_and_score(&ctx, &scene, &labels, &cfg, YCB_STEPS, 1..scene.frames.len());
     scores.assert_above(MEASURED_YCB_FIELD_FLOOR, MEASURED_YCB_REFINED_FLOOR, "frames 1-9");
+    // Dense depth: no opaque last sample, no far class, no opacity term.
+    assert_eq!(scores.opacity_far_class, None);
 }
 
 /// A capture of ../shared/data imported at a longest side of `max_size` with baseline features
@@ -243,7 +251,8 @@ const MEASURED_YCB_REFINED_FLOOR: f64 = 0.85;
 /// The real photo capture with a COLMAP model (../shared/data/alexander-colmap), packed at 200 x
 /// 200: no depth but the model's points, scribbles on photos 0 and 26, all 52 photos scored
 /// against their masks. Its rays end in an opaque sample (`LastSample::Auto` on a capture
-/// without dense depth) and its masks are refined with 10 rounds (`RefineOptions::for_scene`).
+/// without dense depth), the opacity term applies to its labelled rays, and its masks are refined
+/// with 10 rounds (`RefineOptions::for_scene`).
 #[test]
 fn colmap_scribbles_on_two_photos_propagate_to_every_photo() {
     let Some((ctx, scene)) = real_capture(
@@ -261,6 +270,9 @@ fn colmap_scribbles_on_two_photos_propagate_to_every_photo() {
         MEASURED_COLMAP_REFINED_FLOOR,
         "all 52 photos",
     );
+    // The room (the masks' background, class 0) lies beyond the box: the opacity term pulls
+    // its rays through it (docs/quality.md, "The labels say what is empty").
+    assert_eq!(scores.opacity_far_class, Some(0));
 }
 
 const COLMAP_STEPS: u32 = 800;

@@ -117,6 +117,12 @@ pub fn run(mut args: SegmentArgs) -> CliResult {
             trainer.labelled_frames()
         );
     }
+    if let Some(class) = trainer.opacity_far_class() {
+        let name = labels.classes.get(class as usize).map_or("?", |c| c.name.as_str());
+        println!(
+            "opacity: rays labelled {name:?} (far from every point) pass through the scene box, rays of the other classes stop in it (loss.opacity; 0 in --config turns it off)"
+        );
+    }
 
     if let Some(file) = &args.save_checkpoint {
         save_checkpoint(&trainer, file, &args.archive, &scene, args.seed, &labels)?;
