@@ -405,30 +405,44 @@ impl HashGridBackwardPass {
             "MERGE_RUNS",
             f64::from(u8::from(strategy == BackwardStrategy::MergeRuns)),
         )];
-        let atomic_kernel = |source| KernelSpec {
-            constants: &merge_runs,
-            ..KernelSpec::new(WHAT, source, "hash_backward")
+        // One workgroup per (level, WORKGROUP_SIZE consecutive samples), adding atomically.
+        let per_sample = |source| -> Result<(KernelSpec<'_>, [u32; 3], Vec<SampleRange>), GpuError> {
+            let workgroups = u64::from(uniforms.levels) * u64::from(uniforms.groups_per_level);
+            check_index_range(WHAT, workgroups + u64::from(u16::MAX))?;
+            let workgroup_bytes = u64::from(WORKGROUP_SIZE) * (16 + 16 + MAX_HASH_FEATURES as u64 * F32_BYTES);
+            ctx.ensure_workgroup_storage_fits("hash grid backward run merging", workgroup_bytes)?;
+            let groups = Dispatch1d::for_device(ctx, workgroups * u64::from(WORKGROUP_SIZE), WORKGROUP_SIZE)?;
+            let spec = KernelSpec {
+                constants: &merge_runs,
+                ..KernelSpec::new(WHAT, source, "hash_backward")
+            };
+            Ok((spec, groups.into(), Vec::new()))
         };
-        let (spec, groups) = match atomics {
-            // One invocation per level, LEVELS_PER_GROUP to a workgroup.
-            AtomicAdd::PerLevel => (
-                KernelSpec::new(WHAT, shaders::HASH_BACKWARD_PER_LEVEL, "hash_backward"),
-                [uniforms.levels.div_ceil(LEVELS_PER_GROUP), 1, 1],
-            ),
-            _ => {
-                // One workgroup per (level, WORKGROUP_SIZE consecutive samples).
-                let workgroups = u64::from(uniforms.levels) * u64::from(uniforms.groups_per_level);
-                check_index_range(WHAT, workgroups + u64::from(u16::MAX))?;
-                let workgroup_bytes = u64::from(WORKGROUP_SIZE) * (16 + 16 + MAX_HASH_FEATURES as u64 * F32_BYTES);
-                ctx.ensure_workgroup_storage_fits("hash grid backward run merging", workgroup_bytes)?;
-                let source = match atomics {
-                    AtomicAdd::Float => shaders::HASH_BACKWARD_FLOAT_ATOMICS,
-                    AtomicAdd::FixedPoint => shaders::HASH_BACKWARD_FIXED_POINT,
-                    _ => shaders::HASH_BACKWARD,
-                };
-                let groups = Dispatch1d::for_device(ctx, workgroups * u64::from(WORKGROUP_SIZE), WORKGROUP_SIZE)?;
-                (atomic_kernel(source), <[u32; 3]>::from(groups))
+        // The kernel, its workgroups and the sample ranges it is dispatched over, one dispatch
+        // each (none: one dispatch over every sample).
+        let (spec, groups, sample_ranges) = match atomics {
+            // One invocation per level, LEVELS_PER_GROUP to a workgroup, over ranges that keep
+            // each invocation's loops under the driver's limit (`PER_LEVEL_LOOP_BUDGET`).
+            AtomicAdd::PerLevel => {
+                let chunk = per_level_chunk(uniforms.features);
+                let ranges = (0..samples as u64)
+                    .step_by(chunk as usize)
+                    .map(|first| SampleRange {
+                        first: first as u32,
+                        end: (first + chunk).min(samples as u64) as u32,
+                        _pad0: 0,
+                        _pad1: 0,
+                    })
+                    .collect();
+                (
+                    KernelSpec::new(WHAT, shaders::HASH_BACKWARD_PER_LEVEL, "hash_backward"),
+                    [uniforms.levels.div_ceil(LEVELS_PER_GROUP), 1, 1],
+                    ranges,
+                )
             }
+            AtomicAdd::Float => per_sample(shaders::HASH_BACKWARD_FLOAT_ATOMICS)?,
+            AtomicAdd::FixedPoint => per_sample(shaders::HASH_BACKWARD_FIXED_POINT)?,
+            AtomicAdd::CompareExchange => per_sample(shaders::HASH_BACKWARD)?,
         };
         let exponents = (atomics == AtomicAdd::FixedPoint)
             .then(|| storage_buffer_zeroed::<i32>(ctx, "hash gradient exponents", MAX_HASH_LEVELS))
@@ -458,26 +472,18 @@ impl HashGridBackwardPass {
         if let Some(exponents) = &exponents {
             named.push(("exponents", exponents));
         }
-        let mut ranges = Vec::new();
+        let ranges: Vec<wgpu::Buffer> = sample_ranges
+            .iter()
+            .map(|range| uniform_buffer_from(ctx, "hash grid backward sample range", range))
+            .collect();
         let mut dispatches = Vec::new();
-        if atomics == AtomicAdd::PerLevel {
-            let chunk = per_level_chunk(uniforms.features);
-            for first in (0..samples as u64).step_by(chunk as usize) {
-                let range = SampleRange {
-                    first: first as u32,
-                    end: (first + chunk).min(samples as u64) as u32,
-                    _pad0: 0,
-                    _pad1: 0,
-                };
-                ranges.push(uniform_buffer_from(ctx, "hash grid backward sample range", &range));
-            }
-            for range in &ranges {
-                let mut with_range = named.clone();
-                with_range.push(("range", range));
-                dispatches.push(Dispatch::build(ctx, &spec, &whole(&with_range), groups).await?);
-            }
-        } else {
+        if ranges.is_empty() {
             dispatches.push(Dispatch::build(ctx, &spec, &whole(&named), groups).await?);
+        }
+        for range in &ranges {
+            let mut with_range = named.clone();
+            with_range.push(("range", range));
+            dispatches.push(Dispatch::build(ctx, &spec, &whole(&with_range), groups).await?);
         }
         Ok(HashGridBackwardPass {
             kernel: Some(BoundKernel {
