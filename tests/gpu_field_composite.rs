@@ -323,6 +323,7 @@ fn run_entry(ctx: &GpuContext, batch: &Batch, render: bool) -> GpuRun {
     };
     let mut pass = pollster::block_on(CompositePass::new(ctx, cfg, &inputs)).unwrap();
     pass.set_far_class(ctx, batch.far_class);
+    assert_eq!(pass.far_class(), batch.far_class);
     assert_eq!(pass.kernel, CompositeKernel::for_device(ctx));
     fill_with_garbage(ctx, &pass.grad_heads);
     fill_with_garbage(ctx, &pass.head_grads);

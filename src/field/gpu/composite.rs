@@ -293,6 +293,11 @@ impl CompositePass {
         })
     }
 
+    /// The class [`CompositePass::set_far_class`] gave last.
+    pub fn far_class(&self) -> Option<u32> {
+        (self.uniforms.far_class != NO_FAR_CLASS).then_some(self.uniforms.far_class)
+    }
+
     /// The class of what lies beyond the scene box, for the opacity term
     /// (`reference::loss::opacity_loss`; `None`: no term). It applies only to rays that end in
     /// an opaque sample. Takes effect with the next recorded pass.

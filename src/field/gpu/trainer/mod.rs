@@ -150,8 +150,6 @@ pub struct Trainer {
     /// Frames with at least one of those pixels.
     labelled_frames: usize,
     propagation: PropagationCache,
-    /// The far class the composite's opacity term was given with the current labels.
-    far_class: Option<u32>,
     pending_losses: Option<(u32, PendingRead<f32>)>,
     last_losses: Option<StepLosses>,
 }
@@ -462,7 +460,6 @@ impl Trainer {
             labelled_pixels: 0,
             labelled_frames: 0,
             propagation: PropagationCache::default(),
-            far_class: None,
             pending_losses: None,
             last_losses: None,
         };
@@ -509,11 +506,11 @@ impl Trainer {
         // What the strokes say lies beyond the scene box: labelled rays that end in an opaque
         // sample pass through the box with that class and stop in it with any other
         // (`LossWeights::opacity`).
-        self.far_class = match labels {
+        let far_class = match labels {
             Some(_) => self.propagation.far_class().map(u32::from),
             None => None,
         };
-        self.composite.set_far_class(&self.ctx, self.far_class);
+        self.composite.set_far_class(&self.ctx, far_class);
         self.labelled_pixels = index.labelled_pixel_count();
         self.labelled_frames = maps
             .iter()
@@ -529,7 +526,8 @@ impl Trainer {
     /// does not apply: rays without an opaque last sample, a weight of 0, or labels that name no
     /// class for the pixels far from every point (`PropagationCache::far_class`).
     pub fn opacity_far_class(&self) -> Option<u32> {
-        self.far_class
+        self.composite
+            .far_class()
             .filter(|_| self.cfg.opaque_last_sample() && self.cfg.loss.opacity > 0.0)
     }
 
