@@ -1,4 +1,5 @@
-// Shared by the dense kernels that read the weights from a UNIFORM binding (src/field/gpu/dense/, `DenseFamily::UniformWeights`): the kernels CPU devices
+// Shared by the dense kernels that read a packed copy of the weights whose index is the same in
+// every lane (src/field/gpu/dense/, `DenseFamily::UniformWeights`): the kernels CPU devices
 // (lavapipe, SwiftShader) run instead of the workgroup-tiled ones.
 //
 // Why: those devices run a SIMD group of invocations in lock-step lanes, and every storage or
@@ -11,11 +12,18 @@
 // Same uniform block and bindings as the tiled kernels (`_dense_tile.wgsl`), except `weights`:
 // the layer's matrix copied by `dense_pack_weights.wgsl` into rows padded to whole vec4s (the
 // forward reads it transposed, [in][out], the input gradient as [out][in]), zeros in the
-// padding, bound as a 64 KiB uniform. Every weight is read as part of a whole vec4 at an index
-// the same in every lane: indexing a vector's component by a runtime value made Tint (the
-// browser's compiler) load a whole vec4 per weight and pick the component per lane, which ran
-// the page's MLPs about 3x slower than natively on the same device (docs/results/bench.md).
-// Stages declare `weights: array<vec4<f32>, UNIFORM_WEIGHT_VEC4S>`.
+// padding, a 64 KiB window. Every weight is read as part of a whole vec4 at an index the same in
+// every lane: indexing a vector's component by a runtime value made Tint (the browser's
+// compiler) load a whole vec4 per weight and pick the component per lane, which ran the page's
+// MLPs about 3x slower than natively on the same device (docs/results/bench.md).
+//
+// Stages declare `weights: array<vec4<f32>, UNIFORM_WEIGHT_VEC4S>` in one of two address spaces
+// (`PackedReads` in src/field/gpu/dense/uniform.rs): `uniform` for naga (native), `storage,
+// read` for Tint (the page). Tint lowers every uniform access to a byte offset and back,
+// `(index · 16) / 16`, a division per vec4 that SwiftShader's compiler runs lane by lane; in the
+// page that made these kernels about 1.3x slower than natively, and reading the same copy from
+// storage (where SwiftShader loads an index equal in all lanes once) removes it
+// (docs/results/bench.md, "Tint divides per uniform access").
 //!include _dense_tile.wgsl
 //!include _dispatch.wgsl
 //!include _dense_acc.wgsl

@@ -10,22 +10,15 @@
 // `chunk_partial_sums` workgroup slot per chunk of dims.chunk_rows rows reads that chunk's dZ
 // through a 64 KiB uniform window (`dz0` .. `dz7`, bound at the chunk's offset) and writes
 // partials[chunk].
-//!include _dense_tile.wgsl
+//
+// dense_backward_weight_packed_storage.wgsl is the same sum reading dZ from one storage binding
+// (what the page runs on a CPU device, `_dense_uniform.wgsl` says why).
+//!include _dense_chunk_sums.wgsl
 //!include _dispatch.wgsl
-//!include _dense_acc.wgsl
 
 const WORKGROUP: u32 = 64u;
-override BLOCK: u32 = 16u;
-// Lanes (input columns) per workgroup of `chunk_partial_sums`: uniform.rs picks the smallest of
-// 8..64 covering the layer's inputs, so a 15- or 32-input layer leaves few lanes idle.
-override COLUMNS: u32 = 64u;
 
-@group(0) @binding(0) var<uniform> dims: DenseDims;
 @group(0) @binding(1) var<storage, read> dy: array<f32>;
-@group(0) @binding(2) var<storage, read> y: array<f32>;
-@group(0) @binding(3) var<storage, read> x: array<f32>;
-// [chunk][out][in]
-@group(0) @binding(4) var<storage, read_write> partials: array<f32>;
 @group(0) @binding(6) var<storage, read_write> dz_out: array<f32>;
 
 @compute @workgroup_size(WORKGROUP)
@@ -48,17 +41,10 @@ fn mask_output_gradient(
     dz_out[e] = value;
 }
 
-// Mirrors `ChunkInfo` in uniform.rs: the first of the chunks this dispatch sums; workgroup z
-// is the slot of one of them, whose dZ window is bound at `dz<slot>`.
-struct ChunkInfo {
-    first: u32,
-}
-
 // One dispatch sums up to WINDOWS (8) chunks, each through its own 64 KiB window: lavapipe paid
 // about 0.15 ms per dispatch when every chunk had its own (docs/results/bench.md). WGSL cannot
 // index bindings or pass a uniform pointer to a function (naga refuses it), hence one small
 // function per window.
-@group(1) @binding(0) var<uniform> chunk: ChunkInfo;
 @group(1) @binding(1) var<uniform> dz0: array<vec4<f32>, 4096>;
 @group(1) @binding(2) var<uniform> dz1: array<vec4<f32>, 4096>;
 @group(1) @binding(3) var<uniform> dz2: array<vec4<f32>, 4096>;
@@ -68,20 +54,8 @@ struct ChunkInfo {
 @group(1) @binding(7) var<uniform> dz6: array<vec4<f32>, 4096>;
 @group(1) @binding(8) var<uniform> dz7: array<vec4<f32>, 4096>;
 
-// What one window's loop reads: its first row, its row count, the lane's column of X, the first
-// quad of the workgroup's outputs in a dZ row, and the quads per dZ row.
-struct Window {
-    first_row: u32,
-    count: u32,
-    column: u32,
-    q0: u32,
-    row_quads: u32,
-}
-
-fn x_at(w: Window, r: u32) -> f32 {
-    return x[(w.first_row + r) * dims.x_stride + w.column];
-}
-
+// Quad of row r of window w's outputs from q0, counted from the window's start (where its
+// binding starts).
 fn quad_at(w: Window, r: u32) -> u32 {
     return r * w.row_quads + w.q0;
 }
@@ -115,15 +89,7 @@ fn chunk_partial_sums(
     let o0 = workgroup_id.y * BLOCK;
     let slot = workgroup_id.z;
     let index = chunk.first + slot;
-    let first_row = index * dims.chunk_rows;
-    let rows = active_rows();
-    var count = 0u;
-    if first_row < rows {
-        count = min(dims.chunk_rows, rows - first_row);
-    }
-    // Lanes past the last column read a valid column and discard the result.
-    let column = dims.x_offset + min(i, dims.in_dim - 1u);
-    let w = Window(first_row, count, column, o0 >> 2u, quads_per_row(dims.out_dim));
+    let w = chunk_window(index, i, o0);
     var acc: Acc;
     switch slot {
         case 0u: { window_0(&acc, w); }
@@ -135,14 +101,5 @@ fn chunk_partial_sums(
         case 6u: { window_6(&acc, w); }
         default: { window_7(&acc, w); }
     }
-    if i >= dims.in_dim {
-        return;
-    }
-    let matrix = dims.out_dim * dims.in_dim;
-    for (var j = 0u; j < BLOCK; j++) {
-        let o = o0 + j;
-        if o < dims.out_dim {
-            partials[index * matrix + o * dims.in_dim + i] = acc_value(&acc, j);
-        }
-    }
+    store_partials(&acc, index, i, o0);
 }

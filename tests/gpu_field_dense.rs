@@ -8,7 +8,7 @@
 //! magnitude coming from the same reference run on absolute values. dW sums over all N rows
 //! (K = N = 777 here, in chunks), so it gets 4e-5 · magnitude.
 use scribblefield::field::gpu::dense::{
-    DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView, UNIFORM_WEIGHT_FLOATS,
+    DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, PackedReads, RowView, UNIFORM_WEIGHT_FLOATS,
 };
 use scribblefield::field::gpu::keep::{HeadRows, workgroup_counts};
 use scribblefield::field::params::{MlpLayout, ParamLayout};
@@ -186,7 +186,9 @@ fn assert_rows_untouched(what: &str, view: ViewLayout, data: &[f32], from: usize
     }
 }
 
-fn check_mlp(case: MlpCase<'_>) {
+/// Checks one MLP's forward and backward against the reference; returns the bits of every layer's
+/// output, the input gradient and the gradient buffer, for comparing two kernel choices.
+fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
     let MlpCase {
         ctx,
         pipelines,
@@ -408,6 +410,13 @@ fn check_mlp(case: MlpCase<'_>) {
         "{name} {dims:?} × {active} of {rows} rows, kernels {families:?}, input gradients chained {chained}: worst error / \
          magnitude: forward {worst_forward:.2e}, input gradient {worst_input_grad:.2e}, weight gradient {worst_weight:.2e}"
     );
+    gpu_outputs
+        .iter()
+        .flatten()
+        .chain(&gpu_input_grad)
+        .chain(&gpu_grads)
+        .map(|v| v.to_bits())
+        .collect()
 }
 
 #[test]
@@ -458,6 +467,64 @@ fn every_mlp_matches_the_reference_with_uniform_weights() {
     let mut pipelines = DensePipelines::with_family(DenseFamily::UniformWeights);
     let mlp = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc)).unwrap();
     assert!(mlp.layer_families().all(|f| f == DenseFamily::UniformWeights));
+}
+
+/// The page's uniform-weight kernels read the packed copies and dZ from storage (`PackedReads`):
+/// the same sums in the same order as from uniform bindings, so every output and gradient is the
+/// same bits, and both match the reference; at every config's widths, in blocks of 64 and of 16
+/// (the page's), with many weight-gradient chunks (the storage kernel sums them all in one
+/// dispatch) and on kept rows.
+#[test]
+fn packed_reads_from_storage_give_the_bits_of_uniform_reads() {
+    let Some(ctx) = gpu_for_tests("packed_reads_from_storage_give_the_bits_of_uniform_reads") else {
+        return;
+    };
+    let pipelines = |reads, limit| {
+        DensePipelines::with_family(DenseFamily::UniformWeights)
+            .with_uniform_block_limit(limit)
+            .with_input_gradient_chain(false)
+            .with_packed_reads(reads)
+    };
+    let mut cases: Vec<(String, FieldConfig, usize, Option<usize>)> = configs()
+        .into_iter()
+        .map(|(name, cfg)| (name.to_string(), cfg, ROWS, None))
+        .collect();
+    cases.push(("small, 5003 rows".into(), FieldConfig::small(), 5003, None));
+    cases.push((
+        "small, 1500 of 3000 rows kept".into(),
+        FieldConfig::small(),
+        3000,
+        Some(1500),
+    ));
+    for limit in [64, 16] {
+        for (config_name, cfg, rows, kept) in &cases {
+            let layout = ParamLayout::new(cfg);
+            let params = layout.init(23);
+            for (index, (mlp_name, mlp)) in layout.mlps().into_iter().enumerate() {
+                let run = |reads| {
+                    let mut pipelines = pipelines(reads, limit);
+                    check_mlp(MlpCase {
+                        ctx: &ctx,
+                        pipelines: &mut pipelines,
+                        name: format!("{config_name} {mlp_name} ({reads:?} reads, blocks of {limit})"),
+                        layout: mlp,
+                        params: &params,
+                        rows: *rows,
+                        input_grad: mlp_name != "color",
+                        output_view: index % 2 == 0,
+                        seed: 300 + index as u64,
+                        kept: *kept,
+                    })
+                };
+                let uniform = run(PackedReads::Uniform);
+                let storage = run(PackedReads::Storage);
+                assert!(
+                    uniform == storage,
+                    "{config_name} {mlp_name}, blocks of {limit}: storage reads differ from uniform reads"
+                );
+            }
+        }
+    }
 }
 
 /// Which MLPs run their input gradients as one chain: those of 2 or 3 layers on the uniform

@@ -33,6 +33,10 @@
 //! X and Y (and dY and dX) of one layer must be different buffers: WebGPU forbids binding one
 //! buffer both read-only and writable in a dispatch.
 //!
+//! Where the family reads its packed copies and dZ is [`PackedReads`]: uniform bindings natively,
+//! storage bindings in the page, whose compiler (Tint) divides on every uniform access
+//! (`shaders/_dense_uniform.wgsl`).
+//!
 //! On lavapipe an MLP of 2 or 3 such layers whose hidden widths fit one invocation runs all its
 //! input gradients as one kernel ([`chain`]), each hidden layer's dX kept in registers.
 //!
@@ -51,7 +55,7 @@ pub use layer::{DenseBackward, DenseDims, DenseForward, DenseGradients, DenseLay
 pub use mlp::{MlpGradients, MlpPass, MlpPassDesc};
 pub use pipelines::DensePipelines;
 pub use tiled::TileShape;
-pub use uniform::UNIFORM_WEIGHT_FLOATS;
+pub use uniform::{PackedReads, UNIFORM_WEIGHT_FLOATS};
 
 pub use crate::field::gpu::row_view::RowView;
 use crate::gpu::GpuContext;

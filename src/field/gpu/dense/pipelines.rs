@@ -5,7 +5,7 @@
 use super::DenseFamily;
 use super::layer::{DenseLayerSpec, range_binding};
 use super::tiled::{TileShape, row_tile_dispatch};
-use super::uniform::{uniform_block, uniform_dispatch, widest_uniform_block};
+use super::uniform::{PackedReads, uniform_block, uniform_dispatch, widest_uniform_block};
 use crate::gpu::pipeline::{KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
@@ -20,6 +20,9 @@ pub(super) enum DenseKernel {
     BackwardChainUniform,
     MaskOutputGradient,
     ChunkPartialSums,
+    ForwardPackedStorage,
+    BackwardInputPackedStorage,
+    ChunkPartialSumsStorage,
     PackWeights,
 }
 
@@ -71,6 +74,21 @@ impl DenseKernel {
                 shaders::DENSE_BACKWARD_WEIGHT_UNIFORM,
                 "chunk_partial_sums",
             ),
+            DenseKernel::ForwardPackedStorage => (
+                "dense forward (packed weights in storage)",
+                shaders::DENSE_FORWARD_PACKED_STORAGE,
+                "forward",
+            ),
+            DenseKernel::BackwardInputPackedStorage => (
+                "dense backward input (packed weights in storage)",
+                shaders::DENSE_BACKWARD_INPUT_PACKED_STORAGE,
+                "backward_input",
+            ),
+            DenseKernel::ChunkPartialSumsStorage => (
+                "dense weight partial sums (dZ in storage)",
+                shaders::DENSE_BACKWARD_WEIGHT_PACKED_STORAGE,
+                "chunk_partial_sums",
+            ),
         }
     }
 }
@@ -85,6 +103,8 @@ pub struct DensePipelines {
     /// Whether MLPs that qualify run their input gradients as one chain (`chain.rs`); `None`:
     /// where the device is faster with it (`chain::chains_on`).
     input_gradient_chain: Option<bool>,
+    /// Where the uniform-weight family reads; `None`: [`PackedReads::for_this_build`].
+    packed_reads: Option<PackedReads>,
 }
 
 impl Default for DensePipelines {
@@ -104,6 +124,38 @@ impl DensePipelines {
             family,
             uniform_block_limit: None,
             input_gradient_chain: None,
+            packed_reads: None,
+        }
+    }
+
+    /// The same with the uniform-weight family reading its packed copies and dZ as `reads` says
+    /// whatever the build, so tests can run both on one device.
+    pub fn with_packed_reads(self, reads: PackedReads) -> DensePipelines {
+        DensePipelines {
+            packed_reads: Some(reads),
+            ..self
+        }
+    }
+
+    pub fn packed_reads(&self) -> PackedReads {
+        self.packed_reads.unwrap_or_else(PackedReads::for_this_build)
+    }
+
+    /// The uniform-weight family's kernels of a forward, an input gradient and a weight gradient,
+    /// as they read ([`DensePipelines::packed_reads`]).
+    fn packed_kernel(&self, kind: ProductKind) -> DenseKernel {
+        match (kind, self.packed_reads()) {
+            (ProductKind::Forward, PackedReads::Uniform) => DenseKernel::ForwardUniform,
+            (ProductKind::Forward, PackedReads::Storage) => DenseKernel::ForwardPackedStorage,
+            (ProductKind::BackwardInput, PackedReads::Uniform) => DenseKernel::BackwardInputUniform,
+            (ProductKind::BackwardInput, PackedReads::Storage) => DenseKernel::BackwardInputPackedStorage,
+        }
+    }
+
+    pub(super) fn chunk_sums_kernel(&self) -> DenseKernel {
+        match self.packed_reads() {
+            PackedReads::Uniform => DenseKernel::ChunkPartialSums,
+            PackedReads::Storage => DenseKernel::ChunkPartialSumsStorage,
         }
     }
 
@@ -224,14 +276,11 @@ impl DensePipelines {
         kind: ProductKind,
         writes_dz: bool,
     ) -> Result<ProductKernel<'a>, GpuError> {
-        let (columns, uniform_kernel, tiled_kernel) = match kind {
-            ProductKind::Forward => (spec.out_dim, DenseKernel::ForwardUniform, DenseKernel::Forward),
-            ProductKind::BackwardInput => (
-                spec.in_dim,
-                DenseKernel::BackwardInputUniform,
-                DenseKernel::BackwardInput,
-            ),
+        let (columns, tiled_kernel) = match kind {
+            ProductKind::Forward => (spec.out_dim, DenseKernel::Forward),
+            ProductKind::BackwardInput => (spec.in_dim, DenseKernel::BackwardInput),
         };
+        let uniform_kernel = self.packed_kernel(kind);
         if let Some(packed) = packed {
             let block = uniform_block(columns, self.uniform_block_limit(ctx));
             let workgroups = uniform_dispatch(ctx, spec.rows, columns, block)?;

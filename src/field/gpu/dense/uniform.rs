@@ -12,6 +12,41 @@ use crate::gpu::dispatch::{Dispatch, IndirectArgs, bind_named};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError};
 
+/// Where the uniform-weight kernels read a layer's packed weights and the weight gradient reads
+/// dZ (`shaders/_dense_uniform.wgsl`). The same kernels either way, summing in the same order,
+/// so the results are the same bits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum PackedReads {
+    /// 64 KiB uniform bindings (`dense_*_uniform.wgsl`): a load every lane shares is one scalar
+    /// load on CPU devices, as naga's SPIR-V runs natively.
+    Uniform,
+    /// Storage bindings (`dense_*_packed_storage.wgsl`): Tint, the browser's compiler, turns
+    /// every uniform access into a byte offset divided back by 16, which SwiftShader runs lane by
+    /// lane; from storage it loads a shared index once (docs/results/bench.md, "Tint divides per
+    /// uniform access").
+    Storage,
+}
+
+impl PackedReads {
+    /// The faster for the compiler this build hands its WGSL to: Tint in the browser (measured
+    /// in Chromium), naga natively.
+    pub fn for_this_build() -> PackedReads {
+        if cfg!(target_arch = "wasm32") {
+            PackedReads::Storage
+        } else {
+            PackedReads::Uniform
+        }
+    }
+}
+
+/// Offset alignment of a window of the packed copies, bound as a uniform or a storage range.
+fn packed_window_alignment(ctx: &GpuContext) -> u32 {
+    ctx.limits
+        .min_uniform_buffer_offset_alignment
+        .max(ctx.limits.min_storage_buffer_offset_alignment)
+        .max(16)
+}
+
 /// f32 in the uniform binding of the uniform-weight kernels (64 KiB, WebGPU's default limit).
 pub const UNIFORM_WEIGHT_FLOATS: usize = 16384;
 /// Invocations per workgroup of the uniform-weight kernels (`WORKGROUP` in the shader).
@@ -119,12 +154,19 @@ impl UniformWeightPartials {
             mask_dispatch,
         } = layer;
         let window_floats = chunk_rows as usize * padded_to_vec4(spec.out_dim) as usize;
+        let reads = pipelines.packed_reads();
         let info_stride = ctx.limits.min_uniform_buffer_offset_alignment.max(16);
-        let dispatches = chunks.div_ceil(WINDOWS_PER_DISPATCH);
+        // Windows bind one chunk each; from storage one dispatch sums as many chunks as its z
+        // dimension allows.
+        let per_dispatch = match reads {
+            PackedReads::Uniform => WINDOWS_PER_DISPATCH,
+            PackedReads::Storage => ctx.limits.max_compute_workgroups_per_dimension.max(1),
+        };
+        let dispatches = chunks.div_ceil(per_dispatch);
         let mut infos = vec![0u8; dispatches as usize * info_stride as usize];
         for d in 0..dispatches {
             let info = ChunkInfo {
-                first: d * WINDOWS_PER_DISPATCH,
+                first: d * per_dispatch,
                 _pad: [0; 3],
             };
             let at = (d * info_stride) as usize;
@@ -167,7 +209,7 @@ impl UniformWeightPartials {
         let block = uniform_block(spec.out_dim, pipelines.uniform_block_limit(ctx));
         let columns = spec.in_dim.next_power_of_two().clamp(8, UNIFORM_WORKGROUP);
         let (pipeline, layouts) = pipelines.chunk_sums_pipeline(ctx, block, columns).await?;
-        let sums = DenseKernel::ChunkPartialSums.spec();
+        let sums = pipelines.chunk_sums_kernel().spec();
         let common = bind_named(
             ctx,
             &sums,
@@ -184,8 +226,8 @@ impl UniformWeightPartials {
         let window_names = ["dz0", "dz1", "dz2", "dz3", "dz4", "dz5", "dz6", "dz7"];
         let mut windows = Vec::with_capacity(dispatches as usize);
         for d in 0..dispatches {
-            let first = d * WINDOWS_PER_DISPATCH;
-            let count = (chunks - first).min(WINDOWS_PER_DISPATCH);
+            let first = d * per_dispatch;
+            let count = (chunks - first).min(per_dispatch);
             let mut entries = vec![(
                 "chunk",
                 wgpu::BindingResource::Buffer(wgpu::BufferBinding {
@@ -194,6 +236,11 @@ impl UniformWeightPartials {
                     size: NonZeroU64::new(size_of::<ChunkInfo>() as u64),
                 }),
             )];
+            if reads == PackedReads::Storage {
+                entries.push(("dz", dz.as_entire_binding()));
+                windows.push((bind_named(ctx, &sums, &layouts[1], 1, &entries)?, count));
+                continue;
+            }
             // Slots past the last chunk are never read; they bind the first chunk's window.
             for (slot, name) in window_names.iter().enumerate() {
                 let c = if (slot as u32) < count {
@@ -298,7 +345,8 @@ fn gcd(a: usize, b: usize) -> usize {
 
 impl DensePipelines {
     /// The per-chunk weight-gradient kernel, with an explicit layout (its dZ windows are bound
-    /// as 64 KiB ranges of a larger buffer), and its two bind group layouts.
+    /// as 64 KiB ranges of a larger buffer, or dZ whole from storage), and its two bind group
+    /// layouts.
     pub(super) async fn chunk_sums_pipeline(
         &self,
         ctx: &GpuContext,
@@ -322,8 +370,9 @@ impl DensePipelines {
             entry(4, storage(false), None),
             entry(7, storage(true), None),
         ];
-        let windows: Vec<wgpu::BindGroupLayoutEntry> =
-            std::iter::once(entry(0, wgpu::BufferBindingType::Uniform, Some(16)))
+        let slot = std::iter::once(entry(0, wgpu::BufferBindingType::Uniform, Some(16)));
+        let windows: Vec<wgpu::BindGroupLayoutEntry> = match self.packed_reads() {
+            PackedReads::Uniform => slot
                 .chain((1..=WINDOWS_PER_DISPATCH).map(|binding| {
                     entry(
                         binding,
@@ -331,8 +380,10 @@ impl DensePipelines {
                         Some(UNIFORM_WEIGHT_FLOATS as u64 * 4),
                     )
                 }))
-                .collect();
-        let (label, source, entry_point) = DenseKernel::ChunkPartialSums.source();
+                .collect(),
+            PackedReads::Storage => slot.chain(std::iter::once(entry(1, storage(true), Some(16)))).collect(),
+        };
+        let (label, source, entry_point) = self.chunk_sums_kernel().source();
         let spec = KernelSpec {
             label,
             source,
@@ -430,7 +481,7 @@ impl MlpPacking {
         let start = specs.iter().map(|s| s.weights.start).min().unwrap_or(0);
         let end = specs.iter().map(|s| s.weights.end).max().unwrap_or(0);
         let (source, local) = range_binding(ctx, label, params, &(start..end))?;
-        let align = u64::from(ctx.limits.min_uniform_buffer_offset_alignment.max(16));
+        let align = u64::from(packed_window_alignment(ctx));
         let (mut slots, mut jobs) = (Vec::new(), Vec::new());
         let (mut offset, mut bytes) = (0u64, 0u64);
         for &(k, kind) in &wanted {

@@ -1,0 +1,69 @@
+// What both weight-gradient kernels of the packed-weight family share
+// (dense_backward_weight_uniform.wgsl, dZ through 64 KiB uniform windows;
+// dense_backward_weight_packed_storage.wgsl, dZ from one storage binding): the bindings of X and
+// of the partial matrices, a chunk's window of rows, and writing a lane's sums. Workgroup x picks
+// COLUMNS input columns (one per lane), y a block of BLOCK outputs, z a chunk of dims.chunk_rows
+// rows, whose partial dW[o][i] = Σ_n dZ[n][o] · X[n][i] goes to partials[chunk].
+//!include _dense_tile.wgsl
+//!include _dense_acc.wgsl
+
+override BLOCK: u32 = 16u;
+// Lanes (input columns) per workgroup: uniform.rs picks the smallest of 8..64 covering the
+// layer's inputs, so a 15- or 32-input layer leaves few lanes idle.
+override COLUMNS: u32 = 64u;
+
+@group(0) @binding(0) var<uniform> dims: DenseDims;
+// Y: what `output_gradient` (`_dense_tile.wgsl`) masks with, where the windowed stage forms dZ.
+@group(0) @binding(2) var<storage, read> y: array<f32>;
+@group(0) @binding(3) var<storage, read> x: array<f32>;
+// [chunk][out][in]
+@group(0) @binding(4) var<storage, read_write> partials: array<f32>;
+
+// Mirrors `ChunkInfo` in uniform.rs: the first of the chunks one dispatch sums; workgroup z is
+// the slot of one of them.
+struct ChunkInfo {
+    first: u32,
+}
+
+@group(1) @binding(0) var<uniform> chunk: ChunkInfo;
+
+// What one chunk's loop reads: its first row, its row count, the lane's column of X, the first
+// quad of the workgroup's outputs in a dZ row, and the quads per dZ row.
+struct Window {
+    first_row: u32,
+    count: u32,
+    column: u32,
+    q0: u32,
+    row_quads: u32,
+}
+
+// Chunk `index`'s rows for the lane of input column i and the outputs from o0. Lanes past the
+// last column read a valid column and discard the result.
+fn chunk_window(index: u32, i: u32, o0: u32) -> Window {
+    let first_row = index * dims.chunk_rows;
+    let rows = active_rows();
+    var count = 0u;
+    if first_row < rows {
+        count = min(dims.chunk_rows, rows - first_row);
+    }
+    let column = dims.x_offset + min(i, dims.in_dim - 1u);
+    return Window(first_row, count, column, o0 >> 2u, quads_per_row(dims.out_dim));
+}
+
+fn x_at(w: Window, r: u32) -> f32 {
+    return x[(w.first_row + r) * dims.x_stride + w.column];
+}
+
+// partials[index][o0 + j][i] = the lane's sums, for the outputs and the column inside the layer.
+fn store_partials(acc: ptr<function, Acc>, index: u32, i: u32, o0: u32) {
+    if i >= dims.in_dim {
+        return;
+    }
+    let matrix = dims.out_dim * dims.in_dim;
+    for (var j = 0u; j < BLOCK; j++) {
+        let o = o0 + j;
+        if o < dims.out_dim {
+            partials[index * matrix + o * dims.in_dim + i] = acc_value(acc, j);
+        }
+    }
+}
