@@ -246,8 +246,7 @@ impl App {
     /// Shows the pack settings of a capture (the `pack-` page options first) with an estimate;
     /// nothing changes until the user starts packing.
     fn offer_pack(&mut self, name: String, input: CaptureInput, ctx: &egui::Context) {
-        let opts = packing::pack_options(&self.options);
-        self.setup = Some(PackSetup::new(name, input, opts, ctx));
+        self.setup = Some(PackSetup::new(name, input, &self.options, ctx));
     }
 
     /// The pack settings, while shown: *Start* packs, *Cancel* leaves the page as it was.

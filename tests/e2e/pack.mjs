@@ -34,6 +34,15 @@ if (!url || !capturePath || !referencePath) {
   process.exit(2);
 }
 const outDir = process.env.E2E_OUT || "/tmp/e2e";
+// An RGB-D capture beside the photo capture (the YCB clip), when the shared data has it: its
+// pack settings must keep the depth captures' defaults.
+const depthCapturePath = [resolve(capturePath, "..", "ycb-video-0000")].find((p) => {
+  try {
+    return readdirSync(join(p, "depth")).length > 0;
+  } catch {
+    return false;
+  }
+});
 // Packing as `pack --max-size 96 --every 9 --features baseline --feature-stride 4
 // --autoencoder-steps 100`: tiny frames and few steps keep SwiftShader quick. The tiny model,
 // and small batches so a step is short.
@@ -303,6 +312,32 @@ await runBrowserTest("pack", {
       `scene.json as the picked folder (${elapsed()})`);
     await dropPage.close();
   });
+
+  await checks.check("without pack options a photo capture starts at the photo captures' size, one with depth at 640",
+    async () => {
+      const bare = new URL(url);
+      bare.hash = "model=tiny";
+      const defaultsPage = await openPage(context, bare.href, "defaults", consoleLog);
+      await settledStatus(defaultsPage, PACK_TIMEOUT_MS);
+      const startsAs = async (folder) => {
+        await defaultsPage.setInputFiles("#capture-folder", folder);
+        const t = await waitForPackSetup(defaultsPage, (t) => t && t.estimate, "the pack settings", PACK_TIMEOUT_MS);
+        await clickPackControl(defaultsPage, "cancel");
+        await waitForPackSetup(defaultsPage, (t) => t === null, "the settings to close", 60_000);
+        return t;
+      };
+      const photos = await startsAs(capturePath);
+      assert(photos.values.max_size === "200" && photos.values.stride === "2" &&
+        photos.caption.includes("No depth images"),
+        `the COLMAP capture's settings start as ${JSON.stringify(photos.values)}: ${photos.caption}`);
+      console.log(`     ${photos.caption}`);
+      if (depthCapturePath) {
+        const depth = await startsAs(depthCapturePath);
+        assert(depth.values.max_size === "640" && depth.values.stride === "8" && !depth.caption.includes("No depth"),
+          `the RGB-D capture's settings start as ${JSON.stringify(depth.values)}: ${depth.caption}`);
+      }
+      await defaultsPage.close();
+    });
 
   await checks.check("the pack settings estimate, refuse bad values, cancel, and pack with what was changed",
     async () => {

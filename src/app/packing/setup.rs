@@ -15,6 +15,7 @@ use serde_json::json;
 use wasm_bindgen_futures::JsFuture;
 
 use super::CaptureInput;
+use crate::app::page_options::PageOptions;
 use crate::features::pack::{
     CaptureSurvey, FormError, PackEstimate, PackForm, PackOptions, estimate_pack, survey_capture,
 };
@@ -54,6 +55,9 @@ pub struct PackSetup {
     name: String,
     input: Option<CaptureInput>,
     survey: CaptureSurvey,
+    /// The capture has no depth images and the page options name no size: the form starts at
+    /// the photo captures' size, and says so.
+    photo_defaults: bool,
     size: Rc<RefCell<SourceSize>>,
     /// The options the page started with (`pack-` options); the form changes some of them.
     base: PackOptions,
@@ -63,7 +67,9 @@ pub struct PackSetup {
 }
 
 impl PackSetup {
-    pub fn new(name: String, input: CaptureInput, base: PackOptions, ctx: &egui::Context) -> PackSetup {
+    /// The settings of `input` as the page options give them, with the page's defaults for its
+    /// kind of capture (`super::pack_options`).
+    pub fn new(name: String, input: CaptureInput, options: &PageOptions, ctx: &egui::Context) -> PackSetup {
         let size = Rc::new(RefCell::new(SourceSize::Reading));
         let survey = match &input {
             CaptureInput::Files(files) => {
@@ -80,9 +86,12 @@ impl PackSetup {
                 survey
             }
         };
+        let base = super::pack_options(options, survey.dense_depth);
+        let photo_defaults = !survey.dense_depth && survey.images > 0 && options.pack_size.is_none();
         PackSetup {
             name,
             input: Some(input),
+            photo_defaults,
             survey,
             size,
             form: PackForm::from_options(&base),
@@ -264,12 +273,21 @@ impl PackSetup {
                 s.capture_bytes as f64 / 1e6
             );
         }
-        format!(
+        let mut text = format!(
             "{} images{size} in {} ({:.1} MB of images and model files to read).",
             s.images,
             s.found_in,
             s.capture_bytes as f64 / 1e6
-        )
+        );
+        if self.photo_defaults {
+            text.push_str(&format!(
+                " No depth images: photos pack at a longest side of {} with feature cells of {} px by \
+                 default, where such captures gave the best masks.",
+                super::PHOTO_CAPTURE_MAX_SIZE,
+                super::PHOTO_CAPTURE_FEATURE_STRIDE
+            ));
+        }
+        text
     }
 
     /// Puts the form's state on `<body data-pack-setup>` for scripts.
@@ -292,6 +310,7 @@ impl PackSetup {
         let value = json!({
             "name": self.name,
             "images": self.survey.images,
+            "caption": self.describe_capture(),
             "source": source.map(|(w, h)| [w, h]),
             "values": {
                 "max_size": f.max_size, "every": f.every, "max_frames": f.max_frames,
