@@ -32,6 +32,8 @@ const WARMUP_STEPS: u32 = 2;
 const DEFAULT_STEPS: u32 = 5;
 /// Size of the plain matmul, as `bench`'s default `--matmul`.
 const MATMUL_N: u32 = 512;
+/// The longest wait for the page to paint a new stage.
+const PAINT_WAIT_MS: f64 = 2000.0;
 
 /// What the bench runs: from the page's options.
 #[derive(Clone, Copy, Debug)]
@@ -51,6 +53,8 @@ struct Shown {
     steps: u32,
     report: Option<String>,
     error: Option<String>,
+    /// Frames painted since the page opened.
+    painted: u32,
     /// Frames painted and the page thread's time in them while the timed steps ran.
     frames: u32,
     paint_ms: f64,
@@ -112,6 +116,29 @@ fn stage(shown: &RefCell<Shown>, egui_ctx: &egui::Context, name: &str) {
     egui_ctx.request_repaint();
 }
 
+/// Waits until the page has painted (at most [`PAINT_WAIT_MS`]) and the GPU has finished the
+/// paint: on a CPU device one paint holds the device for tens of milliseconds, and the one
+/// showing a new stage must not land in that stage's first timed step. The page's own repaints
+/// while training stay in the timings (`frames_painted`).
+async fn settle_paint(gpu: &GpuContext, shown: &RefCell<Shown>) {
+    let before = shown.borrow().painted;
+    let start = now_ms();
+    while shown.borrow().painted == before && now_ms() - start < PAINT_WAIT_MS {
+        browser::sleep_ms(5).await;
+    }
+    // egui may paint again (a second pass), and the browser composites each painted frame
+    // after it, on SwiftShader on the same cores: wait until two frames pass without a paint.
+    loop {
+        let painted = shown.borrow().painted;
+        browser::next_animation_frame().await;
+        browser::next_animation_frame().await;
+        if shown.borrow().painted == painted || now_ms() - start > PAINT_WAIT_MS {
+            break;
+        }
+    }
+    gpu_done(&gpu.queue).await;
+}
+
 async fn run(
     gpu: GpuContext,
     plan: BenchPlan,
@@ -153,6 +180,7 @@ async fn run(
     let tally_before = trainer.kept_tally().await.ok();
 
     stage(shown, egui_ctx, "timed");
+    settle_paint(&gpu, shown).await;
     {
         let mut s = shown.borrow_mut();
         s.timing = true;
@@ -205,6 +233,7 @@ async fn run(
 
     // Where a step's time goes, by the wall clock: one step alone, then each stage alone.
     stage(shown, egui_ctx, "stages");
+    settle_paint(&gpu, shown).await;
     let before = now_ms();
     trainer.train(1);
     gpu_done(&gpu.queue).await;
@@ -275,6 +304,7 @@ impl eframe::App for BenchApp {
             }
         });
         let mut shown = self.shown.borrow_mut();
+        shown.painted += 1;
         if shown.timing {
             shown.frames += 1;
             shown.paint_ms += now_ms() - start;

@@ -56,6 +56,23 @@ pub async fn sleep_ms(ms: i32) {
     let _ = elapsed.await;
 }
 
+/// Resolves at the browser's next animation frame (at once where there is no window).
+pub async fn next_animation_frame() {
+    let Some(window) = web_sys::window() else {
+        return;
+    };
+    let (done, fired) = futures_channel::oneshot::channel::<()>();
+    let callback = wasm_bindgen::closure::Closure::once_into_js(move |_time: f64| {
+        let _ = done.send(());
+    });
+    if window
+        .request_animation_frame(wasm_bindgen::JsCast::unchecked_ref(&callback))
+        .is_ok()
+    {
+        let _ = fired.await;
+    }
+}
+
 fn local_storage() -> Result<web_sys::Storage, BrowserError> {
     let what = "browser storage";
     web_sys::window()
