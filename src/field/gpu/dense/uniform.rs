@@ -237,7 +237,8 @@ impl UniformWeightPartials {
                 }),
             )];
             if reads == PackedReads::Storage {
-                entries.push(("dz", dz.as_entire_binding()));
+                // The shader names dZ `weights`: the binding its shared `accumulate` reads.
+                entries.push(("weights", dz.as_entire_binding()));
                 windows.push((bind_named(ctx, &sums, &layouts[1], 1, &entries)?, count));
                 continue;
             }
