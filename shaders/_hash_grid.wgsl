@@ -55,6 +55,15 @@ fn corner_weight(frac: vec3<f32>, corner: u32) -> f32 {
     return t.x * t.y * t.z;
 }
 
+// `corner_weight` of all 8 corners at once, corners 0-3 and 4-7 as two vec4s, with the same
+// products in the same order (x · y, then · z), so each weight is bit-identical to it.
+fn corner_weights(frac: vec3<f32>) -> array<vec4<f32>, 2> {
+    let x = vec4(1.0 - frac.x, frac.x, 1.0 - frac.x, frac.x);
+    let y = vec4(1.0 - frac.y, 1.0 - frac.y, frac.y, frac.y);
+    let xy = x * y;
+    return array(xy * (1.0 - frac.z), xy * frac.z);
+}
+
 // Entry of the corner's vertex within its level's table.
 fn corner_entry(cell: vec3<u32>, corner: u32, dense_side: u32, table_size: u32) -> u32 {
     let v = cell + vec3<u32>(corner & 1u, (corner >> 1u) & 1u, (corner >> 2u) & 1u);

@@ -39,15 +39,6 @@ struct SampleRange {
 // 4-7 (`corner_weight`'s numbering: bit 2 of the corner is z).
 var<private> sums: array<vec4<f32>, 16>;
 
-// `corner_weight` of corners 0-3 and 4-7, with the same products in the same order
-// (x · y, then · z), so the weights are bit-identical to the reference's.
-fn corner_weights(frac: vec3<f32>) -> array<vec4<f32>, 2> {
-    let x = vec4(1.0 - frac.x, frac.x, 1.0 - frac.x, frac.x);
-    let y = vec4(1.0 - frac.y, 1.0 - frac.y, frac.y, frac.y);
-    let xy = x * y;
-    return array(xy * (1.0 - frac.z), xy * frac.z);
-}
-
 // Index of feature 0 of the corner's entry in the gradient buffer.
 fn corner_index(cell: vec3<u32>, corner: u32, geometry: vec4<u32>) -> u32 {
     let entry = corner_entry(cell, corner, geometry.y, grid.table_size);
