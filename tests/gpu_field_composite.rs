@@ -13,7 +13,7 @@ use scribblefield::field::gpu::rays::{
     NO_LABEL, RAY_HAS_CODE, RAY_HITS_BOX, StepUniforms, TARGET_DEPTH, TARGET_FLAGS, TARGET_HEADER_WORDS, TARGET_LABEL,
     TARGET_RGB,
 };
-use scribblefield::field::reference::loss::{RayTarget, opacity_loss, ray_loss};
+use scribblefield::field::reference::loss::{RayTarget, add_opacity, opacity_loss, ray_loss};
 use scribblefield::field::reference::{Channels, activations, render};
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{fill_with_garbage, read_buffer_blocking, storage_buffer_from, uniform_buffer_from};
@@ -246,10 +246,7 @@ fn reference_ray(batch: &Batch, ray: usize) -> Expected {
         c,
         cfg.batch_rays as usize,
     );
-    let grad_left = opacity.map_or(0.0, |(term, grad)| {
-        terms.semantic += term;
-        grad
-    });
+    let grad_left = add_opacity(&mut terms, opacity);
     let (grad_sigma, grad_values) =
         render::composite_backward(&forward, &deltas, &values, k, &grad_rendered, grad_left);
     let mut grad_heads = Vec::with_capacity(s_count * k);

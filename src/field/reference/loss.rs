@@ -127,6 +127,18 @@ pub fn opacity_loss<R: Real>(
     Some(((diff * diff).to_f64() * w, (diff + diff) * R::of(w)))
 }
 
+/// Counts the opacity term (from [`opacity_loss`]; `None` where it does not apply) in the
+/// semantic one, as the trainer does, and returns its ∂loss/∂T (0 where it does not apply).
+pub fn add_opacity<R: Real>(terms: &mut LossTerms, opacity: Option<(f64, R)>) -> R {
+    match opacity {
+        Some((term, grad)) => {
+            terms.semantic += term;
+            grad
+        }
+        None => R::ZERO,
+    }
+}
+
 /// Loss of one rendered ray (`channels.count()` values) and ∂loss/∂rendered, both already
 /// scaled by `1 / batch_size`. A label outside `[0, classes)` is treated as unlabelled
 /// (labels are user data; they are validated upstream, and the reference must not panic).

@@ -399,13 +399,7 @@ impl FieldModel {
             self.channels.classes,
             batch_size,
         );
-        let grad_left = match opacity {
-            Some((term, grad)) => {
-                terms.semantic += term;
-                grad
-            }
-            None => R::ZERO,
-        };
+        let grad_left = loss::add_opacity(&mut terms, opacity);
         (terms, grad_rendered, grad_left)
     }
 
