@@ -121,18 +121,16 @@ fn stage(shown: &RefCell<Shown>, egui_ctx: &egui::Context, name: &str) {
 /// showing a new stage must not land in that stage's first timed step. The page's own repaints
 /// while training stay in the timings (`frames_painted`).
 async fn settle_paint(gpu: &GpuContext, shown: &RefCell<Shown>) {
+    // egui may paint twice (a second pass), and the browser composites each painted frame after
+    // it, on SwiftShader on the same cores: wait for a paint, then for two frames without one.
     let before = shown.borrow().painted;
     let start = now_ms();
-    while shown.borrow().painted == before && now_ms() - start < PAINT_WAIT_MS {
-        browser::sleep_ms(5).await;
-    }
-    // egui may paint again (a second pass), and the browser composites each painted frame
-    // after it, on SwiftShader on the same cores: wait until two frames pass without a paint.
     loop {
         let painted = shown.borrow().painted;
         browser::next_animation_frame().await;
         browser::next_animation_frame().await;
-        if shown.borrow().painted == painted || now_ms() - start > PAINT_WAIT_MS {
+        let now = shown.borrow().painted;
+        if (now == painted && now != before) || now_ms() - start > PAINT_WAIT_MS {
             break;
         }
     }
