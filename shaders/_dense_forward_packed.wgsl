@@ -7,27 +7,69 @@
 @group(0) @binding(1) var<storage, read> x: array<f32>;
 @group(0) @binding(3) var<storage, read_write> y: array<f32>;
 
+// Input i's step of the reduction (UNROLL): i and the weight index are constants once the
+// pipeline is specialised and the calls inlined (q0 too, where the block holds the whole row);
+// steps past REDUCED fold away.
+fn forward_step(acc: ptr<function, Acc>, x_row: u32, q0: u32, i: u32) {
+    if i < REDUCED {
+        accumulate(acc, x[x_row + i], i * ROW_QUADS + q0);
+    }
+}
+
+fn forward_steps(acc: ptr<function, Acc>, x_row: u32, q0: u32, first: u32) {
+    forward_step(acc, x_row, q0, first);
+    forward_step(acc, x_row, q0, first + 1u);
+    forward_step(acc, x_row, q0, first + 2u);
+    forward_step(acc, x_row, q0, first + 3u);
+    forward_step(acc, x_row, q0, first + 4u);
+    forward_step(acc, x_row, q0, first + 5u);
+    forward_step(acc, x_row, q0, first + 6u);
+    forward_step(acc, x_row, q0, first + 7u);
+}
+
 @compute @workgroup_size(WORKGROUP)
 fn forward(
     @builtin(workgroup_id) workgroup_id: vec3<u32>,
     @builtin(num_workgroups) num_workgroups: vec3<u32>,
     @builtin(local_invocation_index) local_index: u32,
 ) {
-    let n = linear_item_index(vec3<u32>(workgroup_id.xy, 0u), num_workgroups, local_index, WORKGROUP);
-    if n >= active_rows() {
+    let item = linear_item_index(vec3<u32>(workgroup_id.xy, 0u), num_workgroups, local_index, WORKGROUP);
+    let rows = active_rows();
+    if !UNROLL && item >= rows {
         return;
     }
+    let n = row_read(item, rows);
     let o0 = workgroup_id.z * BLOCK;
     let x_row = n * dims.x_stride + dims.x_offset;
-    // Input i's packed row holds W[0 .. out][i]; outputs o0 .. o0 + BLOCK are its quads from
-    // o0 / 4 (BLOCK is a multiple of 4). Quads past the row's end give outputs never written.
-    let quads = quads_per_row(dims.out_dim);
-    let q0 = o0 >> 2u;
+    let q0 = block_quad(workgroup_id.z);
     var acc: Acc;
-    for (var i = 0u; i < dims.in_dim; i++) {
-        let value = x[x_row + i];
-        let w = i * quads + q0;
-        accumulate(&acc, value, w);
+    if UNROLL {
+        forward_steps(&acc, x_row, q0, 0u);
+        forward_steps(&acc, x_row, q0, 8u);
+        forward_steps(&acc, x_row, q0, 16u);
+        forward_steps(&acc, x_row, q0, 24u);
+        forward_steps(&acc, x_row, q0, 32u);
+        forward_steps(&acc, x_row, q0, 40u);
+        forward_steps(&acc, x_row, q0, 48u);
+        forward_steps(&acc, x_row, q0, 56u);
+        forward_steps(&acc, x_row, q0, 64u);
+        forward_steps(&acc, x_row, q0, 72u);
+        forward_steps(&acc, x_row, q0, 80u);
+        forward_steps(&acc, x_row, q0, 88u);
+        forward_steps(&acc, x_row, q0, 96u);
+        forward_steps(&acc, x_row, q0, 104u);
+        forward_steps(&acc, x_row, q0, 112u);
+        forward_steps(&acc, x_row, q0, 120u);
+    } else {
+        // Input i's packed row holds W[0 .. out][i]; outputs o0 .. o0 + BLOCK are its quads from
+        // o0 / 4 (BLOCK is a multiple of 4). Quads past the row's end give outputs never written.
+        let quads = quads_per_row(dims.out_dim);
+        for (var i = 0u; i < dims.in_dim; i++) {
+            accumulate(&acc, x[x_row + i], i * quads + q0);
+        }
+    }
+    if item >= rows {
+        return;
     }
     let y_row = n * dims.y_stride + dims.y_offset;
     for (var j = 0u; j < BLOCK; j++) {

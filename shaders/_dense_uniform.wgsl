@@ -35,3 +35,33 @@ override BLOCK: u32 = 16u;
 const WORKGROUP: u32 = 64u;
 // 64 KiB: WebGPU's default maxUniformBufferBindingSize.
 const UNIFORM_WEIGHT_VEC4S: u32 = 4096u;
+
+// Straight-line reductions (`Unrolled` in src/field/gpu/dense/uniform.rs). lavapipe loads a
+// uniform value once for all lanes only where its index is made of constants and no lane has
+// left the kernel before the load; any other index (a loop counter, a workgroup id, a value read
+// from a buffer) has each lane gather it, one scalar load per lane, which made the weight loads
+// most of these kernels' time there (docs/results/bench.md). With UNROLL the reduction is
+// written out step by step (`*_steps`, 8 per call, up to MAX_UNROLLED) with REDUCED steps and
+// ROW_QUADS quads per packed row as constants, and invocations past the last row compute on a
+// valid row and skip their stores instead of returning. The sums add in the loop's order.
+override UNROLL: bool = false;
+// The reduction's length (the forward's inputs, the input gradient's outputs) and the vec4s per
+// packed weight row, when UNROLL.
+override REDUCED: u32 = 1u;
+override ROW_QUADS: u32 = 1u;
+const MAX_UNROLLED: u32 = 128u;
+
+// The row invocation `item` reads: itself, or with UNROLL past the last row, the last row (row
+// 0 when there are none: its reads are bounds-checked and nothing is stored).
+fn row_read(item: u32, rows: u32) -> u32 {
+    return min(item, max(rows, 1u) - 1u);
+}
+
+// The first packed quad of block z: 0 when the block holds every column of an unrolled layer,
+// so that the weight indices stay constants.
+fn block_quad(z: u32) -> u32 {
+    if UNROLL && ROW_QUADS * 4u <= BLOCK {
+        return 0u;
+    }
+    return (z * BLOCK) >> 2u;
+}

@@ -13,8 +13,8 @@
 //
 // BLOCK covers every hidden width (uniform.rs keeps hidden widths within the device's widest
 // block), so a hidden layer's dX is one invocation's accumulators; the first layer's dX is
-// split into blocks of BLOCK along workgroup z, and the invocations of the later blocks redo
-// the walk without writing dZ again.
+// split into blocks of BLOCK, one pipeline and dispatch each (DX_BLOCK), and the invocations of
+// the later blocks redo the walk without writing dZ again.
 //!include _dense_uniform.wgsl
 
 // Layers (2 or 3) and widths: D0 in, D1 .. the hidden and output widths (D3 unused with 2).
@@ -25,18 +25,23 @@ override D2: u32 = 32u;
 override D3: u32 = 16u;
 // Whether the MLP's input wants its gradient; without, the walk stops at dZ of layer 0.
 override WRITE_DX: bool = true;
+// Each layer's packed [out][in] copy in `weights` (vec4 index). Constants, like every other part
+// of a weight's index here, so that lavapipe loads each weight once for all lanes (UNROLL in
+// `_dense_uniform.wgsl` says why; this kernel is always written out).
+override W0: u32 = 0u;
+override W1: u32 = 0u;
+override W2: u32 = 0u;
+// The block of the first layer's dX this pipeline computes (one dispatch per block, so that its
+// first input is a constant too); block 0 also writes every layer's dZ.
+override DX_BLOCK: u32 = 0u;
 
 // Mirrors `ChainDims` in src/field/gpu/dense/chain.rs: where the hidden outputs Y_0 and Y_1
-// are, and each layer's packed [out][in] copy in `weights` (vec4 index).
+// are.
 struct ChainDims {
     y0_stride: u32,
     y0_offset: u32,
     y1_stride: u32,
     y1_offset: u32,
-    w0: u32,
-    w1: u32,
-    w2: u32,
-    _pad: u32,
 }
 
 // dims: rows, dy and dx views (the MLP's output gradient and input gradient).
@@ -75,13 +80,13 @@ fn width(j: u32) -> u32 {
 fn weight_base(k: u32) -> u32 {
     switch k {
         case 0u: {
-            return chain.w0;
+            return W0;
         }
         case 1u: {
-            return chain.w1;
+            return W1;
         }
         default: {
-            return chain.w2;
+            return W2;
         }
     }
 }
@@ -211,37 +216,81 @@ fn back_through(k: u32, n: u32, upstream: ptr<function, Acc>, to: ptr<function, 
     }
 }
 
+// What a row's walk reads and whether it stores: its row, where its dY starts, and whether it
+// writes dZ (block 0 of a live row).
+struct ChainRow {
+    n: u32,
+    dy: u32,
+    stores: bool,
+}
+
+// Quad q of the last (linear) layer's dZ, which is dY read as the per-layer kernel reads it:
+// stored, and added output by output into `upper` (dX of the last layer).
+fn last_quad(upper: ptr<function, Acc>, row: ChainRow, q: u32) {
+    let w = width(LAYERS);
+    let o0 = 4u * q;
+    if o0 >= w {
+        return;
+    }
+    var g = vec4<f32>(dy[row.dy + o0], 0.0, 0.0, 0.0);
+    if o0 + 1u < w {
+        g.y = dy[row.dy + o0 + 1u];
+    }
+    if o0 + 2u < w {
+        g.z = dy[row.dy + o0 + 2u];
+    }
+    if o0 + 3u < w {
+        g.w = dy[row.dy + o0 + 3u];
+    }
+    if row.stores {
+        store_dz(LAYERS - 1u, row.n, q, g);
+    }
+    let quads = quads_per_row(width(LAYERS - 1u));
+    let base = weight_base(LAYERS - 1u) + o0 * quads;
+    accumulate(upper, g.x, base);
+    if o0 + 1u < w {
+        accumulate(upper, g.y, base + quads);
+    }
+    if o0 + 2u < w {
+        accumulate(upper, g.z, base + 2u * quads);
+    }
+    if o0 + 3u < w {
+        accumulate(upper, g.w, base + 3u * quads);
+    }
+}
+
+// Quads first .. first + 8 of the last layer (past its width they fold away).
+fn last_quads(upper: ptr<function, Acc>, row: ChainRow, first: u32) {
+    last_quad(upper, row, first);
+    last_quad(upper, row, first + 1u);
+    last_quad(upper, row, first + 2u);
+    last_quad(upper, row, first + 3u);
+    last_quad(upper, row, first + 4u);
+    last_quad(upper, row, first + 5u);
+    last_quad(upper, row, first + 6u);
+    last_quad(upper, row, first + 7u);
+}
+
 @compute @workgroup_size(WORKGROUP)
 fn backward_chain(
     @builtin(workgroup_id) workgroup_id: vec3<u32>,
     @builtin(num_workgroups) num_workgroups: vec3<u32>,
     @builtin(local_invocation_index) local_index: u32,
 ) {
-    let n = linear_item_index(vec3<u32>(workgroup_id.xy, 0u), num_workgroups, local_index, WORKGROUP);
-    if n >= active_rows() {
-        return;
-    }
-    let stores = workgroup_id.z == 0u;
-    let i0 = workgroup_id.z * BLOCK;
-    let last = LAYERS - 1u;
-    // The last layer is linear: its dZ is dY, read as the per-layer kernel reads it.
-    let w_out = width(LAYERS);
-    let quads = quads_per_row(width(last));
-    let dy_row = n * dims.dy_stride + dims.dy_offset;
+    // No invocation returns before the walk (rows past the last compute on a valid one and
+    // store nothing): see W0.
+    let item = linear_item_index(vec3<u32>(workgroup_id.xy, 0u), num_workgroups, local_index, WORKGROUP);
+    let rows = active_rows();
+    let live = item < rows;
+    let n = row_read(item, rows);
+    let i0 = DX_BLOCK * BLOCK;
+    let stores = live && DX_BLOCK == 0u;
+    let row = ChainRow(n, n * dims.dy_stride + dims.dy_offset, stores);
     var upper: Acc;
-    var row_quad = vec4<f32>(0.0);
-    for (var o = 0u; o < w_out; o++) {
-        let g = dy[dy_row + o];
-        row_quad[o & 3u] = g;
-        if stores && (o & 3u) == 3u {
-            store_dz(last, n, o >> 2u, row_quad);
-            row_quad = vec4<f32>(0.0);
-        }
-        accumulate(&upper, g, weight_base(last) + o * quads);
-    }
-    if stores && (w_out & 3u) != 0u {
-        store_dz(last, n, w_out >> 2u, row_quad);
-    }
+    last_quads(&upper, row, 0u);
+    last_quads(&upper, row, 8u);
+    last_quads(&upper, row, 16u);
+    last_quads(&upper, row, 24u);
     var lower: Acc;
     var first: Acc;
     if LAYERS == 3u {
@@ -250,7 +299,7 @@ fn backward_chain(
     } else {
         back_through(0u, n, &upper, &first, stores, WRITE_DX, i0 >> 2u);
     }
-    if !WRITE_DX {
+    if !WRITE_DX || !live {
         return;
     }
     let dx_row = n * dims.dx_stride + dims.dx_offset;

@@ -527,6 +527,64 @@ fn packed_reads_from_storage_give_the_bits_of_uniform_reads() {
     }
 }
 
+/// lavapipe's uniform-weight products write their reductions out step by step (UNROLL in
+/// `shaders/_dense_uniform.wgsl`): the same sums in the same order as the loops, so every output
+/// and gradient is the same bits, and both match the reference; at every config's widths, in
+/// blocks of 64 (one block per layer: constant weight indices) and of 16 (several), with many
+/// rows and on kept rows (rows past the last compute and store nothing), with and without the
+/// input-gradient chain (which is always written out).
+#[test]
+fn unrolled_reductions_give_the_bits_of_loops() {
+    let Some(ctx) = gpu_for_tests("unrolled_reductions_give_the_bits_of_loops") else {
+        return;
+    };
+    let mut cases: Vec<(String, FieldConfig, usize, Option<usize>)> = configs()
+        .into_iter()
+        .map(|(name, cfg)| (name.to_string(), cfg, ROWS, None))
+        .collect();
+    cases.push(("small, 5003 rows".into(), FieldConfig::small(), 5003, None));
+    cases.push((
+        "small, 1500 of 3000 rows kept".into(),
+        FieldConfig::small(),
+        3000,
+        Some(1500),
+    ));
+    for (limit, chain) in [(64, false), (16, false), (64, true)] {
+        for (config_name, cfg, rows, kept) in &cases {
+            let layout = ParamLayout::new(cfg);
+            let params = layout.init(29);
+            for (index, (mlp_name, mlp)) in layout.mlps().into_iter().enumerate() {
+                let run = |unrolled| {
+                    let mut pipelines = DensePipelines::with_family(DenseFamily::UniformWeights)
+                        .with_uniform_block_limit(limit)
+                        .with_input_gradient_chain(chain)
+                        .with_unrolled_reductions(unrolled);
+                    check_mlp(MlpCase {
+                        ctx: &ctx,
+                        pipelines: &mut pipelines,
+                        name: format!(
+                            "{config_name} {mlp_name} (unrolled {unrolled}, blocks of {limit}, chain {chain})"
+                        ),
+                        layout: mlp,
+                        params: &params,
+                        rows: *rows,
+                        input_grad: mlp_name != "color",
+                        output_view: index % 2 == 1,
+                        seed: 500 + index as u64,
+                        kept: *kept,
+                    })
+                };
+                let unrolled = run(true);
+                let looped = run(false);
+                assert!(
+                    unrolled == looped,
+                    "{config_name} {mlp_name}, blocks of {limit}, chain {chain}: unrolled reductions differ from loops"
+                );
+            }
+        }
+    }
+}
+
 /// Which MLPs run their input gradients as one chain: those of 2 or 3 layers on the uniform
 /// family whose hidden widths fit one block (the checks above run both kinds).
 #[test]

@@ -7,13 +7,15 @@
 //! An MLP qualifies when it runs the uniform-weight family, has 2 or 3 layers (the kernel's
 //! storage bindings: dY, two hidden outputs, three dZ, dX and the row count are WebGPU's default
 //! 8), every hidden width fits the device's widest uniform block (one invocation holds a whole
-//! hidden dX), every layer's weight gradient reads dZ through uniform windows, and the packed
+//! hidden dX), the output is at most `MAX_UNROLLED` wide (the kernel reads dY written out quad
+//! by quad), every layer's weight gradient reads dZ through uniform windows, and the packed
 //! copies the walk multiplies by lie in one 64 KiB window. Otherwise each layer keeps its own
 //! input-gradient kernel.
 use super::layer::{DenseDims, DenseLayerSpec, bound};
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
 use super::uniform::{
-    MlpPacking, UNIFORM_WORKGROUP, is_lavapipe, padded_to_vec4, uniform_block, uniform_dispatch, uniform_weight_chunks,
+    MAX_UNROLLED, MlpPacking, UNIFORM_WORKGROUP, is_lavapipe, padded_to_vec4, uniform_block, uniform_dispatch,
+    uniform_weight_chunks,
 };
 use super::{DenseFamily, RowView};
 use crate::field::gpu::keep::HeadRows;
@@ -29,10 +31,6 @@ struct ChainDims {
     y0_offset: u32,
     y1_stride: u32,
     y1_offset: u32,
-    w0: u32,
-    w1: u32,
-    w2: u32,
-    _pad: u32,
 }
 
 /// Storage buffers the chain kernel binds.
@@ -63,7 +61,8 @@ pub(super) fn chain_block(
     }
     let limit = pipelines.uniform_block_limit(ctx);
     let hidden = specs[1..].iter().map(|s| padded_to_vec4(s.in_dim)).max()?;
-    if hidden > limit || specs.iter().any(|s| uniform_weight_chunks(ctx, s).is_none()) {
+    let last = specs[specs.len() - 1].out_dim;
+    if hidden > limit || last > MAX_UNROLLED || specs.iter().any(|s| uniform_weight_chunks(ctx, s).is_none()) {
         return None;
     }
     chain_weights(packing, specs.len(), input_grad)?;
@@ -98,7 +97,8 @@ pub(super) struct ChainDesc<'a> {
 
 /// One MLP's input gradients as one dispatch.
 pub(super) struct BackwardChain {
-    dispatch: Dispatch,
+    /// One per block of the first layer's dX.
+    dispatches: Vec<Dispatch>,
     widths: Vec<u32>,
     input_grad: bool,
     blocks: u32,
@@ -165,59 +165,60 @@ impl BackwardChain {
             y0_offset: y0.1,
             y1_stride: y1.0,
             y1_offset: y1.1,
-            w0: base[0],
-            w1: base[1],
-            w2: base[2],
-            _pad: 0,
         };
         let width = |j: usize| f64::from(widths.get(j).copied().unwrap_or(0));
-        let constants = [
-            ("BLOCK", f64::from(block)),
-            ("LAYERS", layers as f64),
-            ("D0", width(0)),
-            ("D1", width(1)),
-            ("D2", width(2)),
-            ("D3", width(3)),
-            ("WRITE_DX", f64::from(u8::from(input_grad.is_some()))),
-        ];
-        let pipeline = pipelines
-            .compile(ctx, DenseKernel::BackwardChainUniform, &constants)
-            .await?;
         let blocks = if input_grad.is_some() {
             widths[0].div_ceil(block)
         } else {
             1
         };
-        let workgroups = uniform_dispatch(ctx, rows, blocks * block, block)?;
+        let workgroups = uniform_dispatch(ctx, rows, block, block)?;
         let dims = uniform_buffer_from(ctx, &label, &dims);
         let chain = uniform_buffer_from(ctx, &format!("{label} layers"), &chain);
         fn or<'a>(buffer: Option<&'a wgpu::Buffer>, unused: &'a wgpu::Buffer) -> wgpu::BindingResource<'a> {
             buffer.unwrap_or(unused).as_entire_binding()
         }
-        let dispatch = bound(
-            ctx,
-            (pipeline, DenseKernel::BackwardChainUniform),
-            &[
-                ("dims", dims.as_entire_binding()),
-                ("dy", output_grad.buffer.as_entire_binding()),
-                ("y", hidden0.buffer.as_entire_binding()),
-                ("weights", window),
-                ("dx", or(input_grad.map(|v| &v.buffer), &no_dx)),
-                ("y_upper", or(view(1).map(|v| &v.buffer), &no_y_upper)),
-                ("chain", chain.as_entire_binding()),
-                ("dz0", dz[0].as_entire_binding()),
-                ("dz1", dz[1].as_entire_binding()),
-                ("dz2", or(dz.get(2), &no_dz2)),
-                ("row_count", row_count.as_entire_binding()),
-            ],
-            workgroups,
-        )?
-        .with_indirect(
-            kept.map(|kept| kept.dispatch(1, UNIFORM_WORKGROUP, workgroups[2]))
-                .transpose()?,
-        );
+        let mut dispatches = Vec::with_capacity(blocks as usize);
+        for dx_block in 0..blocks {
+            let constants = [
+                ("BLOCK", f64::from(block)),
+                ("LAYERS", layers as f64),
+                ("D0", width(0)),
+                ("D1", width(1)),
+                ("D2", width(2)),
+                ("D3", width(3)),
+                ("WRITE_DX", f64::from(u8::from(input_grad.is_some()))),
+                ("W0", f64::from(base[0])),
+                ("W1", f64::from(base[1])),
+                ("W2", f64::from(base[2])),
+                ("DX_BLOCK", f64::from(dx_block)),
+            ];
+            let pipeline = pipelines
+                .compile(ctx, DenseKernel::BackwardChainUniform, &constants)
+                .await?;
+            let dispatch = bound(
+                ctx,
+                (pipeline, DenseKernel::BackwardChainUniform),
+                &[
+                    ("dims", dims.as_entire_binding()),
+                    ("dy", output_grad.buffer.as_entire_binding()),
+                    ("y", hidden0.buffer.as_entire_binding()),
+                    ("weights", window.clone()),
+                    ("dx", or(input_grad.map(|v| &v.buffer), &no_dx)),
+                    ("y_upper", or(view(1).map(|v| &v.buffer), &no_y_upper)),
+                    ("chain", chain.as_entire_binding()),
+                    ("dz0", dz[0].as_entire_binding()),
+                    ("dz1", dz[1].as_entire_binding()),
+                    ("dz2", or(dz.get(2), &no_dz2)),
+                    ("row_count", row_count.as_entire_binding()),
+                ],
+                workgroups,
+            )?
+            .with_indirect(kept.map(|kept| kept.dispatch(1, UNIFORM_WORKGROUP, 1)).transpose()?);
+            dispatches.push(dispatch);
+        }
         Ok(BackwardChain {
-            dispatch,
+            dispatches,
             widths,
             input_grad: input_grad.is_some(),
             blocks,
@@ -243,6 +244,8 @@ impl BackwardChain {
     }
 
     pub(super) fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        self.dispatch.record(pass);
+        for dispatch in &self.dispatches {
+            dispatch.record(pass);
+        }
     }
 }

@@ -5,7 +5,9 @@
 use super::DenseFamily;
 use super::layer::{DenseLayerSpec, range_binding};
 use super::tiled::{TileShape, row_tile_dispatch};
-use super::uniform::{PackedReads, uniform_block, uniform_dispatch, widest_uniform_block};
+use super::uniform::{
+    MAX_UNROLLED, PackedReads, padded_to_vec4, uniform_block, uniform_dispatch, unrolls_on, widest_uniform_block,
+};
 use crate::gpu::pipeline::{KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
@@ -105,6 +107,9 @@ pub struct DensePipelines {
     input_gradient_chain: Option<bool>,
     /// Where the uniform-weight family reads; `None`: [`PackedReads::for_this_build`].
     packed_reads: Option<PackedReads>,
+    /// Whether the uniform-weight products write their reductions out step by step; `None`:
+    /// where the device is faster with it (`uniform::unrolls_on`).
+    unrolled_reductions: Option<bool>,
 }
 
 impl Default for DensePipelines {
@@ -125,6 +130,7 @@ impl DensePipelines {
             uniform_block_limit: None,
             input_gradient_chain: None,
             packed_reads: None,
+            unrolled_reductions: None,
         }
     }
 
@@ -171,6 +177,35 @@ impl DensePipelines {
     pub(super) fn input_gradient_chain(&self, ctx: &GpuContext) -> bool {
         self.input_gradient_chain
             .unwrap_or_else(|| super::chain::chains_on(ctx))
+    }
+
+    /// The same with the uniform-weight products' reductions written out step by step, or kept
+    /// as loops, whatever the device, so tests can run both on one device.
+    pub fn with_unrolled_reductions(self, unrolled: bool) -> DensePipelines {
+        DensePipelines {
+            unrolled_reductions: Some(unrolled),
+            ..self
+        }
+    }
+
+    /// The override constants that write a reduction of `reduced` steps over packed rows of
+    /// `row_columns` columns out step by step, where this device does so, the weights are read
+    /// from uniform bindings (what the unrolling is for; unrolled storage reads compiled for
+    /// minutes on lavapipe) and it is short enough.
+    pub(super) fn unrolled_constants(
+        &self,
+        ctx: &GpuContext,
+        reduced: u32,
+        row_columns: u32,
+    ) -> [(&'static str, f64); 3] {
+        let on = self.unrolled_reductions.unwrap_or_else(|| unrolls_on(ctx))
+            && self.packed_reads() == PackedReads::Uniform
+            && reduced <= MAX_UNROLLED;
+        [
+            ("UNROLL", f64::from(u8::from(on))),
+            ("REDUCED", f64::from(reduced)),
+            ("ROW_QUADS", f64::from(padded_to_vec4(row_columns) / 4)),
+        ]
     }
 
     /// The same with the uniform-weight kernels' blocks at most `limit` (a multiple of 4 up to 64)
@@ -276,20 +311,25 @@ impl DensePipelines {
         kind: ProductKind,
         writes_dz: bool,
     ) -> Result<ProductKernel<'a>, GpuError> {
-        let (columns, tiled_kernel) = match kind {
-            ProductKind::Forward => (spec.out_dim, DenseKernel::Forward),
-            ProductKind::BackwardInput => (spec.in_dim, DenseKernel::BackwardInput),
+        // The columns one invocation computes, the reduction's length, and the tiled kernel.
+        let (columns, reduced, tiled_kernel) = match kind {
+            ProductKind::Forward => (spec.out_dim, spec.in_dim, DenseKernel::Forward),
+            ProductKind::BackwardInput => (spec.in_dim, spec.out_dim, DenseKernel::BackwardInput),
         };
         let uniform_kernel = self.packed_kernel(kind);
         if let Some(packed) = packed {
             let block = uniform_block(columns, self.uniform_block_limit(ctx));
             let workgroups = uniform_dispatch(ctx, spec.rows, columns, block)?;
-            let block = f64::from(block);
+            let [unroll, reduced, row_quads] = self.unrolled_constants(ctx, reduced, columns);
+            let block = ("BLOCK", f64::from(block));
             let pipeline = match kind {
-                ProductKind::Forward => self.compile(ctx, uniform_kernel, &[("BLOCK", block)]).await?,
+                ProductKind::Forward => {
+                    self.compile(ctx, uniform_kernel, &[block, unroll, reduced, row_quads])
+                        .await?
+                }
                 ProductKind::BackwardInput => {
-                    let writes = f64::from(u8::from(writes_dz));
-                    self.compile(ctx, uniform_kernel, &[("BLOCK", block), ("WRITE_DZ", writes)])
+                    let writes = ("WRITE_DZ", f64::from(u8::from(writes_dz)));
+                    self.compile(ctx, uniform_kernel, &[block, writes, unroll, reduced, row_quads])
                         .await?
                 }
             };

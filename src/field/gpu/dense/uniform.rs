@@ -69,6 +69,18 @@ pub(super) fn widest_uniform_block(ctx: &GpuContext) -> u32 {
     if is_lavapipe(ctx) { 64 } else { 16 }
 }
 
+/// The longest reduction the uniform-weight kernels write out step by step (`MAX_UNROLLED` in
+/// `shaders/_dense_uniform.wgsl`).
+pub(super) const MAX_UNROLLED: u32 = 128;
+
+/// Whether the uniform-weight kernels run their reductions written out step by step on `ctx`
+/// (UNROLL in `shaders/_dense_uniform.wgsl`): lavapipe loads a uniform value once for all lanes
+/// only at an index made of constants, and gathers it lane by lane otherwise; other CPU devices
+/// keep the loop they were measured with (docs/results/bench.md).
+pub(super) fn unrolls_on(ctx: &GpuContext) -> bool {
+    is_lavapipe(ctx)
+}
+
 /// Whether `ctx`'s adapter is Mesa's lavapipe (llvmpipe, LLVM), whose compiler some kernels
 /// suit better than other CPU devices' (SwiftShader's Subzero).
 pub(super) fn is_lavapipe(ctx: &GpuContext) -> bool {
