@@ -191,16 +191,20 @@ impl DensePipelines {
     /// The override constants that write a reduction of `reduced` steps over packed rows of
     /// `row_columns` columns out step by step, where this device does so, the weights are read
     /// from uniform bindings (what the unrolling is for; unrolled storage reads compiled for
-    /// minutes on lavapipe) and it is short enough.
+    /// minutes on lavapipe), it is short enough, and one block of `block` holds the whole row
+    /// (with several, the blocks' first weights come from the workgroup id and every lane
+    /// gathers them: written out, that ran slower than the loop).
     pub(super) fn unrolled_constants(
         &self,
         ctx: &GpuContext,
         reduced: u32,
         row_columns: u32,
+        block: u32,
     ) -> [(&'static str, f64); 3] {
         let on = self.unrolled_reductions.unwrap_or_else(|| unrolls_on(ctx))
             && self.packed_reads() == PackedReads::Uniform
-            && reduced <= MAX_UNROLLED;
+            && reduced <= MAX_UNROLLED
+            && row_columns <= block;
         [
             ("UNROLL", f64::from(u8::from(on))),
             ("REDUCED", f64::from(reduced)),
@@ -320,7 +324,7 @@ impl DensePipelines {
         if let Some(packed) = packed {
             let block = uniform_block(columns, self.uniform_block_limit(ctx));
             let workgroups = uniform_dispatch(ctx, spec.rows, columns, block)?;
-            let [unroll, reduced, row_quads] = self.unrolled_constants(ctx, reduced, columns);
+            let [unroll, reduced, row_quads] = self.unrolled_constants(ctx, reduced, columns, block);
             let block = ("BLOCK", f64::from(block));
             let pipeline = match kind {
                 ProductKind::Forward => {
