@@ -404,6 +404,20 @@ export async function setPackField(page, field, value) {
     60_000);
 }
 
+/// Closes the pack settings with their Cancel button, clicking again where a click was lost
+/// while the page was busy (as `startPack` does).
+export async function cancelPackSetup(page) {
+  for (let attempt = 1; ; attempt++) {
+    await clickPackControl(page, "cancel");
+    try {
+      await waitForPackSetup(page, (s) => s === null, "the settings to close", 20_000);
+      return;
+    } catch (e) {
+      if (attempt === 3) throw e;
+    }
+  }
+}
+
 /// Waits for the pack settings of a capture just picked or dropped, then starts packing with
 /// them (the form's Start button); returns the settings as they were.
 export async function startPack(page, timeoutMs) {

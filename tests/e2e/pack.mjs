@@ -21,7 +21,7 @@ import { mkdirSync, mkdtempSync, readdirSync, readFileSync, rmSync, writeFileSyn
 import { tmpdir } from "node:os";
 import { basename, join, resolve } from "node:path";
 import {
-  assert, Checks, clickPackControl, decodePng, drawFrameStroke, openPage, packSetup, planFrameStrokes, readZip,
+  assert, cancelPackSetup, Checks, clickPackControl, decodePng, drawFrameStroke, openPage, packSetup, planFrameStrokes, readZip,
   runBrowserTest, setPackField, settledStatus, show, startPack, status, waitForPackSetup, waitForStatus, writeZip,
 } from "./lib.mjs";
 
@@ -322,8 +322,7 @@ await runBrowserTest("pack", {
       const startsAs = async (folder) => {
         await defaultsPage.setInputFiles("#capture-folder", folder);
         const t = await waitForPackSetup(defaultsPage, (t) => t && t.estimate, "the pack settings", PACK_TIMEOUT_MS);
-        await clickPackControl(defaultsPage, "cancel");
-        await waitForPackSetup(defaultsPage, (t) => t === null, "the settings to close", 60_000);
+        await cancelPackSetup(defaultsPage);
         return t;
       };
       const photos = await startsAs(capturePath);
@@ -346,8 +345,7 @@ await runBrowserTest("pack", {
       // Cancel leaves the scene open as it was.
       await setPage.setInputFiles("#capture-folder", capturePath);
       await waitForPackSetup(setPage, (t) => t && t.estimate, "the pack settings", PACK_TIMEOUT_MS);
-      await clickPackControl(setPage, "cancel");
-      await waitForPackSetup(setPage, (t) => t === null, "the settings to close", 60_000);
+      await cancelPackSetup(setPage);
       s = await status(setPage);
       assert(s.state === "ready" && s.frames === before.frames, `after Cancel the page says ${show(s)}`);
 
