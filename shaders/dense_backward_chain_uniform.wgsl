@@ -133,6 +133,24 @@ fn relu_mask(k: u32, n: u32, o0: u32, w: u32) -> vec4<f32> {
     return mask;
 }
 
+// dX of layer k (into `to`, inputs from packed quad `i0_quad`) gains dZ_k[o0 .. o0 + 4] = g,
+// output by output in order, those inside the layer's width.
+fn feed_quad(to: ptr<function, Acc>, k: u32, g: vec4<f32>, o0: u32, i0_quad: u32) {
+    let w = width(k + 1u);
+    let quads = quads_per_row(width(k));
+    let base = weight_base(k) + o0 * quads + i0_quad;
+    accumulate(to, g.x, base);
+    if o0 + 1u < w {
+        accumulate(to, g.y, base + quads);
+    }
+    if o0 + 2u < w {
+        accumulate(to, g.z, base + 2u * quads);
+    }
+    if o0 + 3u < w {
+        accumulate(to, g.w, base + 3u * quads);
+    }
+}
+
 // Quad q of layer k's dZ from quad q of `upstream` (dX of layer k + 1): masked, stored (first
 // block only), and, if `feeds`, added into `to` (dX of layer k, quads from `i0_quad` of each
 // packed row).
@@ -151,18 +169,7 @@ fn back_quad(k: u32, n: u32, q: u32, upstream: vec4<f32>, to: ptr<function, Acc>
     if !feeds {
         return;
     }
-    let quads = quads_per_row(width(k));
-    let base = weight_base(k) + o0 * quads + i0_quad;
-    accumulate(to, g.x, base);
-    if o0 + 1u < w {
-        accumulate(to, g.y, base + quads);
-    }
-    if o0 + 2u < w {
-        accumulate(to, g.z, base + 2u * quads);
-    }
-    if o0 + 3u < w {
-        accumulate(to, g.w, base + 3u * quads);
-    }
+    feed_quad(to, k, g, o0, i0_quad);
 }
 
 // Layer k's dZ from `upstream` (dX of layer k + 1, quad by quad in order), and dX of layer k into
@@ -245,18 +252,7 @@ fn last_quad(upper: ptr<function, Acc>, row: ChainRow, q: u32) {
     if row.stores {
         store_dz(LAYERS - 1u, row.n, q, g);
     }
-    let quads = quads_per_row(width(LAYERS - 1u));
-    let base = weight_base(LAYERS - 1u) + o0 * quads;
-    accumulate(upper, g.x, base);
-    if o0 + 1u < w {
-        accumulate(upper, g.y, base + quads);
-    }
-    if o0 + 2u < w {
-        accumulate(upper, g.z, base + 2u * quads);
-    }
-    if o0 + 3u < w {
-        accumulate(upper, g.w, base + 3u * quads);
-    }
+    feed_quad(upper, LAYERS - 1u, g, o0, 0u);
 }
 
 // Quads first .. first + 8 of the last layer (past its width they fold away).

@@ -469,6 +469,24 @@ fn every_mlp_matches_the_reference_with_uniform_weights() {
     assert!(mlp.layer_families().all(|f| f == DenseFamily::UniformWeights));
 }
 
+/// What the bit-for-bit comparisons of two ways of running the uniform-weight kernels run:
+/// every config at the usual rows, `small` over many weight-gradient chunks, and on kept rows
+/// (name, config, rows, rows kept).
+fn bit_comparison_cases() -> Vec<(String, FieldConfig, usize, Option<usize>)> {
+    let mut cases: Vec<(String, FieldConfig, usize, Option<usize>)> = configs()
+        .into_iter()
+        .map(|(name, cfg)| (name.to_string(), cfg, ROWS, None))
+        .collect();
+    cases.push(("small, 5003 rows".into(), FieldConfig::small(), 5003, None));
+    cases.push((
+        "small, 1500 of 3000 rows kept".into(),
+        FieldConfig::small(),
+        3000,
+        Some(1500),
+    ));
+    cases
+}
+
 /// The page's uniform-weight kernels read the packed copies and dZ from storage (`PackedReads`):
 /// the same sums in the same order as from uniform bindings, so every output and gradient is the
 /// same bits, and both match the reference; at every config's widths, in blocks of 64 and of 16
@@ -485,17 +503,7 @@ fn packed_reads_from_storage_give_the_bits_of_uniform_reads() {
             .with_input_gradient_chain(false)
             .with_packed_reads(reads)
     };
-    let mut cases: Vec<(String, FieldConfig, usize, Option<usize>)> = configs()
-        .into_iter()
-        .map(|(name, cfg)| (name.to_string(), cfg, ROWS, None))
-        .collect();
-    cases.push(("small, 5003 rows".into(), FieldConfig::small(), 5003, None));
-    cases.push((
-        "small, 1500 of 3000 rows kept".into(),
-        FieldConfig::small(),
-        3000,
-        Some(1500),
-    ));
+    let cases = bit_comparison_cases();
     for limit in [64, 16] {
         for (config_name, cfg, rows, kept) in &cases {
             let layout = ParamLayout::new(cfg);
@@ -539,17 +547,7 @@ fn unrolled_reductions_give_the_bits_of_loops() {
     let Some(ctx) = gpu_for_tests("unrolled_reductions_give_the_bits_of_loops") else {
         return;
     };
-    let mut cases: Vec<(String, FieldConfig, usize, Option<usize>)> = configs()
-        .into_iter()
-        .map(|(name, cfg)| (name.to_string(), cfg, ROWS, None))
-        .collect();
-    cases.push(("small, 5003 rows".into(), FieldConfig::small(), 5003, None));
-    cases.push((
-        "small, 1500 of 3000 rows kept".into(),
-        FieldConfig::small(),
-        3000,
-        Some(1500),
-    ));
+    let cases = bit_comparison_cases();
     for (limit, chain) in [(64, false), (16, false), (64, true)] {
         for (config_name, cfg, rows, kept) in &cases {
             let layout = ParamLayout::new(cfg);
