@@ -56,8 +56,9 @@ fn backward_input(
     }
     let live = item < rows;
     let n = row_read(item, rows);
-    let i0 = workgroup_id.z * BLOCK;
-    let q0 = block_quad(workgroup_id.z);
+    let block = block_index(workgroup_id.z);
+    let i0 = block * BLOCK;
+    let q0 = block_quad(block);
     let dy_row = n * dims.dy_stride + dims.dy_offset;
     let y_row = n * dims.y_stride + dims.y_offset;
     // Block 0 writes dZ (q0 is 0 for it alone, and a constant where it is the only block).

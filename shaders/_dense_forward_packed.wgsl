@@ -39,9 +39,10 @@ fn forward(
         return;
     }
     let n = row_read(item, rows);
-    let o0 = workgroup_id.z * BLOCK;
+    let block = block_index(workgroup_id.z);
+    let o0 = block * BLOCK;
     let x_row = n * dims.x_stride + dims.x_offset;
-    let q0 = block_quad(workgroup_id.z);
+    let q0 = block_quad(block);
     var acc: Acc;
     if UNROLL {
         forward_steps(&acc, x_row, q0, 0u);

@@ -57,11 +57,24 @@ fn row_read(item: u32, rows: u32) -> u32 {
     return min(item, max(rows, 1u) - 1u);
 }
 
-// The first packed quad of block z: 0 when the block holds every column of an unrolled layer,
+// Which block of the layer a workgroup computes: its z, or FIXED_BLOCK where each block is a
+// pipeline of its own (UNROLL with several blocks: the workgroup id in a weight index would have
+// every lane gather the weights, and the written-out reduction then ran slower than the loop).
+const ANY_BLOCK: u32 = 0xffffffffu;
+override FIXED_BLOCK: u32 = ANY_BLOCK;
+
+fn block_index(z: u32) -> u32 {
+    if FIXED_BLOCK != ANY_BLOCK {
+        return FIXED_BLOCK;
+    }
+    return z;
+}
+
+// The first packed quad of block b: 0 when the block holds every column of an unrolled layer,
 // so that the weight indices stay constants.
-fn block_quad(z: u32) -> u32 {
+fn block_quad(b: u32) -> u32 {
     if UNROLL && ROW_QUADS * 4u <= BLOCK {
         return 0u;
     }
-    return (z * BLOCK) >> 2u;
+    return (b * BLOCK) >> 2u;
 }

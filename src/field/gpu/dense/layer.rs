@@ -86,6 +86,24 @@ impl DenseLayerSpec {
     }
 }
 
+/// One dispatch per pipeline of a product ([`super::pipelines::ProductKernel`]), each bound to
+/// the same resources and launched over the kept rows where there are some.
+fn bound_product(
+    ctx: &GpuContext,
+    (pipelines, kernel): (Vec<wgpu::ComputePipeline>, DenseKernel),
+    resources: &[(&str, wgpu::BindingResource<'_>)],
+    workgroups: [u32; 3],
+    (kept, rows_per_workgroup): (Option<&HeadRows>, u32),
+) -> Result<Vec<Dispatch>, GpuError> {
+    pipelines
+        .into_iter()
+        .map(|pipeline| {
+            let indirect = kept_dispatch(kept, 1, rows_per_workgroup, workgroups[2])?;
+            Ok(bound(ctx, (pipeline, kernel), resources, workgroups)?.with_indirect(indirect))
+        })
+        .collect()
+}
+
 /// One dense kernel's dispatch, its group 0 bound by the WGSL names of `kernel`'s bindings.
 pub(super) fn bound(
     ctx: &GpuContext,
@@ -164,7 +182,8 @@ pub struct DenseForward {
     spec: DenseLayerSpec,
     /// Whether the kernel reads a packed copy of the weights (uniform-weight kernels).
     packed: bool,
-    dispatch: Dispatch,
+    /// One per block where each block is its own pipeline, otherwise one.
+    dispatches: Vec<Dispatch>,
     family: DenseFamily,
 }
 
@@ -203,7 +222,7 @@ impl DenseForward {
             ..spec.base_dims()
         };
         let uniform = uniform_buffer_from(ctx, &label, &dims);
-        let dispatch = bound(
+        let dispatches = bound_product(
             ctx,
             kernel,
             &[
@@ -214,12 +233,12 @@ impl DenseForward {
                 ("row_count", rows.as_entire_binding()),
             ],
             workgroups,
-        )?
-        .with_indirect(kept_dispatch(kept, 1, rows_per_workgroup, workgroups[2])?);
+            (kept, rows_per_workgroup),
+        )?;
         Ok(DenseForward {
             spec: spec.clone(),
             packed,
-            dispatch,
+            dispatches,
             family,
         })
     }
@@ -247,7 +266,9 @@ impl DenseForward {
     }
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        self.dispatch.record(pass);
+        for dispatch in &self.dispatches {
+            dispatch.record(pass);
+        }
     }
 }
 
@@ -271,7 +292,7 @@ pub struct DenseGradients<'a> {
 pub struct DenseBackward {
     spec: DenseLayerSpec,
     /// dX, and whether it reads a packed copy of the weights (uniform-weight kernels).
-    input_grad: Option<(bool, Dispatch)>,
+    input_grad: Option<(bool, Vec<Dispatch>)>,
     partial_sums: WeightPartials,
     reduce: Dispatch,
     chunks: u32,
@@ -396,13 +417,8 @@ impl DenseBackward {
                     resources.push(("dz_out", target.as_entire_binding()));
                     dz_written = dz.is_some();
                 }
-                let dispatch = bound(ctx, kernel, &resources, workgroups)?.with_indirect(kept_dispatch(
-                    kept,
-                    1,
-                    rows_per_workgroup,
-                    workgroups[2],
-                )?);
-                Some((matches!(product_weights, ProductWeights::Packed(_)), dispatch))
+                let dispatches = bound_product(ctx, kernel, &resources, workgroups, (kept, rows_per_workgroup))?;
+                Some((matches!(product_weights, ProductWeights::Packed(_)), dispatches))
             }
         };
 
@@ -554,8 +570,8 @@ impl DenseBackward {
     /// Records dX (if wanted; on the uniform-window path it also writes the dZ that dW reads),
     /// then the dW partial sums and their reduction into the gradient.
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        if let Some((_, input_grad)) = &self.input_grad {
-            input_grad.record(pass);
+        for dispatch in self.input_grad.iter().flat_map(|(_, dispatches)| dispatches) {
+            dispatch.record(pass);
         }
         self.partial_sums.record(pass);
         self.reduce.record(pass);

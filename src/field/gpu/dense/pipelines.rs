@@ -189,11 +189,10 @@ impl DensePipelines {
     }
 
     /// The override constants that write a reduction of `reduced` steps over packed rows of
-    /// `row_columns` columns out step by step, where this device does so, the weights are read
-    /// from uniform bindings (what the unrolling is for; unrolled storage reads compiled for
-    /// minutes on lavapipe), it is short enough, and one block of `block` holds the whole row
-    /// (with several, the blocks' first weights come from the workgroup id and every lane
-    /// gathers them: written out, that ran slower than the loop).
+    /// `row_columns` columns in blocks of `block` out step by step, where this device does so,
+    /// the weights are read from uniform bindings (what the unrolling is for; unrolled storage
+    /// reads compiled for minutes on lavapipe), it is short enough, and the row takes at most
+    /// [`MAX_FIXED_BLOCKS`] blocks, each then its own pipeline ([`DensePipelines::fixed_blocks`]).
     pub(super) fn unrolled_constants(
         &self,
         ctx: &GpuContext,
@@ -201,15 +200,36 @@ impl DensePipelines {
         row_columns: u32,
         block: u32,
     ) -> [(&'static str, f64); 3] {
-        let on = self.unrolled_reductions.unwrap_or_else(|| unrolls_on(ctx))
-            && self.packed_reads() == PackedReads::Uniform
-            && reduced <= MAX_UNROLLED
-            && row_columns <= block;
         [
-            ("UNROLL", f64::from(u8::from(on))),
+            (
+                "UNROLL",
+                f64::from(u8::from(self.unrolls(ctx, reduced, row_columns, block))),
+            ),
             ("REDUCED", f64::from(reduced)),
             ("ROW_QUADS", f64::from(padded_to_vec4(row_columns) / 4)),
         ]
+    }
+
+    fn unrolls(&self, ctx: &GpuContext, reduced: u32, row_columns: u32, block: u32) -> bool {
+        self.unrolled_reductions.unwrap_or_else(|| unrolls_on(ctx))
+            && self.packed_reads() == PackedReads::Uniform
+            && reduced <= MAX_UNROLLED
+            && row_columns.div_ceil(block) <= MAX_FIXED_BLOCKS
+    }
+
+    /// The `FIXED_BLOCK` of each pipeline a product of `columns` columns in blocks of `block`
+    /// runs: one per block where its reduction is written out and there are several (the
+    /// block's first weight is then a constant: from the workgroup id, every lane gathered it
+    /// and the written-out reduction ran slower than the loop), otherwise one pipeline whose
+    /// workgroups' z picks the block (`ANY_BLOCK` in `shaders/_dense_uniform.wgsl`). Every
+    /// block's pipeline compiles the written-out reduction again, hence [`MAX_FIXED_BLOCKS`].
+    fn fixed_blocks(&self, ctx: &GpuContext, reduced: u32, columns: u32, block: u32) -> Vec<u32> {
+        let blocks = columns.div_ceil(block);
+        if blocks > 1 && self.unrolls(ctx, reduced, columns, block) {
+            (0..blocks).collect()
+        } else {
+            vec![ANY_BLOCK]
+        }
     }
 
     /// The same with the uniform-weight kernels' blocks at most `limit` (a multiple of 4 up to 64)
@@ -290,15 +310,23 @@ impl ProductWeights<'_> {
     }
 }
 
-/// A pipeline and the kernel it runs, where it reads the weights, the workgroup counts, the
-/// family actually used and the rows one workgroup covers.
+/// The pipelines a product runs (one dispatch each, with the same bindings) and their kernel,
+/// where it reads the weights, the workgroup counts of each dispatch, the family actually used
+/// and the rows one workgroup covers.
 pub(super) type ProductKernel<'a> = (
-    (wgpu::ComputePipeline, DenseKernel),
+    (Vec<wgpu::ComputePipeline>, DenseKernel),
     ProductWeights<'a>,
     [u32; 3],
     DenseFamily,
     u32,
 );
+
+/// `FIXED_BLOCK` of a pipeline whose workgroups' z picks the block.
+const ANY_BLOCK: u32 = u32::MAX;
+
+/// The most blocks a product splits into pipelines of one block each: every layer of the
+/// presets in lavapipe's blocks of 64 (the semantic head's 79 inputs, the 128-wide layers).
+const MAX_FIXED_BLOCKS: u32 = 2;
 
 impl DensePipelines {
     /// The kernel for one of a layer's weight products, given where the weights are: the
@@ -323,22 +351,25 @@ impl DensePipelines {
         let uniform_kernel = self.packed_kernel(kind);
         if let Some(packed) = packed {
             let block = uniform_block(columns, self.uniform_block_limit(ctx));
-            let workgroups = uniform_dispatch(ctx, spec.rows, columns, block)?;
-            let [unroll, reduced, row_quads] = self.unrolled_constants(ctx, reduced, columns, block);
-            let block = ("BLOCK", f64::from(block));
-            let pipeline = match kind {
-                ProductKind::Forward => {
-                    self.compile(ctx, uniform_kernel, &[block, unroll, reduced, row_quads])
-                        .await?
-                }
-                ProductKind::BackwardInput => {
-                    let writes = ("WRITE_DZ", f64::from(u8::from(writes_dz)));
-                    self.compile(ctx, uniform_kernel, &[block, writes, unroll, reduced, row_quads])
-                        .await?
-                }
-            };
+            let mut workgroups = uniform_dispatch(ctx, spec.rows, columns, block)?;
+            let unrolled = self.unrolled_constants(ctx, reduced, columns, block);
+            let fixed = self.fixed_blocks(ctx, reduced, columns, block);
+            if fixed.len() > 1 {
+                workgroups[2] = 1;
+            }
+            let mut constants = vec![("BLOCK", f64::from(block))];
+            constants.extend(unrolled);
+            if kind == ProductKind::BackwardInput {
+                constants.push(("WRITE_DZ", f64::from(u8::from(writes_dz))));
+            }
+            let mut pipelines = Vec::with_capacity(fixed.len());
+            for fixed_block in fixed {
+                let mut constants = constants.clone();
+                constants.push(("FIXED_BLOCK", f64::from(fixed_block)));
+                pipelines.push(self.compile(ctx, uniform_kernel, &constants).await?);
+            }
             return Ok((
-                (pipeline, uniform_kernel),
+                (pipelines, uniform_kernel),
                 ProductWeights::Packed(packed),
                 workgroups,
                 DenseFamily::UniformWeights,
@@ -350,7 +381,7 @@ impl DensePipelines {
         let (binding, offset) = range_binding(ctx, label, params, &spec.weights)?;
         let workgroups = row_tile_dispatch(ctx, spec.rows, shape, columns.div_ceil(shape.tile_columns()))?;
         Ok((
-            (pipeline, tiled_kernel),
+            (vec![pipeline], tiled_kernel),
             ProductWeights::Range(binding, offset),
             workgroups,
             DenseFamily::Tiled,
