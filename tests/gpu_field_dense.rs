@@ -538,10 +538,10 @@ fn packed_reads_from_storage_give_the_bits_of_uniform_reads() {
 /// lavapipe's uniform-weight products write their reductions out step by step (UNROLL in
 /// `shaders/_dense_uniform.wgsl`): the same sums in the same order as the loops, so every output
 /// and gradient is the same bits, and both match the reference; at every config's widths, in
-/// blocks of 64 (most layers one block: written out) and of 16 (where a layer is several blocks
-/// it keeps the loop), with many rows and on kept rows (rows past the last compute and store
-/// nothing), with and without the input-gradient chain (which is always written out, one
-/// dispatch per block of its first layer's dX).
+/// blocks of 64 and of 16 (a layer of one or two blocks is written out, two as a pipeline per
+/// block, `FIXED_BLOCK`; one of more blocks keeps the loop), with many rows and on kept rows
+/// (rows past the last compute and store nothing), with and without the input-gradient chain
+/// (which is always written out, one dispatch per block of its first layer's dX).
 #[test]
 fn unrolled_reductions_give_the_bits_of_loops() {
     let Some(ctx) = gpu_for_tests("unrolled_reductions_give_the_bits_of_loops") else {
