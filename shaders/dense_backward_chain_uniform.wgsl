@@ -13,7 +13,7 @@
 //
 // BLOCK covers every hidden width (uniform.rs keeps hidden widths within the device's widest
 // block), so a hidden layer's dX is one invocation's accumulators; the first layer's dX is
-// split into blocks of BLOCK, one pipeline and dispatch each (DX_BLOCK), and the invocations of
+// split into blocks of BLOCK, one pipeline and dispatch each (FIXED_BLOCK), and the invocations of
 // the later blocks redo the walk without writing dZ again.
 //!include _dense_uniform.wgsl
 
@@ -31,9 +31,9 @@ override WRITE_DX: bool = true;
 override W0: u32 = 0u;
 override W1: u32 = 0u;
 override W2: u32 = 0u;
-// The block of the first layer's dX this pipeline computes (one dispatch per block, so that its
-// first input is a constant too); block 0 also writes every layer's dZ.
-override DX_BLOCK: u32 = 0u;
+// FIXED_BLOCK (`_dense_uniform.wgsl`) is the block of the first layer's dX this pipeline
+// computes (one dispatch per block, so that its first input is a constant too); block 0 also
+// writes every layer's dZ.
 
 // Mirrors `ChainDims` in src/field/gpu/dense/chain.rs: where the hidden outputs Y_0 and Y_1
 // are.
@@ -279,8 +279,9 @@ fn backward_chain(
     let rows = active_rows();
     let live = item < rows;
     let n = row_read(item, rows);
-    let i0 = DX_BLOCK * BLOCK;
-    let stores = live && DX_BLOCK == 0u;
+    let block = block_index(workgroup_id.z);
+    let i0 = block * BLOCK;
+    let stores = live && block == 0u;
     let row = ChainRow(n, n * dims.dy_stride + dims.dy_offset, stores);
     var upper: Acc;
     last_quads(&upper, row, 0u);

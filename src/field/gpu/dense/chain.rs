@@ -191,7 +191,7 @@ impl BackwardChain {
                 ("W0", f64::from(base[0])),
                 ("W1", f64::from(base[1])),
                 ("W2", f64::from(base[2])),
-                ("DX_BLOCK", f64::from(dx_block)),
+                ("FIXED_BLOCK", f64::from(dx_block)),
             ];
             let pipeline = pipelines
                 .compile(ctx, DenseKernel::BackwardChainUniform, &constants)

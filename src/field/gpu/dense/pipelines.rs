@@ -199,15 +199,14 @@ impl DensePipelines {
         reduced: u32,
         row_columns: u32,
         block: u32,
-    ) -> [(&'static str, f64); 3] {
-        [
-            (
-                "UNROLL",
-                f64::from(u8::from(self.unrolls(ctx, reduced, row_columns, block))),
-            ),
+    ) -> (bool, [(&'static str, f64); 3]) {
+        let unrolled = self.unrolls(ctx, reduced, row_columns, block);
+        let constants = [
+            ("UNROLL", f64::from(u8::from(unrolled))),
             ("REDUCED", f64::from(reduced)),
             ("ROW_QUADS", f64::from(padded_to_vec4(row_columns) / 4)),
-        ]
+        ];
+        (unrolled, constants)
     }
 
     fn unrolls(&self, ctx: &GpuContext, reduced: u32, row_columns: u32, block: u32) -> bool {
@@ -218,14 +217,14 @@ impl DensePipelines {
     }
 
     /// The `FIXED_BLOCK` of each pipeline a product of `columns` columns in blocks of `block`
-    /// runs: one per block where its reduction is written out and there are several (the
+    /// runs: one per block where its reduction is written out (`unrolled`) and there are several (the
     /// block's first weight is then a constant: from the workgroup id, every lane gathered it
     /// and the written-out reduction ran slower than the loop), otherwise one pipeline whose
     /// workgroups' z picks the block (`ANY_BLOCK` in `shaders/_dense_uniform.wgsl`). Every
     /// block's pipeline compiles the written-out reduction again, hence [`MAX_FIXED_BLOCKS`].
-    fn fixed_blocks(&self, ctx: &GpuContext, reduced: u32, columns: u32, block: u32) -> Vec<u32> {
+    fn fixed_blocks(unrolled: bool, columns: u32, block: u32) -> Vec<u32> {
         let blocks = columns.div_ceil(block);
-        if blocks > 1 && self.unrolls(ctx, reduced, columns, block) {
+        if blocks > 1 && unrolled {
             (0..blocks).collect()
         } else {
             vec![ANY_BLOCK]
@@ -352,13 +351,13 @@ impl DensePipelines {
         if let Some(packed) = packed {
             let block = uniform_block(columns, self.uniform_block_limit(ctx));
             let mut workgroups = uniform_dispatch(ctx, spec.rows, columns, block)?;
-            let unrolled = self.unrolled_constants(ctx, reduced, columns, block);
-            let fixed = self.fixed_blocks(ctx, reduced, columns, block);
+            let (unrolled, unroll_constants) = self.unrolled_constants(ctx, reduced, columns, block);
+            let fixed = DensePipelines::fixed_blocks(unrolled, columns, block);
             if fixed.len() > 1 {
                 workgroups[2] = 1;
             }
             let mut constants = vec![("BLOCK", f64::from(block))];
-            constants.extend(unrolled);
+            constants.extend(unroll_constants);
             if kind == ProductKind::BackwardInput {
                 constants.push(("WRITE_DZ", f64::from(u8::from(writes_dz))));
             }
