@@ -2,16 +2,19 @@
 // dense_backward_input_packed_storage.wgsl): everything but the `weights` binding, which each
 // stage declares in its own address space (`_dense_uniform.wgsl` says why there are two).
 //!include _dense_uniform.wgsl
+//!include _bf16.wgsl
 
+// Whether block 0 also stores dZ for the layer's uniform-window weight gradient, as bf16 rows
+// (`_bf16.wgsl`).
 override WRITE_DZ: bool = false;
 
 @group(0) @binding(0) var<uniform> dims: DenseDims;
 @group(0) @binding(1) var<storage, read> dy: array<f32>;
 @group(0) @binding(2) var<storage, read> y: array<f32>;
 @group(0) @binding(4) var<storage, read_write> dx: array<f32>;
-@group(0) @binding(6) var<storage, read_write> dz_out: array<f32>;
+@group(0) @binding(6) var<storage, read_write> dz_out: array<u32>;
 
-// Where one row's steps read and write (UNROLL).
+// Where one row's steps read and write (UNROLL); `dz` is the row's first word.
 struct InputRow {
     dy: u32,
     y: u32,
@@ -20,27 +23,39 @@ struct InputRow {
     writes_dz: bool,
 }
 
-// Output o's step of the reduction (UNROLL; `forward_step` in _dense_forward_packed.wgsl says
-// why): dZ[n][o], stored where asked, times W[o][i0 .. i0 + BLOCK].
-fn input_step(acc: ptr<function, Acc>, row: InputRow, o: u32) {
+// dZ[n][o] of the row, 0 past the layer's outputs.
+fn row_gradient(row: InputRow, o: u32) -> f32 {
+    if o >= dims.out_dim {
+        return 0.0;
+    }
+    return output_gradient(dy[row.dy + o], row.y + o);
+}
+
+// Outputs o and o + 1 (o even) of the reduction (UNROLL; `forward_step` in
+// _dense_forward_packed.wgsl says why): dZ[n][o], dZ[n][o + 1], stored as one word where asked,
+// each times W[·][i0 .. i0 + BLOCK], o first.
+fn input_pair(acc: ptr<function, Acc>, row: InputRow, o: u32) {
     if o < REDUCED {
         let g = output_gradient(dy[row.dy + o], row.y + o);
+        var h = 0.0;
+        if o + 1u < REDUCED {
+            h = output_gradient(dy[row.dy + o + 1u], row.y + o + 1u);
+        }
         if row.writes_dz {
-            dz_out[row.dz + o] = g;
+            dz_out[row.dz + (o >> 1u)] = bf16_pair(g, h);
         }
         accumulate(acc, g, o * ROW_QUADS + row.q0);
+        if o + 1u < REDUCED {
+            accumulate(acc, h, (o + 1u) * ROW_QUADS + row.q0);
+        }
     }
 }
 
 fn input_steps(acc: ptr<function, Acc>, row: InputRow, first: u32) {
-    input_step(acc, row, first);
-    input_step(acc, row, first + 1u);
-    input_step(acc, row, first + 2u);
-    input_step(acc, row, first + 3u);
-    input_step(acc, row, first + 4u);
-    input_step(acc, row, first + 5u);
-    input_step(acc, row, first + 6u);
-    input_step(acc, row, first + 7u);
+    input_pair(acc, row, first);
+    input_pair(acc, row, first + 2u);
+    input_pair(acc, row, first + 4u);
+    input_pair(acc, row, first + 6u);
 }
 
 @compute @workgroup_size(WORKGROUP)
@@ -63,7 +78,7 @@ fn backward_input(
     let y_row = n * dims.y_stride + dims.y_offset;
     // Block 0 writes dZ (q0 is 0 for it alone, and a constant where it is the only block).
     let writes_dz = WRITE_DZ && live && q0 == 0u;
-    let dz_row = n * padded_to_vec4(dims.out_dim);
+    let dz_row = n * (padded_to_vec8(dims.out_dim) >> 1u);
     var acc: Acc;
     if UNROLL {
         let row = InputRow(dy_row, y_row, dz_row, q0, writes_dz);
@@ -84,23 +99,28 @@ fn backward_input(
         input_steps(&acc, row, 112u);
         input_steps(&acc, row, 120u);
     } else {
+        let row = InputRow(dy_row, y_row, dz_row, q0, writes_dz);
         let quads = quads_per_row(dims.in_dim);
-        for (var o = 0u; o < dims.out_dim; o++) {
-            let g = output_gradient(dy[dy_row + o], y_row + o);
+        for (var o = 0u; o < dims.out_dim; o += 2u) {
+            let g = row_gradient(row, o);
+            let h = row_gradient(row, o + 1u);
             if writes_dz {
-                dz_out[dz_row + o] = g;
+                dz_out[dz_row + (o >> 1u)] = bf16_pair(g, h);
             }
             // W[o][i0 .. i0 + BLOCK] is the packed row's quads from i0 / 4 (BLOCK is a multiple
             // of 4); quads past the row's end are never written.
             accumulate(&acc, g, o * quads + q0);
+            if o + 1u < dims.out_dim {
+                accumulate(&acc, h, (o + 1u) * quads + q0);
+            }
         }
     }
     if !live {
         return;
     }
     if writes_dz {
-        for (var o = dims.out_dim; o < padded_to_vec4(dims.out_dim); o++) {
-            dz_out[dz_row + o] = 0.0;
+        for (var p = (dims.out_dim + 1u) >> 1u; p < (padded_to_vec8(dims.out_dim) >> 1u); p++) {
+            dz_out[dz_row + p] = 0u;
         }
     }
     let dx_row = n * dims.dx_stride + dims.dx_offset;

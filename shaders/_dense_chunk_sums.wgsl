@@ -6,6 +6,7 @@
 // rows, whose partial dW[o][i] = Σ_n dZ[n][o] · X[n][i] goes to partials[chunk].
 //!include _dense_tile.wgsl
 //!include _dense_acc.wgsl
+//!include _bf16.wgsl
 
 override BLOCK: u32 = 16u;
 // Lanes (input columns) per workgroup: uniform.rs picks the smallest of 8..64 covering the
@@ -28,13 +29,14 @@ struct ChunkInfo {
 @group(1) @binding(0) var<uniform> chunk: ChunkInfo;
 
 // What one chunk's loop reads: its first row, its row count, the lane's column of X, the first
-// quad of the workgroup's outputs in a dZ row, and the quads per dZ row.
+// vec4<u32> of the workgroup's outputs in a dZ row (o0 is a multiple of 8), and the vec4<u32>s
+// per dZ row (bf16 rows, `_bf16.wgsl`).
 struct Window {
     first_row: u32,
     count: u32,
     column: u32,
-    q0: u32,
-    row_quads: u32,
+    o0_oct: u32,
+    row_octs: u32,
 }
 
 // Chunk `index`'s rows for the lane of input column i and the outputs from o0. Lanes past the
@@ -47,7 +49,7 @@ fn chunk_window(index: u32, i: u32, o0: u32) -> Window {
         count = min(dims.chunk_rows, rows - first_row);
     }
     let column = dims.x_offset + min(i, dims.in_dim - 1u);
-    return Window(first_row, count, column, o0 >> 2u, quads_per_row(dims.out_dim));
+    return Window(first_row, count, column, o0 >> 3u, bf16_row_octs(dims.out_dim));
 }
 
 fn x_at(w: Window, r: u32) -> f32 {

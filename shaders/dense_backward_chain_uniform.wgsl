@@ -5,9 +5,10 @@
 //   dZ of the last (linear) layer = dY;
 //   dX of layer k = Σ_o dZ_k[o] · W_k[o][·], kept in registers (`Acc`), not written;
 //   dZ of layer k - 1 = that dX ⊙ ReLU'(Y_{k-1}) (0 at 0, as the reference);
-// and writes every layer's dZ in the padded rows its uniform-window weight gradient reads
-// (`dense_backward_weight_uniform.wgsl`, `padded_to_vec4(width)` per row, zeros in the
-// padding) and dX of the first layer. Per layer boundary that saves the store of dX and its
+// and writes every layer's dZ in the bf16 rows its uniform-window weight gradient reads
+// (`dense_backward_weight_uniform.wgsl`, `_bf16.wgsl`; a row's quads past its width, where
+// `padded_to_vec8` adds one, are left as they are: the weight gradient never stores the outputs
+// they feed) and dX of the first layer. Per layer boundary that saves the store of dX and its
 // load as the next layer's dY, and a dispatch. Every sum adds in the order of
 // `dense_backward_input_uniform.wgsl`, o = 0, 1, ...
 //
@@ -16,6 +17,7 @@
 // split into blocks of BLOCK, one pipeline and dispatch each (FIXED_BLOCK), and the invocations of
 // the later blocks redo the walk without writing dZ again.
 //!include _dense_uniform.wgsl
+//!include _bf16.wgsl
 
 // Layers (2 or 3) and widths: D0 in, D1 .. the hidden and output widths (D3 unused with 2).
 override LAYERS: u32 = 3u;
@@ -54,10 +56,10 @@ struct ChainDims {
 // Y_1 (3 layers).
 @group(0) @binding(5) var<storage, read> y_upper: array<f32>;
 @group(0) @binding(8) var<uniform> chain: ChainDims;
-// dZ of each layer, rows of padded_to_vec4(its output width) vec4-aligned.
-@group(0) @binding(9) var<storage, read_write> dz0: array<vec4<f32>>;
-@group(0) @binding(10) var<storage, read_write> dz1: array<vec4<f32>>;
-@group(0) @binding(11) var<storage, read_write> dz2: array<vec4<f32>>;
+// dZ of each layer, bf16 rows of padded_to_vec8(its output width) values, a quad per vec2<u32>.
+@group(0) @binding(9) var<storage, read_write> dz0: array<vec2<u32>>;
+@group(0) @binding(10) var<storage, read_write> dz1: array<vec2<u32>>;
+@group(0) @binding(11) var<storage, read_write> dz2: array<vec2<u32>>;
 
 // Width j of the MLP: D0 (its input) .. D_LAYERS (its output).
 fn width(j: u32) -> u32 {
@@ -99,18 +101,19 @@ fn hidden_output(k: u32, n: u32, j: u32) -> f32 {
     return y_upper[n * chain.y1_stride + chain.y1_offset + j];
 }
 
-// Quad q of row n of layer k's dZ.
+// Quad q of row n of layer k's dZ, as bf16.
 fn store_dz(k: u32, n: u32, q: u32, value: vec4<f32>) {
-    let index = n * quads_per_row(width(k + 1u)) + q;
+    let index = n * (padded_to_vec8(width(k + 1u)) >> 2u) + q;
+    let packed = bf16_quad(value);
     switch k {
         case 0u: {
-            dz0[index] = value;
+            dz0[index] = packed;
         }
         case 1u: {
-            dz1[index] = value;
+            dz1[index] = packed;
         }
         default: {
-            dz2[index] = value;
+            dz2[index] = packed;
         }
     }
 }

@@ -6,13 +6,16 @@
 //! K·2⁻²⁴ times the sum of the absolute terms (the "magnitude"; for K ≤ 128 and the tiled order
 //! far less in practice). We accept |gpu − f64 reference| ≤ 1e-5 · magnitude + 1e-6, the
 //! magnitude coming from the same reference run on absolute values. dW sums over all N rows
-//! (K = N = 777 here, in chunks), so it gets 4e-5 · magnitude.
+//! (K = N = 777 here, in chunks), so it gets 4e-5 · magnitude. Where dW reads dZ through
+//! uniform windows the GPU stores dZ as bf16 (`scribblefield::field::bf16`): each stored value
+//! must be the reference's dZ within bf16 rounding, and dW the sum of the stored values.
+use scribblefield::field::bf16;
 use scribblefield::field::gpu::dense::{
     DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, PackedReads, RowView, UNIFORM_WEIGHT_FLOATS,
 };
 use scribblefield::field::gpu::keep::{HeadRows, workgroup_counts};
 use scribblefield::field::params::{MlpLayout, ParamLayout};
-use scribblefield::field::reference::mlp::{MlpTrace, backward, forward};
+use scribblefield::field::reference::mlp::{MlpTrace, backward, forward, layer_output_gradients};
 use scribblefield::field::{Encoding, FieldConfig};
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{
@@ -26,6 +29,9 @@ const ROWS: usize = 777;
 const FORWARD_TOLERANCE: f64 = 1e-5;
 const WEIGHT_GRAD_TOLERANCE: f64 = 4e-5;
 const ABSOLUTE_TOLERANCE: f64 = 1e-6;
+/// A stored bf16 dZ against the f64 reference: half a bf16 step (2⁻⁸ of the value at most), or
+/// a whole one where the GPU's f32 value lay within its rounding of a halfway point.
+const BF16_TOLERANCE: f64 = 1.0 / 128.0;
 /// Initial value of every gradient element: dW must be added to it, and elements outside the
 /// MLP's layers must keep it bit for bit.
 const GRAD_PRESET: f32 = 0.25;
@@ -311,6 +317,11 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
 
     let weights = to_f64(&params[layout.range()]);
     let abs_weights = abs(&weights);
+    // The dZ the uniform-window weight gradients sum, as they stored it (bf16 rows).
+    let gpu_dz: Vec<Option<Vec<u32>>> = (0..layers)
+        .map(|k| mlp.layer_dz(k).map(|buffer| read_buffer_blocking(ctx, buffer).unwrap()))
+        .collect();
+    let mut worst_dz = 0.0f64;
     let mut worst_forward = 0.0f64;
     let mut weight_grad = vec![0.0f64; weights.len()];
     let mut weight_grad_magnitude = vec![0.0f64; weights.len()];
@@ -345,8 +356,42 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
             activations: trace.activations.iter().map(|a| abs(a)).collect(),
         };
         let dy = to_f64(output_grad_layout.row(&output_grad, n));
-        let dx = backward(dims, &weights, &trace, &dy, &mut weight_grad);
-        let dx_magnitude = backward(dims, &abs_weights, &abs_trace, &abs(&dy), &mut weight_grad_magnitude);
+        let mut unused = vec![0.0f64; weights.len()];
+        let dx = backward(dims, &weights, &trace, &dy, &mut unused);
+        let dx_magnitude = backward(dims, &abs_weights, &abs_trace, &abs(&dy), &mut unused);
+        // dW from each layer's dZ: the reference's, or where the GPU stored it as bf16, the
+        // stored values (checked here to be the reference's within bf16 rounding).
+        let dz = layer_output_gradients(dims, &weights, &trace, &dy);
+        let dz_magnitude = layer_output_gradients(dims, &abs_weights, &abs_trace, &abs(&dy));
+        let mut offset = 0;
+        for k in 0..layers {
+            let summed: Vec<f64> = match &gpu_dz[k] {
+                None => dz[k].clone(),
+                Some(words) => {
+                    let row_words = bf16::row_words(dims[k + 1] as u32) as usize;
+                    let row = &words[n * row_words..(n + 1) * row_words];
+                    let stored: Vec<f64> = (0..dims[k + 1]).map(|o| f64::from(bf16::row_value(row, o))).collect();
+                    for (o, ((s, r), m)) in stored.iter().zip(&dz[k]).zip(&dz_magnitude[k]).enumerate() {
+                        let error = (s - r).abs();
+                        assert!(
+                            error <= BF16_TOLERANCE * r.abs() + FORWARD_TOLERANCE * m + ABSOLUTE_TOLERANCE,
+                            "{name} row {n} layer {k} stored dZ[{o}]: {s}, reference {r} (magnitude {m})"
+                        );
+                        worst_dz = worst_dz.max(error / (r.abs() + m).max(f64::MIN_POSITIVE));
+                    }
+                    stored
+                }
+            };
+            let x = &trace.activations[k];
+            let width = x.len();
+            for (o, g) in summed.iter().enumerate() {
+                for (i, xi) in x.iter().enumerate() {
+                    weight_grad[offset + o * width + i] += g * xi;
+                    weight_grad_magnitude[offset + o * width + i] += (g * xi).abs();
+                }
+            }
+            offset += width * summed.len();
+        }
         if input_grad {
             let what = format!("{name} row {n} input gradient");
             let gpu = input_grad_layout.row(&gpu_input_grad, n);
@@ -408,7 +453,7 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
     let chained = mlp.chains_input_gradients();
     eprintln!(
         "{name} {dims:?} × {active} of {rows} rows, kernels {families:?}, input gradients chained {chained}: worst error / \
-         magnitude: forward {worst_forward:.2e}, input gradient {worst_input_grad:.2e}, weight gradient {worst_weight:.2e}"
+         magnitude: forward {worst_forward:.2e}, input gradient {worst_input_grad:.2e}, stored dZ {worst_dz:.2e}, weight gradient {worst_weight:.2e}"
     );
     gpu_outputs
         .iter()

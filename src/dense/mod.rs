@@ -132,13 +132,18 @@ impl<'a, T: Scalar> DenseLayer<'a, T> {
         }
         if let Some(dx) = dx {
             assert_eq!(dx.len(), x.len(), "dense layer: input gradient size");
-            for (dxr, dyr) in dx.chunks_exact_mut(self.inputs).zip(dy.chunks_exact(self.outputs)) {
-                dxr.fill(T::default());
-                for (&g, wr) in dyr.iter().zip(self.weight.chunks_exact(self.inputs)) {
-                    if g != T::default() {
-                        for (d, &w) in dxr.iter_mut().zip(wr) {
-                            *d += g * w;
-                        }
+            self.input_gradient(dy, dx);
+        }
+    }
+
+    /// dx = dy · W over the rows of `dy` (overwritten).
+    pub fn input_gradient(&self, dy: &[T], dx: &mut [T]) {
+        for (dxr, dyr) in dx.chunks_exact_mut(self.inputs).zip(dy.chunks_exact(self.outputs)) {
+            dxr.fill(T::default());
+            for (&g, wr) in dyr.iter().zip(self.weight.chunks_exact(self.inputs)) {
+                if g != T::default() {
+                    for (d, &w) in dxr.iter_mut().zip(wr) {
+                        *d += g * w;
                     }
                 }
             }

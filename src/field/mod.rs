@@ -8,6 +8,7 @@
 //! sized to their vertices) + MLPs 24,064 (density) + 20,736 (colour) + 9,152 (feature) +
 //! 5,056 + 64·C (semantic), i.e. 14,321,574 f32 (≈ 55 MiB) for C = 2. The trainer keeps four
 //! buffers of that length (parameters, gradient, Adam m and v).
+pub mod bf16;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod checkpoint;
 pub mod config;

@@ -6,6 +6,7 @@
 //! crate's one CPU dense layer, `crate::dense::DenseLayer`, without bias.
 use super::real::Real;
 use crate::dense::DenseLayer;
+use crate::field::bf16;
 
 /// Number of weights of an MLP with these layer sizes.
 pub fn weight_count(dims: &[usize]) -> usize {
@@ -48,6 +49,16 @@ pub fn forward<R: Real>(dims: &[usize], weights: &[R], input: &[R]) -> MlpTrace<
     MlpTrace { activations }
 }
 
+/// How a layer's weight gradient sees its dZ (∂L/∂ the layer's output before the ReLU): as
+/// computed, or rounded to bf16 as the GPU's uniform-window weight gradient stores it
+/// (`crate::field::bf16`). The input gradient always takes dZ as computed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DzRows {
+    #[default]
+    Exact,
+    Bf16,
+}
+
 /// Vector-Jacobian product: given `grad_out` = ∂L/∂output (`dims[last]` values), adds
 /// ∂L/∂weights into `weight_grad` (same layout as `weights`) and returns ∂L/∂input
 /// (`dims[0]` values). The ReLU derivative is taken as 0 at 0 (the activation stored is the
@@ -58,6 +69,19 @@ pub fn backward<R: Real>(
     trace: &MlpTrace<R>,
     grad_out: &[R],
     weight_grad: &mut [R],
+) -> Vec<R> {
+    backward_with_dz(dims, weights, trace, grad_out, weight_grad, &[])
+}
+
+/// [`backward`] with layer k's weight gradient reading dZ as `dz[k]` says (layers past the
+/// slice's end: [`DzRows::Exact`]).
+pub fn backward_with_dz<R: Real>(
+    dims: &[usize],
+    weights: &[R],
+    trace: &MlpTrace<R>,
+    grad_out: &[R],
+    weight_grad: &mut [R],
+    dz: &[DzRows],
 ) -> Vec<R> {
     let layers = dims.len() - 1;
     let mut offsets = Vec::with_capacity(layers);
@@ -73,7 +97,17 @@ pub fn backward<R: Real>(
         let wg = &mut weight_grad[offsets[k]..offsets[k] + n_in * n_out];
         let x = &trace.activations[k];
         let mut grad_in = vec![R::ZERO; n_in];
-        layer.backward(x, &grad, wg, None, Some(&mut grad_in));
+        match dz.get(k).copied().unwrap_or_default() {
+            DzRows::Exact => layer.backward(x, &grad, wg, None, Some(&mut grad_in)),
+            DzRows::Bf16 => {
+                let rounded: Vec<R> = grad
+                    .iter()
+                    .map(|&g| R::of_f32(bf16::round(g.to_f64() as f32)))
+                    .collect();
+                layer.backward(x, &rounded, wg, None, None);
+                layer.input_gradient(&grad, &mut grad_in);
+            }
+        }
         if k > 0 {
             // x is the ReLU output of the previous layer.
             for (gi, xi) in grad_in.iter_mut().zip(x) {
@@ -85,6 +119,34 @@ pub fn backward<R: Real>(
         grad = grad_in;
     }
     grad
+}
+
+/// dZ of every layer (∂L/∂ its output before the ReLU; the last layer's is `grad_out`), first
+/// layer first: what each layer's weight gradient sums against its input.
+pub fn layer_output_gradients<R: Real>(
+    dims: &[usize],
+    weights: &[R],
+    trace: &MlpTrace<R>,
+    grad_out: &[R],
+) -> Vec<Vec<R>> {
+    let layers = dims.len() - 1;
+    let mut dz = vec![grad_out.to_vec()];
+    let mut end = weight_count(dims);
+    for k in (1..layers).rev() {
+        let (n_in, n_out) = (dims[k], dims[k + 1]);
+        let layer = DenseLayer::new(n_in, n_out, &weights[end - n_in * n_out..end], None);
+        end -= n_in * n_out;
+        let mut grad_in = vec![R::ZERO; n_in];
+        layer.input_gradient(&dz[dz.len() - 1], &mut grad_in);
+        for (gi, xi) in grad_in.iter_mut().zip(&trace.activations[k]) {
+            if *xi <= R::ZERO {
+                *gi = R::ZERO;
+            }
+        }
+        dz.push(grad_in);
+    }
+    dz.reverse();
+    dz
 }
 
 #[cfg(test)]
@@ -125,5 +187,49 @@ mod tests {
         let numeric_x = central_differences(|x| loss(&weights, x), &input, 1e-6);
         assert_close("mlp weights", &weight_grad, &numeric_w, 1e-7);
         assert_close("mlp input", &input_grad, &numeric_x, 1e-7);
+    }
+
+    #[test]
+    fn layer_output_gradients_give_the_weight_gradient_and_bf16_rounds_only_it() {
+        let dims = [5, 7, 6, 3];
+        let mut rng = SplitMix64::new(12);
+        let weights = random_vec(&mut rng, weight_count(&dims), 0.8);
+        let input = random_vec(&mut rng, dims[0], 1.0);
+        let probe = random_vec(&mut rng, 3, 1.0);
+        let trace = forward(&dims, &weights, &input);
+        let mut exact = vec![0.0; weights.len()];
+        let input_grad = backward(&dims, &weights, &trace, &probe, &mut exact);
+        let dz = layer_output_gradients(&dims, &weights, &trace, &probe);
+        assert_eq!(dz.iter().map(Vec::len).collect::<Vec<_>>(), [7, 6, 3]);
+        let mut from_dz = Vec::new();
+        for (k, g) in dz.iter().enumerate() {
+            for &go in g {
+                from_dz.extend(trace.activations[k].iter().map(|x| go * x));
+            }
+        }
+        assert_close("dW from dZ", &from_dz, &exact, 1e-12);
+
+        // Layer 1 rounded: its dW takes bf16(dZ); the other layers and dX stay exact.
+        let mut rounded = vec![0.0; weights.len()];
+        let rows = [DzRows::Exact, DzRows::Bf16];
+        let input_grad_rounded = backward_with_dz(&dims, &weights, &trace, &probe, &mut rounded, &rows);
+        assert_eq!(input_grad_rounded, input_grad);
+        let layer1 = 35..35 + 42;
+        let mut expected = exact.clone();
+        for (o, &go) in dz[1].iter().enumerate() {
+            let g = f64::from(bf16::round(go as f32));
+            for (i, x) in trace.activations[1].iter().enumerate() {
+                expected[layer1.start + o * 7 + i] = g * x;
+            }
+        }
+        assert_eq!(rounded[..35], exact[..35]);
+        assert_eq!(rounded[77..], exact[77..]);
+        assert_close(
+            "dW of the rounded layer",
+            &rounded[layer1.clone()],
+            &expected[layer1.clone()],
+            1e-12,
+        );
+        assert!(rounded[layer1.clone()] != exact[layer1], "rounding changed nothing");
     }
 }

@@ -37,6 +37,18 @@ pub struct FieldModel {
     /// (`loss::opacity_loss`); the trainer takes it from its labels
     /// (`PropagationCache::far_class`). None: no such term.
     pub far_class: Option<u32>,
+    /// How each MLP layer's weight gradient sees dZ; the GPU trainer says which of its layers
+    /// store it as bf16 (`Trainer::dz_rows`). Default: exact everywhere.
+    pub dz_rows: FieldDzRows,
+}
+
+/// [`mlp::DzRows`] per layer of each of the field's MLPs (layers past a list's end: exact).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct FieldDzRows {
+    pub density: Vec<mlp::DzRows>,
+    pub color: Vec<mlp::DzRows>,
+    pub feature: Vec<mlp::DzRows>,
+    pub semantic: Vec<mlp::DzRows>,
 }
 
 /// One ray's samples, ready for the field.
@@ -139,6 +151,7 @@ impl FieldModel {
             },
             config,
             far_class: None,
+            dz_rows: FieldDzRows::default(),
         })
     }
 
@@ -284,12 +297,13 @@ impl FieldModel {
         let mut grad_density_out = Vec::with_capacity(1 + geometry_dim);
         grad_density_out.push(activations::density_backward(sample.density.output()[0], grad_sigma));
         grad_density_out.extend_from_slice(&grad_geometry);
-        let grad_encoding = mlp::backward(
+        let grad_encoding = mlp::backward_with_dz(
             &l.density.dims,
             &params[l.density.range()],
             &sample.density,
             &grad_density_out,
             &mut grad[l.density.range()],
+            &self.dz_rows.density,
         );
 
         // Hash grid (the frequency part has no parameters).
@@ -320,12 +334,13 @@ impl FieldModel {
 
         // Semantic head → [relu(f), g].
         let grad_logits = &grad_value[Channels::SEMANTIC..Channels::SEMANTIC + ch.classes];
-        let grad_semantic_in = mlp::backward(
+        let grad_semantic_in = mlp::backward_with_dz(
             &l.semantic.dims,
             &params[l.semantic.range()],
             &sample.semantic,
             grad_logits,
             &mut grad[l.semantic.range()],
+            &self.dz_rows.semantic,
         );
         // Only a share of it reaches the shared field (FieldConfig::semantic_trunk_gradient).
         let trunk = R::of_f32(self.config.semantic_trunk_gradient);
@@ -343,12 +358,13 @@ impl FieldModel {
         add_into(grad_geometry, &grad_semantic_in[feature_dim..]);
 
         // Feature MLP → g.
-        let grad_feature_in = mlp::backward(
+        let grad_feature_in = mlp::backward_with_dz(
             &l.feature.dims,
             &params[l.feature.range()],
             &sample.feature,
             &grad_f,
             &mut grad[l.feature.range()],
+            &self.dz_rows.feature,
         );
         add_into(grad_geometry, &grad_feature_in);
 
@@ -356,12 +372,13 @@ impl FieldModel {
         let grad_color_out: Vec<R> = (0..3)
             .map(|c| activations::sigmoid_backward(sample.rgb[c], grad_value[Channels::RGB + c]))
             .collect();
-        let grad_color_in = mlp::backward(
+        let grad_color_in = mlp::backward_with_dz(
             &l.color.dims,
             &params[l.color.range()],
             &sample.color,
             &grad_color_out,
             &mut grad[l.color.range()],
+            &self.dz_rows.color,
         );
         add_into(grad_geometry, &grad_color_in[sh::SH_COEFFS..]);
     }

@@ -227,7 +227,7 @@ impl BackwardChain {
 
     /// Bytes it moves over `rows` rows (every element a dispatch reads or writes counted once
     /// per block of the first layer's dX, since each block redoes the walk): dY and the hidden
-    /// outputs read, the packed weights read, every layer's dZ written in padded rows, dX
+    /// outputs read, the packed weights read, every layer's dZ written in bf16 rows, dX
     /// written.
     pub(super) fn global_bytes(&self, rows: u64) -> u64 {
         let w: Vec<u64> = self.widths.iter().map(|&d| u64::from(d)).collect();
@@ -238,7 +238,10 @@ impl BackwardChain {
             .map(|k| w[k + 1] * u64::from(padded_to_vec4(self.widths[k])))
             .sum();
         let reads = rows * (w[layers] + hidden) + weights;
-        let dz: u64 = w[1..].iter().map(|&d| rows * u64::from(padded_to_vec4(d as u32))).sum();
+        let dz: u64 = w[1..]
+            .iter()
+            .map(|&d| rows * u64::from(crate::field::bf16::row_words(d as u32)))
+            .sum();
         let dx = if self.input_grad { rows * w[0] } else { 0 };
         4 * (u64::from(self.blocks) * reads + dz + dx)
     }

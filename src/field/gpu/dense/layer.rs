@@ -460,7 +460,7 @@ impl DenseBackward {
                         row_count: &rows,
                         mask_dispatch: kept_dispatch(
                             kept,
-                            padded_to_vec4(spec.out_dim),
+                            crate::field::bf16::row_words(spec.out_dim),
                             super::uniform::UNIFORM_WORKGROUP,
                             1,
                         )?,
@@ -514,7 +514,8 @@ impl DenseBackward {
         })
     }
 
-    /// The buffer of padded dZ rows its weight gradient reads, where it reads one.
+    /// The buffer of bf16 dZ rows (`crate::field::bf16`) its weight gradient reads, where it
+    /// reads one.
     pub fn dz_buffer(&self) -> Option<&wgpu::Buffer> {
         self.dz.as_ref()
     }
@@ -535,7 +536,8 @@ impl DenseBackward {
     pub fn global_bytes(&self, rows: u64) -> u64 {
         let (i, o) = (u64::from(self.spec.in_dim), u64::from(self.spec.out_dim));
         let relu = u64::from(self.spec.activation == Activation::Relu);
-        let dz_row = u64::from(padded_to_vec4(self.spec.out_dim));
+        // dZ's bf16 rows, in words.
+        let dz_row = u64::from(crate::field::bf16::row_words(self.spec.out_dim));
         let dz_from_dy = rows * o * (1 + relu);
         // dX's kernel forms the dZ the uniform windows read unless the layer masks it itself.
         let dz_written = matches!(&self.partial_sums, WeightPartials::Uniform(p) if !p.masks());

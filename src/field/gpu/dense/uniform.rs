@@ -7,6 +7,7 @@ use std::num::NonZeroU64;
 use super::layer::{DenseLayerSpec, bound, range_binding};
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
 use super::{DenseFamily, RowView};
+use crate::field::bf16;
 use crate::gpu::buffers::uniform_buffer_from;
 use crate::gpu::dispatch::{Dispatch, IndirectArgs, bind_named};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
@@ -165,7 +166,7 @@ impl UniformWeightPartials {
             row_count,
             mask_dispatch,
         } = layer;
-        let window_floats = chunk_rows as usize * padded_to_vec4(spec.out_dim) as usize;
+        let window_words = chunk_rows as usize * bf16::row_words(spec.out_dim) as usize;
         let reads = pipelines.packed_reads();
         let info_stride = ctx.limits.min_uniform_buffer_offset_alignment.max(16);
         // Windows bind one chunk each; from storage one dispatch sums as many chunks as its z
@@ -199,7 +200,7 @@ impl UniformWeightPartials {
             let mask_pipeline = pipelines.compile(ctx, DenseKernel::MaskOutputGradient, &[]).await?;
             let groups = Dispatch1d::for_device(
                 ctx,
-                u64::from(spec.rows) * u64::from(padded_to_vec4(spec.out_dim)),
+                u64::from(spec.rows) * u64::from(bf16::row_words(spec.out_dim)),
                 UNIFORM_WORKGROUP,
             )?;
             let mask = bound(
@@ -218,7 +219,7 @@ impl UniformWeightPartials {
             Some(mask)
         };
 
-        let block = uniform_block(spec.out_dim, pipelines.uniform_block_limit(ctx));
+        let block = weight_gradient_block(spec.out_dim, pipelines.uniform_block_limit(ctx));
         let columns = spec.in_dim.next_power_of_two().clamp(8, UNIFORM_WORKGROUP);
         let (pipeline, layouts) = pipelines.chunk_sums_pipeline(ctx, block, columns).await?;
         let sums = pipelines.chunk_sums_kernel().spec();
@@ -234,7 +235,7 @@ impl UniformWeightPartials {
                 ("row_count", row_count.as_entire_binding()),
             ],
         )?;
-        let window_bytes = (window_floats * 4) as u64;
+        let window_bytes = (window_words * 4) as u64;
         let window_names = ["dz0", "dz1", "dz2", "dz3", "dz4", "dz5", "dz6", "dz7"];
         let mut windows = Vec::with_capacity(dispatches as usize);
         for d in 0..dispatches {
@@ -249,8 +250,7 @@ impl UniformWeightPartials {
                 }),
             )];
             if reads == PackedReads::Storage {
-                // The shader names dZ `weights`: the binding its shared `accumulate` reads.
-                entries.push(("weights", dz.as_entire_binding()));
+                entries.push(("dz", dz.as_entire_binding()));
                 windows.push((bind_named(ctx, &sums, &layouts[1], 1, &entries)?, count));
                 continue;
             }
@@ -301,9 +301,22 @@ impl UniformWeightPartials {
     }
 }
 
+/// The outputs one workgroup of the uniform-window weight gradient sums: as
+/// [`uniform_block`], but where the layer takes more than one block each is a multiple of 8, so
+/// that every block starts at a whole vec4<u32> of the bf16 dZ rows (a device limit of 4 then
+/// gets 8).
+pub(super) fn weight_gradient_block(out_dim: u32, limit: u32) -> u32 {
+    let block = uniform_block(out_dim, limit);
+    if block >= out_dim {
+        return block;
+    }
+    let blocks = out_dim.div_ceil(limit.max(8) / 8 * 8);
+    bf16::padded_to_vec8(out_dim.div_ceil(blocks))
+}
+
 /// The buffer the uniform-window weight gradient reads dZ from: `chunks` windows of
-/// `chunk_rows` padded rows, the last one UNIFORM_WEIGHT_FLOATS long from its start like every
-/// other.
+/// `chunk_rows` bf16 rows (`crate::field::bf16`), the last one UNIFORM_WEIGHT_FLOATS words long
+/// from its start like every other.
 pub(super) fn dz_windows_buffer(
     ctx: &GpuContext,
     label: &str,
@@ -311,32 +324,35 @@ pub(super) fn dz_windows_buffer(
     chunk_rows: u32,
     chunks: u32,
 ) -> Result<wgpu::Buffer, GpuError> {
-    let window_floats = chunk_rows as usize * padded_to_vec4(spec.out_dim) as usize;
-    let dz_floats = (chunks as usize - 1) * window_floats + UNIFORM_WEIGHT_FLOATS;
-    ctx.ensure_storage_binding_fits(label, dz_floats as u64 * 4)?;
+    let window_words = chunk_rows as usize * bf16::row_words(spec.out_dim) as usize;
+    let dz_words = (chunks as usize - 1) * window_words + UNIFORM_WEIGHT_FLOATS;
+    ctx.ensure_storage_binding_fits(label, dz_words as u64 * 4)?;
     Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(&format!("{label} dZ")),
-        size: dz_floats as u64 * 4,
-        // COPY_DST: tests fill it with garbage.
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        size: dz_words as u64 * 4,
+        // COPY_DST, COPY_SRC: tests fill it with garbage and read back what was stored.
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::UNIFORM
+            | wgpu::BufferUsages::COPY_DST
+            | wgpu::BufferUsages::COPY_SRC,
         mapped_at_creation: false,
     }))
 }
 
-/// Rows per chunk and chunk count for the uniform-window weight gradient: as many rows as fit
-/// a 64 KiB window, each window starting at an offset the device accepts for uniform bindings;
-/// `None` when the partial matrices would not fit one storage binding (then: tiled).
+/// Rows per chunk and chunk count for the uniform-window weight gradient: as many bf16 dZ rows
+/// as fit a 64 KiB window, each window starting at an offset the device accepts for uniform
+/// bindings; `None` when the partial matrices would not fit one storage binding (then: tiled).
 pub(super) fn uniform_weight_chunks(ctx: &GpuContext, spec: &DenseLayerSpec) -> Option<(u32, u32)> {
     if (ctx.limits.max_uniform_buffer_binding_size as usize) < UNIFORM_WEIGHT_FLOATS * 4 {
         return None;
     }
-    // dZ's rows are padded to whole vec4s in the windows.
-    let out = padded_to_vec4(spec.out_dim) as usize;
+    // Words per dZ row: bf16 pairs, whole vec4<u32>s.
+    let out = bf16::row_words(spec.out_dim) as usize;
     if out > UNIFORM_WEIGHT_FLOATS {
         return None;
     }
     let align = (ctx.limits.min_uniform_buffer_offset_alignment.max(4) / 4) as usize;
-    // chunk_rows · out must be a multiple of `align` floats.
+    // chunk_rows · out must be a multiple of `align` words.
     let step = align / gcd(out, align);
     let chunk_rows = (UNIFORM_WEIGHT_FLOATS / out) / step * step;
     if chunk_rows == 0 {

@@ -37,6 +37,7 @@ use super::rays::{NO_LABEL, RayGeometry, TARGET_FLAGS, TARGET_HEADER_WORDS, TARG
 use super::scene_buffers::{LabelIndex, SceneBuffers};
 use super::view::view_rays;
 pub use super::view::{DepthGuide, FrameAssembler, RenderedFrame, ViewCamera};
+use crate::field::reference::mlp::DzRows;
 pub use stages::StageShape;
 use stages::{FIELD_STAGES, StepStage, TRAINING_STEP};
 
@@ -558,6 +559,23 @@ impl Trainer {
 
     pub fn has_labels(&self) -> bool {
         self.labelled_pixels > 0
+    }
+
+    /// Which MLP layers' weight gradients sum dZ stored as bf16 (those reading it through
+    /// uniform windows), for the reference to round the same way.
+    pub fn dz_rows(&self) -> crate::field::reference::FieldDzRows {
+        let rows = |mlp: &MlpPass| {
+            mlp.weight_gradient_windows()
+                .into_iter()
+                .map(|windowed| if windowed { DzRows::Bf16 } else { DzRows::Exact })
+                .collect()
+        };
+        crate::field::reference::FieldDzRows {
+            density: rows(&self.density),
+            color: rows(&self.color),
+            feature: rows(&self.feature),
+            semantic: rows(&self.semantic),
+        }
     }
 
     /// How the hash grid's backward adds into the gradient buffer on this device.
