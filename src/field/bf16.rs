@@ -55,10 +55,10 @@ mod tests {
         assert_eq!(round(-2.5), -2.5);
         assert_eq!(round(0.0), 0.0);
         assert_eq!(bits(-0.0), 0x8000);
-        // The relative error of a rounding is at most 2^-9.
+        // A rounding moves a value by at most half a step: 2^-8 of it.
         for k in 0..1000 {
             let v = (k as f32 * 0.7371).sin() * 10f32.powi(k % 30 - 15);
-            assert!((round(v) - v).abs() <= v.abs() * 2f32.powi(-9), "{v}");
+            assert!((round(v) - v).abs() <= v.abs() * 2f32.powi(-8), "{v}");
         }
     }
 

@@ -607,7 +607,7 @@ impl MlpPacking {
 
 #[cfg(test)]
 mod tests {
-    use super::uniform_block;
+    use super::{uniform_block, weight_gradient_block};
 
     #[test]
     fn blocks_split_a_layer_evenly_in_multiples_of_four() {
@@ -626,6 +626,29 @@ mod tests {
         ] {
             assert_eq!(uniform_block(width, limit), block, "width {width}, limit {limit}");
             assert!(block % 4 == 0 && block <= limit.max(4));
+        }
+    }
+
+    #[test]
+    fn weight_gradient_blocks_start_at_whole_bf16_vec4s() {
+        for (width, limit, block) in [
+            (79, 64, 40),
+            (128, 64, 64),
+            (100, 64, 56),
+            (16, 64, 16),
+            (3, 64, 4),
+            (79, 16, 16),
+            (20, 16, 16),
+            (16, 4, 8),
+            (3, 4, 4),
+        ] {
+            assert_eq!(
+                weight_gradient_block(width, limit),
+                block,
+                "width {width}, limit {limit}"
+            );
+            // One block covering the row, or blocks of whole 8-value vec4<u32>s.
+            assert!(block >= width || block % 8 == 0);
         }
     }
 }
