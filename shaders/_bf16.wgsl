@@ -39,3 +39,25 @@ fn bf16_first_quad(w: vec4<u32>) -> vec4<f32> {
 fn bf16_second_quad(w: vec4<u32>) -> vec4<f32> {
     return bitcast<vec4<f32>>(vec4<u32>(w.z << 16u, w.z & 0xffff0000u, w.w << 16u, w.w & 0xffff0000u));
 }
+
+// Value `index` of a bf16 row from its word (`index` even: the low half).
+fn bf16_at(word: u32, index: u32) -> f32 {
+    return bitcast<f32>(select(word << 16u, word & 0xffff0000u, (index & 1u) != 0u));
+}
+
+// Rows a stage reads or writes as f32 or as bf16 (an override constant per binding, `bf16`),
+// bound as array<u32>: value j of the row starting at value `row` (even for bf16 rows, so the
+// word and half of a constant j are constants).
+fn row_word(row: u32, j: u32, bf16: bool) -> u32 {
+    if bf16 {
+        return (row >> 1u) + (j >> 1u);
+    }
+    return row + j;
+}
+
+fn row_value(word: u32, j: u32, bf16: bool) -> f32 {
+    if bf16 {
+        return bf16_at(word, j);
+    }
+    return bitcast<f32>(word);
+}

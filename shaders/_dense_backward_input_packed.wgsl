@@ -3,14 +3,17 @@
 // stage declares in its own address space (`_dense_uniform.wgsl` says why there are two).
 //!include _dense_uniform.wgsl
 //!include _bf16.wgsl
+//!include _dense_output_gradient.wgsl
 
 // Whether block 0 also stores dZ for the layer's uniform-window weight gradient, as bf16 rows
 // (`_bf16.wgsl`).
 override WRITE_DZ: bool = false;
+override Y_BF16: bool = false;
 
 @group(0) @binding(0) var<uniform> dims: DenseDims;
 @group(0) @binding(1) var<storage, read> dy: array<f32>;
-@group(0) @binding(2) var<storage, read> y: array<f32>;
+// Y in f32 or bf16 rows (Y_BF16: a hidden layer of an MLP whose kernels all read bf16 rows).
+@group(0) @binding(2) var<storage, read> y: array<u32>;
 @group(0) @binding(4) var<storage, read_write> dx: array<f32>;
 @group(0) @binding(6) var<storage, read_write> dz_out: array<u32>;
 
@@ -28,7 +31,11 @@ fn row_gradient(row: InputRow, o: u32) -> f32 {
     if o >= dims.out_dim {
         return 0.0;
     }
-    return output_gradient(dy[row.dy + o], row.y + o);
+    return output_gradient(dy[row.dy + o], row.y, o);
+}
+
+fn y_value(row: u32, j: u32) -> f32 {
+    return row_value(y[row_word(row, j, Y_BF16)], j, Y_BF16);
 }
 
 // Outputs o and o + 1 (o even) of the reduction (UNROLL; `forward_step` in
@@ -36,10 +43,10 @@ fn row_gradient(row: InputRow, o: u32) -> f32 {
 // each times W[·][i0 .. i0 + BLOCK], o first.
 fn input_pair(acc: ptr<function, Acc>, row: InputRow, o: u32) {
     if o < REDUCED {
-        let g = output_gradient(dy[row.dy + o], row.y + o);
+        let g = output_gradient(dy[row.dy + o], row.y, o);
         var h = 0.0;
         if o + 1u < REDUCED {
-            h = output_gradient(dy[row.dy + o + 1u], row.y + o + 1u);
+            h = output_gradient(dy[row.dy + o + 1u], row.y, o + 1u);
         }
         if row.writes_dz {
             dz_out[row.dz + (o >> 1u)] = bf16_pair(g, h);

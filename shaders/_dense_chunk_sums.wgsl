@@ -7,6 +7,7 @@
 //!include _dense_tile.wgsl
 //!include _dense_acc.wgsl
 //!include _bf16.wgsl
+//!include _dense_output_gradient.wgsl
 
 override BLOCK: u32 = 16u;
 // Lanes (input columns) per workgroup: uniform.rs picks the smallest of 8..64 covering the
@@ -15,8 +16,12 @@ override COLUMNS: u32 = 64u;
 
 @group(0) @binding(0) var<uniform> dims: DenseDims;
 // Y: what `output_gradient` (`_dense_tile.wgsl`) masks with, where the windowed stage forms dZ.
-@group(0) @binding(2) var<storage, read> y: array<f32>;
-@group(0) @binding(3) var<storage, read> x: array<f32>;
+// X and Y in f32 or bf16 rows (X_BF16, Y_BF16: hidden layers of an MLP whose kernels all read
+// bf16 rows, `_bf16.wgsl`).
+@group(0) @binding(2) var<storage, read> y: array<u32>;
+@group(0) @binding(3) var<storage, read> x: array<u32>;
+override X_BF16: bool = false;
+override Y_BF16: bool = false;
 // [chunk][out][in]
 @group(0) @binding(4) var<storage, read_write> partials: array<f32>;
 
@@ -53,7 +58,15 @@ fn chunk_window(index: u32, i: u32, o0: u32) -> Window {
 }
 
 fn x_at(w: Window, r: u32) -> f32 {
-    return x[(w.first_row + r) * dims.x_stride + w.column];
+    let index = (w.first_row + r) * dims.x_stride + w.column;
+    if X_BF16 {
+        return bf16_at(x[index >> 1u], index);
+    }
+    return bitcast<f32>(x[index]);
+}
+
+fn y_value(row: u32, j: u32) -> f32 {
+    return row_value(y[row_word(row, j, Y_BF16)], j, Y_BF16);
 }
 
 // partials[index][o0 + j][i] = the lane's sums, for the outputs and the column inside the layer.

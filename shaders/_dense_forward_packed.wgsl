@@ -2,17 +2,38 @@
 // dense_forward_packed_storage.wgsl): everything but the `weights` binding, which each stage
 // declares in its own address space (`_dense_uniform.wgsl` says why there are two).
 //!include _dense_uniform.wgsl
+//!include _bf16.wgsl
 
 @group(0) @binding(0) var<uniform> dims: DenseDims;
-@group(0) @binding(1) var<storage, read> x: array<f32>;
-@group(0) @binding(3) var<storage, read_write> y: array<f32>;
+// X and Y in f32 or bf16 rows (X_BF16, Y_BF16: hidden layers of an MLP whose kernels all read
+// bf16 rows, `_bf16.wgsl`); bf16 rows start at even values.
+@group(0) @binding(1) var<storage, read> x: array<u32>;
+@group(0) @binding(3) var<storage, read_write> y: array<u32>;
+override X_BF16: bool = false;
+override Y_BF16: bool = false;
+
+fn x_value(row: u32, i: u32) -> f32 {
+    return row_value(x[row_word(row, i, X_BF16)], i, X_BF16);
+}
+
+// Y[n][o] after the activation, 0 past the layer's outputs.
+fn output_value(acc: ptr<function, Acc>, j: u32, o: u32) -> f32 {
+    if o >= dims.out_dim {
+        return 0.0;
+    }
+    let value = acc_value(acc, j);
+    if dims.relu != 0u {
+        return max(value, 0.0);
+    }
+    return value;
+}
 
 // Input i's step of the reduction (UNROLL): i and the weight index are constants once the
 // pipeline is specialised and the calls inlined (q0 too, where the block holds the whole row);
 // steps past REDUCED fold away.
 fn forward_step(acc: ptr<function, Acc>, x_row: u32, q0: u32, i: u32) {
     if i < REDUCED {
-        accumulate(acc, x[x_row + i], i * ROW_QUADS + q0);
+        accumulate(acc, x_value(x_row, i), i * ROW_QUADS + q0);
     }
 }
 
@@ -66,21 +87,28 @@ fn forward(
         // o0 / 4 (BLOCK is a multiple of 4). Quads past the row's end give outputs never written.
         let quads = quads_per_row(dims.out_dim);
         for (var i = 0u; i < dims.in_dim; i++) {
-            accumulate(&acc, x[x_row + i], i * quads + q0);
+            accumulate(&acc, x_value(x_row, i), i * quads + q0);
         }
     }
     if item >= rows {
         return;
     }
     let y_row = n * dims.y_stride + dims.y_offset;
-    for (var j = 0u; j < BLOCK; j++) {
+    // Pairs of outputs (BLOCK and o0 are multiples of 4): a bf16 pair is one word, the second
+    // 0 past an odd width (the row's padding).
+    for (var j = 0u; j < BLOCK; j += 2u) {
         let o = o0 + j;
         if o < dims.out_dim {
-            var value = acc_value(&acc, j);
-            if dims.relu != 0u {
-                value = max(value, 0.0);
+            let first = output_value(&acc, j, o);
+            let second = output_value(&acc, j + 1u, o + 1u);
+            if Y_BF16 {
+                y[row_word(y_row, o, true)] = bf16_pair(first, second);
+            } else {
+                y[y_row + o] = bitcast<u32>(first);
+                if o + 1u < dims.out_dim {
+                    y[y_row + o + 1u] = bitcast<u32>(second);
+                }
             }
-            y[y_row + o] = value;
         }
     }
 }

@@ -115,13 +115,3 @@ fn multiply_staged(block: ptr<function, Block>, tx: u32, ty: u32) {
     (*block).r2 = r2;
     (*block).r3 = r3;
 }
-
-// dL/dZ of one element: dY, masked by the ReLU's derivative (0 at 0, as the reference) read
-// from the stored activation Y at `y_index`. Uses the stage's own `y` binding; Y is only read
-// for ReLU layers.
-fn output_gradient(dy_value: f32, y_index: u32) -> f32 {
-    if dims.relu != 0u && !(y[y_index] > 0.0) {
-        return 0.0;
-    }
-    return dy_value;
-}

@@ -49,12 +49,13 @@ struct ChainDims {
 // dims: rows, dy and dx views (the MLP's output gradient and input gradient).
 @group(0) @binding(0) var<uniform> dims: DenseDims;
 @group(0) @binding(1) var<storage, read> dy: array<f32>;
-// Y_0, the first hidden layer's output (named `y` as `_dense_tile.wgsl` expects).
-@group(0) @binding(2) var<storage, read> y: array<f32>;
+// Y_0, the first hidden layer's output; the hidden outputs are f32 or bf16 rows (Y_BF16).
+@group(0) @binding(2) var<storage, read> y: array<u32>;
 @group(0) @binding(3) var<uniform> weights: array<vec4<f32>, UNIFORM_WEIGHT_VEC4S>;
 @group(0) @binding(4) var<storage, read_write> dx: array<f32>;
 // Y_1 (3 layers).
-@group(0) @binding(5) var<storage, read> y_upper: array<f32>;
+@group(0) @binding(5) var<storage, read> y_upper: array<u32>;
+override Y_BF16: bool = false;
 @group(0) @binding(8) var<uniform> chain: ChainDims;
 // dZ of each layer, bf16 rows of padded_to_vec8(its output width) values, a quad per vec2<u32>.
 @group(0) @binding(9) var<storage, read_write> dz0: array<vec2<u32>>;
@@ -96,9 +97,11 @@ fn weight_base(k: u32) -> u32 {
 // Y_k[n][j] (k = 0 or 1: only hidden layers are masked).
 fn hidden_output(k: u32, n: u32, j: u32) -> f32 {
     if k == 0u {
-        return y[n * chain.y0_stride + chain.y0_offset + j];
+        let row = n * chain.y0_stride + chain.y0_offset;
+        return row_value(y[row_word(row, j, Y_BF16)], j, Y_BF16);
     }
-    return y_upper[n * chain.y1_stride + chain.y1_offset + j];
+    let row = n * chain.y1_stride + chain.y1_offset;
+    return row_value(y_upper[row_word(row, j, Y_BF16)], j, Y_BF16);
 }
 
 // Quad q of row n of layer k's dZ, as bf16.

@@ -3,11 +3,17 @@
 // dX is overwritten (not accumulated). Workgroups: x, y spread the row tiles, z the input-column
 // tiles.
 //!include _dense_tile.wgsl
+//!include _dense_output_gradient.wgsl
 //!include _dispatch.wgsl
 
 @group(0) @binding(0) var<uniform> dims: DenseDims;
 @group(0) @binding(1) var<storage, read> dy: array<f32>;
 @group(0) @binding(2) var<storage, read> y: array<f32>;
+
+// Y in f32 rows: the tiled kernels never see bf16 rows (src/field/gpu/dense/mlp.rs).
+fn y_value(row: u32, j: u32) -> f32 {
+    return y[row + j];
+}
 @group(0) @binding(3) var<storage, read> weights: array<f32>;
 @group(0) @binding(4) var<storage, read_write> dx: array<f32>;
 
@@ -52,7 +58,7 @@ fn backward_input(
             var value = 0.0;
             if row < rows && o < dims.out_dim {
                 let g = dy[row * dims.dy_stride + dims.dy_offset + o];
-                value = output_gradient(g, row * dims.y_stride + dims.y_offset + o);
+                value = output_gradient(g, row * dims.y_stride + dims.y_offset, o);
             }
             stage_a(k, m, value);
         }

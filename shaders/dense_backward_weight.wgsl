@@ -5,11 +5,17 @@
 // `reduce_chunks` sums the chunks in order per weight and ADDS the total to the gradient buffer
 // (the trainer zeroes it before a step), touching only the layer's [out][in] range.
 //!include _dense_tile.wgsl
+//!include _dense_output_gradient.wgsl
 //!include _dispatch.wgsl
 
 @group(0) @binding(0) var<uniform> dims: DenseDims;
 @group(0) @binding(1) var<storage, read> dy: array<f32>;
 @group(0) @binding(2) var<storage, read> y: array<f32>;
+
+// Y in f32 rows: the tiled kernels never see bf16 rows (src/field/gpu/dense/mlp.rs).
+fn y_value(row: u32, j: u32) -> f32 {
+    return y[row + j];
+}
 @group(0) @binding(3) var<storage, read> x: array<f32>;
 // [chunk][out][in]
 @group(0) @binding(4) var<storage, read_write> partials: array<f32>;
@@ -69,7 +75,7 @@ fn partial_sums(
             var value = 0.0;
             if row < end_row && o < dims.out_dim {
                 let g = dy[row * dims.dy_stride + dims.dy_offset + o];
-                value = output_gradient(g, row * dims.y_stride + dims.y_offset + o);
+                value = output_gradient(g, row * dims.y_stride + dims.y_offset, o);
             }
             stage_a(k, m, value);
         }

@@ -26,7 +26,7 @@ fn dz_value(n: u32, o: u32) -> f32 {
     if o >= dims.out_dim {
         return 0.0;
     }
-    return output_gradient(dy[n * dims.dy_stride + dims.dy_offset + o], n * dims.y_stride + dims.y_offset + o);
+    return output_gradient(dy[n * dims.dy_stride + dims.dy_offset + o], n * dims.y_stride + dims.y_offset, o);
 }
 
 @compute @workgroup_size(WORKGROUP)

@@ -294,26 +294,10 @@ fn run_entry(ctx: &GpuContext, batch: &Batch, render: bool) -> GpuRun {
     let hs = batch.heads_stride() as u32;
     let inputs = CompositeInputs {
         step_uniforms: &step,
-        h0: RowView {
-            buffer: density.clone(),
-            stride: DENSITY_STRIDE,
-            offset: 0,
-        },
-        color: RowView {
-            buffer: color.clone(),
-            stride: 3,
-            offset: 0,
-        },
-        logits: RowView {
-            buffer: heads.clone(),
-            stride: hs,
-            offset: 0,
-        },
-        feature: RowView {
-            buffer: heads.clone(),
-            stride: hs,
-            offset: cfg.num_classes,
-        },
+        h0: RowView::new(&density, DENSITY_STRIDE, 0),
+        color: RowView::new(&color, 3, 0),
+        logits: RowView::new(&heads, hs, 0),
+        feature: RowView::new(&heads, hs, cfg.num_classes),
         intervals: &intervals,
         targets: &targets,
         slot: &slot,
@@ -589,26 +573,10 @@ fn composite_rejects_head_sources_too_small() {
     let small = storage_buffer_from(&ctx, "small", &[0.0f32; 16]).unwrap();
     let inputs = CompositeInputs {
         step_uniforms: &step,
-        h0: RowView {
-            buffer: small.clone(),
-            stride: 1,
-            offset: 0,
-        },
-        color: RowView {
-            buffer: small.clone(),
-            stride: 3,
-            offset: 0,
-        },
-        logits: RowView {
-            buffer: small.clone(),
-            stride: 3,
-            offset: 0,
-        },
-        feature: RowView {
-            buffer: small.clone(),
-            stride: 5,
-            offset: 0,
-        },
+        h0: RowView::new(&small, 1, 0),
+        color: RowView::new(&small, 3, 0),
+        logits: RowView::new(&small, 3, 0),
+        feature: RowView::new(&small, 5, 0),
         intervals: &small,
         targets: &small,
         slot: &small,
@@ -638,26 +606,10 @@ fn composite_throughput_report() {
     let hs = batch.heads_stride() as u32;
     let inputs = CompositeInputs {
         step_uniforms: &step,
-        h0: RowView {
-            buffer: density.clone(),
-            stride: DENSITY_STRIDE,
-            offset: 0,
-        },
-        color: RowView {
-            buffer: color.clone(),
-            stride: 3,
-            offset: 0,
-        },
-        logits: RowView {
-            buffer: heads.clone(),
-            stride: hs,
-            offset: 0,
-        },
-        feature: RowView {
-            buffer: heads.clone(),
-            stride: hs,
-            offset: cfg.num_classes,
-        },
+        h0: RowView::new(&density, DENSITY_STRIDE, 0),
+        color: RowView::new(&color, 3, 0),
+        logits: RowView::new(&heads, hs, 0),
+        feature: RowView::new(&heads, hs, cfg.num_classes),
         intervals: &intervals,
         targets: &targets,
         slot: &slot,

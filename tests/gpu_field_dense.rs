@@ -11,7 +11,8 @@
 //! must be the reference's dZ within bf16 rounding, and dW the sum of the stored values.
 use scribblefield::field::bf16;
 use scribblefield::field::gpu::dense::{
-    DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, PackedReads, RowView, UNIFORM_WEIGHT_FLOATS,
+    DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, PackedReads, RowFormat, RowView,
+    UNIFORM_WEIGHT_FLOATS,
 };
 use scribblefield::field::gpu::keep::{HeadRows, workgroup_counts};
 use scribblefield::field::params::{MlpLayout, ParamLayout};
@@ -58,11 +59,7 @@ impl ViewLayout {
     }
 
     fn view(&self, buffer: &wgpu::Buffer) -> RowView {
-        RowView {
-            buffer: buffer.clone(),
-            stride: self.stride as u32,
-            offset: self.offset as u32,
-        }
+        RowView::new(buffer, self.stride as u32, self.offset as u32)
     }
 
     fn row<'a>(&self, data: &'a [f32], n: usize) -> &'a [f32] {
@@ -176,6 +173,17 @@ struct MlpCase<'a> {
     /// count read from a buffer and the kernels launched indirectly (the counts written here
     /// as the keep pass writes them).
     kept: Option<usize>,
+}
+
+/// Every word of bf16 rows `from..rows` (`row_words` each) must still hold the garbage pattern.
+fn assert_bf16_rows_untouched(what: &str, words: &[u32], row_words: usize, from: usize, rows: usize) {
+    for index in from * row_words..rows * row_words {
+        assert_eq!(
+            words[index],
+            GARBAGE_WORDS[index % GARBAGE_WORDS.len()],
+            "{what}: word {index} past the kept rows was written"
+        );
+    }
 }
 
 /// Every element of rows `from..rows` of `view` must still hold the garbage pattern.
@@ -292,11 +300,34 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
     }
     ctx.queue.submit([encoder.finish()]);
 
-    // Every layer's output, as the GPU stored it.
+    // Every layer's output, as the GPU stored it (bf16 rows decoded into packed f32 rows).
     let mut gpu_outputs: Vec<Vec<f32>> = Vec::new();
+    let mut formats = Vec::new();
     for k in 0..layers {
-        gpu_outputs.push(read_buffer_blocking(ctx, &mlp.layer_output(k).unwrap().buffer).unwrap());
+        let view = mlp.layer_output(k).unwrap();
+        let words: Vec<u32> = read_buffer_blocking(ctx, &view.buffer).unwrap();
+        formats.push(view.format);
+        gpu_outputs.push(match view.format {
+            RowFormat::F32 => words.iter().map(|&w| f32::from_bits(w)).collect(),
+            RowFormat::Bf16 => {
+                let width = dims[k + 1];
+                let row_words = view.stride as usize / 2;
+                if k + 1 == layers {
+                    panic!("{name}: the MLP's output is stored as bf16");
+                }
+                assert_bf16_rows_untouched(&format!("{name} layer {k} output"), &words, row_words, active, rows);
+                (0..rows)
+                    .flat_map(|n| (0..width).map(move |o| (n, o)))
+                    .map(|(n, o)| bf16::row_value(&words[n * row_words..(n + 1) * row_words], o))
+                    .collect()
+            }
+        });
     }
+    let bf16_hidden = formats[..layers - 1].iter().all(|f| *f == RowFormat::Bf16);
+    assert!(
+        bf16_hidden || formats.iter().all(|f| *f == RowFormat::F32),
+        "{name}: hidden layers in different formats {formats:?}"
+    );
     let output_views: Vec<ViewLayout> = (0..layers)
         .map(|k| match (k + 1 == layers, output_view) {
             (true, true) => output_layout,
@@ -310,7 +341,7 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
     if output_view {
         output_layout.assert_gaps_untouched(&format!("{name} output"), &gpu_outputs[layers - 1], rows);
     }
-    for k in 0..layers {
+    for k in (0..layers).filter(|&k| formats[k] == RowFormat::F32) {
         let what = format!("{name} layer {k} output");
         assert_rows_untouched(&what, output_views[k], &gpu_outputs[k], active, rows);
     }
@@ -333,24 +364,39 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
     let mut worst_input_grad = 0.0f64;
     for n in 0..active {
         let x = to_f64(input_layout.row(&input, n));
-        let reference = forward(dims, &weights, &x);
-        let magnitude = forward(dims, &abs_weights, &abs(&x));
-        for k in 0..layers {
-            let gpu = output_views[k].row(&gpu_outputs[k], n);
-            let what = format!("{name} row {n} layer {k} output");
-            let worst = assert_close(
-                &what,
-                gpu,
-                &reference.activations[k + 1],
-                &magnitude.activations[k + 1],
-                FORWARD_TOLERANCE,
-            );
-            worst_forward = worst_forward.max(worst);
-        }
-        // The backward is checked on the GPU's own activations, so both take the same ReLU
-        // branches even where a pre-activation is within rounding of 0.
+        // Each layer is checked on its input as the GPU stored it, so the reference takes the
+        // same ReLU branches even where a pre-activation is within rounding of 0, and a bf16
+        // layer's rounding is checked where it happens.
         let mut activations = vec![x.clone()];
         activations.extend((0..layers).map(|k| to_f64(output_views[k].row(&gpu_outputs[k], n))));
+        let mut offset = 0;
+        for k in 0..layers {
+            let (n_in, n_out) = (dims[k], dims[k + 1]);
+            let layer_weights = &weights[offset..offset + n_in * n_out];
+            offset += n_in * n_out;
+            let hidden = k + 1 < layers;
+            let relu = |v: f64| if hidden { v.max(0.0) } else { v };
+            let reference: Vec<f64> = forward(&[n_in, n_out], layer_weights, &activations[k])
+                .output()
+                .iter()
+                .map(|&v| relu(v))
+                .collect();
+            let magnitude = forward(&[n_in, n_out], &abs(layer_weights), &abs(&activations[k]));
+            let rounding = if formats[k] == RowFormat::Bf16 {
+                BF16_TOLERANCE
+            } else {
+                0.0
+            };
+            let allowed: Vec<f64> = reference
+                .iter()
+                .zip(magnitude.output())
+                .map(|(r, m)| m + rounding / FORWARD_TOLERANCE * r.abs())
+                .collect();
+            let gpu = output_views[k].row(&gpu_outputs[k], n);
+            let what = format!("{name} row {n} layer {k} output");
+            let worst = assert_close(&what, gpu, &reference, &allowed, FORWARD_TOLERANCE);
+            worst_forward = worst_forward.max(worst);
+        }
         let trace = MlpTrace { activations };
         let abs_trace = MlpTrace {
             activations: trace.activations.iter().map(|a| abs(a)).collect(),
@@ -452,7 +498,7 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
     );
     let chained = mlp.chains_input_gradients();
     eprintln!(
-        "{name} {dims:?} × {active} of {rows} rows, kernels {families:?}, input gradients chained {chained}: worst error / \
+        "{name} {dims:?} × {active} of {rows} rows, kernels {families:?}, hidden rows {formats:?}, input gradients chained {chained}: worst error / \
          magnitude: forward {worst_forward:.2e}, input gradient {worst_input_grad:.2e}, stored dZ {worst_dz:.2e}, weight gradient {worst_weight:.2e}"
     );
     gpu_outputs
@@ -807,18 +853,35 @@ fn forward_only_pass_refuses_backward_and_bad_views_are_errors() {
     assert!(mlp.record_backward(&mut pass).is_err());
     drop(pass);
     // One row too many for the buffer, and columns spilling past the stride.
-    let too_long = RowView {
-        buffer: input.clone(),
-        stride: width + 1,
-        offset: 0,
-    };
+    let too_long = RowView::new(&input, width + 1, 0);
     assert!(pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc(too_long))).is_err());
-    let spilling = RowView {
-        buffer: input.clone(),
-        stride: width,
-        offset: 1,
-    };
+    let spilling = RowView::new(&input, width, 1);
     assert!(pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc(spilling))).is_err());
+    // bf16 rows: an odd offset is refused, and so is any bf16 row for the tiled kernels.
+    let odd = RowView {
+        offset: 1,
+        stride: width + 2,
+        ..RowView::packed_bf16(&input, width)
+    };
+    let error = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc(odd)))
+        .err()
+        .unwrap();
+    assert!(error.to_string().contains("even stride and offset"), "{error}");
+    let bf16_input = RowView::packed_bf16(&input, width);
+    let error = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc(bf16_input.clone())))
+        .err()
+        .unwrap();
+    assert!(
+        error.to_string().contains("bf16 rows need the packed-weight kernels"),
+        "{error}"
+    );
+    // The packed-weight kernels take it, and store the hidden outputs as bf16 unless told not to.
+    let mut uniform = DensePipelines::with_family(DenseFamily::UniformWeights);
+    let mlp = pollster::block_on(MlpPass::new(&ctx, &mut uniform, desc(bf16_input))).unwrap();
+    assert_eq!(mlp.hidden_rows(), RowFormat::Bf16);
+    let mut f32_rows = DensePipelines::with_family(DenseFamily::UniformWeights).with_hidden_rows(RowFormat::F32);
+    let mlp = pollster::block_on(MlpPass::new(&ctx, &mut f32_rows, desc(RowView::packed(&input, width)))).unwrap();
+    assert_eq!(mlp.hidden_rows(), RowFormat::F32);
 }
 
 /// Measurement, not a check: GFLOP/s of the default density MLP's forward and backward at

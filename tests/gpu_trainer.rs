@@ -411,7 +411,7 @@ fn check_one_step_gradient(
         })
         .collect();
     let mut model = FieldModel::new(cfg.clone()).unwrap();
-    model.dz_rows = trainer.dz_rows();
+    model.stored_rows = trainer.stored_rows();
     let mut reference = vec![0.0f64; params.len()];
     let params64: Vec<f64> = params.iter().map(|&p| f64::from(p)).collect();
     let reference_losses = model.loss_and_gradient(&params64, &batch, &mut reference);

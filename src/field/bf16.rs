@@ -1,7 +1,7 @@
 //! bf16 rows, the CPU twin of `shaders/_bf16.wgsl`: the uniform-window weight gradient stores
 //! dZ as bf16 (the top half of an f32), two values per u32 word, value 2p of a row in the low
 //! half of word p, rows padded to a multiple of 8 values (docs/architecture.md, "dZ in bf16").
-//! The reference rounds dZ the same way where the GPU does (`reference::mlp::DzRows`).
+//! The reference rounds dZ the same way where the GPU does (`reference::mlp::StoredRows`).
 
 /// `n` rounded up to a multiple of 8: a bf16 row's length in values (`padded_to_vec8`).
 pub fn padded_to_vec8(n: u32) -> u32 {

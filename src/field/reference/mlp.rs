@@ -29,6 +29,12 @@ impl<R: Real> MlpTrace<R> {
 
 /// Forward pass of one input vector (`dims[0]` values).
 pub fn forward<R: Real>(dims: &[usize], weights: &[R], input: &[R]) -> MlpTrace<R> {
+    forward_stored(dims, weights, input, Rounding::Exact)
+}
+
+/// [`forward`] with every hidden layer's output (after the ReLU) seen as `hidden` says: as the
+/// GPU stores it, so every later layer and the backward read what the GPU's read.
+pub fn forward_stored<R: Real>(dims: &[usize], weights: &[R], input: &[R], hidden: Rounding) -> MlpTrace<R> {
     debug_assert_eq!(weights.len(), weight_count(dims));
     debug_assert_eq!(input.len(), dims[0]);
     let layers = dims.len() - 1;
@@ -41,7 +47,7 @@ pub fn forward<R: Real>(dims: &[usize], weights: &[R], input: &[R]) -> MlpTrace<
         let mut y = vec![R::ZERO; n_out];
         layer.forward(&activations[k], &mut y);
         if k + 1 < layers {
-            y.iter_mut().for_each(|v| *v = v.max(R::ZERO));
+            y.iter_mut().for_each(|v| *v = hidden.apply(v.max(R::ZERO)));
         }
         activations.push(y);
         offset += n_in * n_out;
@@ -49,14 +55,33 @@ pub fn forward<R: Real>(dims: &[usize], weights: &[R], input: &[R]) -> MlpTrace<
     MlpTrace { activations }
 }
 
-/// How a layer's weight gradient sees its dZ (∂L/∂ the layer's output before the ReLU): as
-/// computed, or rounded to bf16 as the GPU's uniform-window weight gradient stores it
-/// (`crate::field::bf16`). The input gradient always takes dZ as computed.
+/// How the reference sees a value the GPU stores: as computed, or rounded to bf16 (through f32)
+/// as the GPU's bf16 rows hold it (`crate::field::bf16`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum DzRows {
+pub enum Rounding {
     #[default]
     Exact,
     Bf16,
+}
+
+impl Rounding {
+    pub fn apply<R: Real>(self, value: R) -> R {
+        match self {
+            Rounding::Exact => value,
+            Rounding::Bf16 => R::of_f32(bf16::round(value.to_f64() as f32)),
+        }
+    }
+}
+
+/// How the GPU stores an MLP's rows, for the reference to round the same way.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct StoredRows {
+    /// How layer k's weight gradient sees its dZ (∂L/∂ the layer's output before the ReLU):
+    /// rounded where the GPU's uniform-window weight gradient stores it as bf16 (layers past
+    /// the end: exact). The input gradient always takes dZ as computed.
+    pub dz: Vec<Rounding>,
+    /// How the hidden layers' outputs are stored ([`forward_stored`]).
+    pub hidden: Rounding,
 }
 
 /// Vector-Jacobian product: given `grad_out` = ∂L/∂output (`dims[last]` values), adds
@@ -74,14 +99,14 @@ pub fn backward<R: Real>(
 }
 
 /// [`backward`] with layer k's weight gradient reading dZ as `dz[k]` says (layers past the
-/// slice's end: [`DzRows::Exact`]).
+/// slice's end: [`Rounding::Exact`]).
 pub fn backward_with_dz<R: Real>(
     dims: &[usize],
     weights: &[R],
     trace: &MlpTrace<R>,
     grad_out: &[R],
     weight_grad: &mut [R],
-    dz: &[DzRows],
+    dz: &[Rounding],
 ) -> Vec<R> {
     let layers = dims.len() - 1;
     let mut offsets = Vec::with_capacity(layers);
@@ -98,12 +123,9 @@ pub fn backward_with_dz<R: Real>(
         let x = &trace.activations[k];
         let mut grad_in = vec![R::ZERO; n_in];
         match dz.get(k).copied().unwrap_or_default() {
-            DzRows::Exact => layer.backward(x, &grad, wg, None, Some(&mut grad_in)),
-            DzRows::Bf16 => {
-                let rounded: Vec<R> = grad
-                    .iter()
-                    .map(|&g| R::of_f32(bf16::round(g.to_f64() as f32)))
-                    .collect();
+            Rounding::Exact => layer.backward(x, &grad, wg, None, Some(&mut grad_in)),
+            Rounding::Bf16 => {
+                let rounded: Vec<R> = grad.iter().map(|&g| Rounding::Bf16.apply(g)).collect();
                 layer.backward(x, &rounded, wg, None, None);
                 layer.input_gradient(&grad, &mut grad_in);
             }
@@ -211,7 +233,7 @@ mod tests {
 
         // Layer 1 rounded: its dW takes bf16(dZ); the other layers and dX stay exact.
         let mut rounded = vec![0.0; weights.len()];
-        let rows = [DzRows::Exact, DzRows::Bf16];
+        let rows = [Rounding::Exact, Rounding::Bf16];
         let input_grad_rounded = backward_with_dz(&dims, &weights, &trace, &probe, &mut rounded, &rows);
         assert_eq!(input_grad_rounded, input_grad);
         let layer1 = 35..35 + 42;

@@ -23,7 +23,7 @@ mod model_tests;
 
 pub use adam::Adam;
 pub use loss::{LossTerms, RayTarget};
-pub use model::{FieldDzRows, FieldModel, SampledRay, TrainingRay};
+pub use model::{FieldModel, FieldRows, SampledRay, TrainingRay};
 pub use real::Real;
 pub use render::Channels;
 pub use sampling::Ray;

@@ -37,18 +37,18 @@ pub struct FieldModel {
     /// (`loss::opacity_loss`); the trainer takes it from its labels
     /// (`PropagationCache::far_class`). None: no such term.
     pub far_class: Option<u32>,
-    /// How each MLP layer's weight gradient sees dZ; the GPU trainer says which of its layers
-    /// store it as bf16 (`Trainer::dz_rows`). Default: exact everywhere.
-    pub dz_rows: FieldDzRows,
+    /// How each MLP's hidden outputs and each layer's dZ are seen; the GPU trainer says which
+    /// it stores as bf16 (`Trainer::stored_rows`). Default: exact everywhere.
+    pub stored_rows: FieldRows,
 }
 
-/// [`mlp::DzRows`] per layer of each of the field's MLPs (layers past a list's end: exact).
+/// [`mlp::StoredRows`] of each of the field's MLPs.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct FieldDzRows {
-    pub density: Vec<mlp::DzRows>,
-    pub color: Vec<mlp::DzRows>,
-    pub feature: Vec<mlp::DzRows>,
-    pub semantic: Vec<mlp::DzRows>,
+pub struct FieldRows {
+    pub density: mlp::StoredRows,
+    pub color: mlp::StoredRows,
+    pub feature: mlp::StoredRows,
+    pub semantic: mlp::StoredRows,
 }
 
 /// One ray's samples, ready for the field.
@@ -151,7 +151,7 @@ impl FieldModel {
             },
             config,
             far_class: None,
-            dz_rows: FieldDzRows::default(),
+            stored_rows: FieldRows::default(),
         })
     }
 
@@ -174,22 +174,38 @@ impl FieldModel {
         let l = &self.layout;
         let mut encoding = vec![R::ZERO; self.config.encoding_dim()];
         self.encode_position(params, pos, &mut encoding);
-        let density = mlp::forward(&l.density.dims, &params[l.density.range()], &encoding);
+        let rows = &self.stored_rows;
+        let density = mlp::forward_stored(
+            &l.density.dims,
+            &params[l.density.range()],
+            &encoding,
+            rows.density.hidden,
+        );
         let sigma = activations::density(density.output()[0]);
         let geometry = &density.output()[1..];
 
         let color_in: Vec<R> = view_sh.iter().chain(geometry).copied().collect();
-        let color = mlp::forward(&l.color.dims, &params[l.color.range()], &color_in);
+        let color = mlp::forward_stored(&l.color.dims, &params[l.color.range()], &color_in, rows.color.hidden);
         let rgb: [R; 3] = std::array::from_fn(|c| activations::sigmoid(color.output()[c]));
 
-        let feature = mlp::forward(&l.feature.dims, &params[l.feature.range()], geometry);
+        let feature = mlp::forward_stored(
+            &l.feature.dims,
+            &params[l.feature.range()],
+            geometry,
+            rows.feature.hidden,
+        );
         let semantic_in: Vec<R> = feature
             .output()
             .iter()
             .map(|f| f.max(R::ZERO))
             .chain(geometry[..self.config.semantic_geometry_dim()].iter().copied())
             .collect();
-        let semantic = mlp::forward(&l.semantic.dims, &params[l.semantic.range()], &semantic_in);
+        let semantic = mlp::forward_stored(
+            &l.semantic.dims,
+            &params[l.semantic.range()],
+            &semantic_in,
+            rows.semantic.hidden,
+        );
 
         let mut value = Vec::with_capacity(self.channels.count());
         value.extend_from_slice(&rgb);
@@ -303,7 +319,7 @@ impl FieldModel {
             &sample.density,
             &grad_density_out,
             &mut grad[l.density.range()],
-            &self.dz_rows.density,
+            &self.stored_rows.density.dz,
         );
 
         // Hash grid (the frequency part has no parameters).
@@ -340,7 +356,7 @@ impl FieldModel {
             &sample.semantic,
             grad_logits,
             &mut grad[l.semantic.range()],
-            &self.dz_rows.semantic,
+            &self.stored_rows.semantic.dz,
         );
         // Only a share of it reaches the shared field (FieldConfig::semantic_trunk_gradient).
         let trunk = R::of_f32(self.config.semantic_trunk_gradient);
@@ -364,7 +380,7 @@ impl FieldModel {
             &sample.feature,
             &grad_f,
             &mut grad[l.feature.range()],
-            &self.dz_rows.feature,
+            &self.stored_rows.feature.dz,
         );
         add_into(grad_geometry, &grad_feature_in);
 
@@ -378,7 +394,7 @@ impl FieldModel {
             &sample.color,
             &grad_color_out,
             &mut grad[l.color.range()],
-            &self.dz_rows.color,
+            &self.stored_rows.color.dz,
         );
         add_into(grad_geometry, &grad_color_in[sh::SH_COEFFS..]);
     }

@@ -17,7 +17,7 @@ use super::uniform::{
     MAX_UNROLLED, MlpPacking, UNIFORM_WORKGROUP, is_lavapipe, padded_to_vec4, uniform_block, uniform_dispatch,
     uniform_weight_chunks,
 };
-use super::{DenseFamily, RowView};
+use super::{DenseFamily, RowFormat, RowView, bf16_rows};
 use crate::field::gpu::keep::HeadRows;
 use crate::gpu::buffers::{storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::Dispatch;
@@ -102,6 +102,8 @@ pub(super) struct BackwardChain {
     widths: Vec<u32>,
     input_grad: bool,
     blocks: u32,
+    /// How the hidden outputs it masks with are stored.
+    hidden: RowFormat,
 }
 
 impl BackwardChain {
@@ -148,6 +150,12 @@ impl BackwardChain {
         let (no_dx, no_y_upper, no_dz2) = (unused("dX")?, unused("Y_1")?, unused("dZ_2")?);
         let view = |k: usize| outputs.get(k).filter(|_| k + 1 < layers);
         let hidden0 = view(0).ok_or_else(|| GpuError::invalid_argument(&label, "no hidden layer"))?;
+        if view(1).is_some_and(|upper| upper.format != hidden0.format) {
+            return Err(GpuError::invalid_argument(
+                &label,
+                "the hidden outputs differ in format",
+            ));
+        }
         let y0 = (hidden0.stride, hidden0.offset);
         let y1 = view(1).map_or((0, 0), |v| (v.stride, v.offset));
         let dims = DenseDims {
@@ -192,6 +200,7 @@ impl BackwardChain {
                 ("W1", f64::from(base[1])),
                 ("W2", f64::from(base[2])),
                 ("FIXED_BLOCK", f64::from(dx_block)),
+                bf16_rows("Y_BF16", hidden0),
             ];
             let pipeline = pipelines
                 .compile(ctx, DenseKernel::BackwardChainUniform, &constants)
@@ -222,12 +231,13 @@ impl BackwardChain {
             widths,
             input_grad: input_grad.is_some(),
             blocks,
+            hidden: hidden0.format,
         })
     }
 
     /// Bytes it moves over `rows` rows (every element a dispatch reads or writes counted once
     /// per block of the first layer's dX, since each block redoes the walk): dY and the hidden
-    /// outputs read, the packed weights read, every layer's dZ written in bf16 rows, dX
+    /// outputs (in their format) read, the packed weights read, every layer's dZ written in bf16 rows, dX
     /// written.
     pub(super) fn global_bytes(&self, rows: u64) -> u64 {
         let w: Vec<u64> = self.widths.iter().map(|&d| u64::from(d)).collect();
@@ -237,6 +247,10 @@ impl BackwardChain {
         let weights: u64 = (first_fed..layers)
             .map(|k| w[k + 1] * u64::from(padded_to_vec4(self.widths[k])))
             .sum();
+        let hidden = match self.hidden {
+            RowFormat::F32 => hidden,
+            RowFormat::Bf16 => w[1..layers].iter().map(|d| d.div_ceil(2)).sum(),
+        };
         let reads = rows * (w[layers] + hidden) + weights;
         let dz: u64 = w[1..]
             .iter()

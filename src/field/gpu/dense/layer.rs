@@ -6,7 +6,7 @@ use std::ops::Range;
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind, ProductWeights};
 use super::tiled::{REDUCE_SHAPE, REDUCE_WORKGROUP, TileShape, weight_chunks};
 use super::uniform::{UniformWeightPartials, WindowedLayer, dz_windows_buffer, padded_to_vec4, uniform_weight_chunks};
-use super::{Activation, DenseFamily, RowView};
+use super::{Activation, DenseFamily, RowFormat, RowView, bf16_rows};
 use crate::field::gpu::keep::HeadRows;
 use crate::gpu::buffers::{storage_buffer_from, storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::{Dispatch, IndirectArgs, bind_named};
@@ -185,6 +185,8 @@ pub struct DenseForward {
     /// One per block where each block is its own pipeline, otherwise one.
     dispatches: Vec<Dispatch>,
     family: DenseFamily,
+    /// How X and Y are stored.
+    formats: (RowFormat, RowFormat),
 }
 
 impl DenseForward {
@@ -208,7 +210,14 @@ impl DenseForward {
         check_binding(ctx, &label, &input.buffer)?;
         check_binding(ctx, &label, &output.buffer)?;
         let (kernel, product_weights, workgroups, family, rows_per_workgroup) = pipelines
-            .product_kernel(ctx, &label, (params, packed), spec, ProductKind::Forward, false)
+            .product_kernel(
+                ctx,
+                &label,
+                (params, packed),
+                spec,
+                ProductKind::Forward,
+                &[bf16_rows("X_BF16", input), bf16_rows("Y_BF16", output)],
+            )
             .await?;
         let packed = matches!(product_weights, ProductWeights::Packed(_));
         let (weights, weight_offset) = product_weights.binding();
@@ -240,6 +249,7 @@ impl DenseForward {
             packed,
             dispatches,
             family,
+            formats: (input.format, output.format),
         })
     }
 
@@ -248,8 +258,8 @@ impl DenseForward {
     }
 
     /// Bytes its dispatch moves through global memory over `rows` rows (every element read or
-    /// written counted once): X read, Y written, the weights (or their packed copy) read. The
-    /// MLP counts the packing.
+    /// written counted once, bf16 rows as their words): X read, Y written, the weights (or their
+    /// packed copy) read. The MLP counts the packing.
     pub fn global_bytes(&self, rows: u64) -> u64 {
         let (i, o) = (u64::from(self.spec.in_dim), u64::from(self.spec.out_dim));
         let weights = if self.packed {
@@ -257,7 +267,8 @@ impl DenseForward {
         } else {
             i * o
         };
-        WORD * (rows * (i + o) + weights)
+        let (x, y) = self.formats;
+        WORD * (rows * (row_words(x, self.spec.in_dim) + row_words(y, self.spec.out_dim)) + weights)
     }
 
     /// The kernels this layer's forward runs (uniform weights only where the layer fits).
@@ -300,6 +311,8 @@ pub struct DenseBackward {
     dz: Option<wgpu::Buffer>,
     /// The row-count word its kernels read.
     row_count: wgpu::Buffer,
+    /// How X and Y are stored.
+    formats: (RowFormat, RowFormat),
 }
 
 /// The first half of dW: every chunk of rows' partial matrix.
@@ -339,6 +352,11 @@ impl DenseBackward {
         output.check(&format!("{label} output"), spec.rows, spec.out_dim)?;
         let output_grad = gradients.output_grad;
         output_grad.check(&format!("{label} output gradient"), spec.rows, spec.out_dim)?;
+        // (A chained layer's output gradient is a stand-in it never reads.)
+        let dy_bf16 = output_grad.is_bf16() && !gradients.dz_from_chain;
+        if dy_bf16 || gradients.input_grad.is_some_and(RowView::is_bf16) {
+            return Err(GpuError::invalid_argument(&label, "gradients are f32 rows"));
+        }
         for buffer in [&input.buffer, &output.buffer, &output_grad.buffer] {
             check_binding(ctx, &label, buffer)?;
         }
@@ -377,6 +395,10 @@ impl DenseBackward {
                 input_grad.check(&label, spec.rows, spec.in_dim)?;
                 check_binding(ctx, &label, &input_grad.buffer)?;
                 let writes_dz = dz.is_some();
+                let constants = [
+                    ("WRITE_DZ", f64::from(u8::from(writes_dz))),
+                    bf16_rows("Y_BF16", output),
+                ];
                 let (kernel, product_weights, workgroups, family, rows_per_workgroup) = pipelines
                     .product_kernel(
                         ctx,
@@ -384,7 +406,7 @@ impl DenseBackward {
                         (params, packed),
                         spec,
                         ProductKind::BackwardInput,
-                        writes_dz,
+                        &constants,
                     )
                     .await?;
                 let (weights, weight_offset) = product_weights.binding();
@@ -469,6 +491,12 @@ impl DenseBackward {
                 .await?,
             ),
             None => {
+                if input.is_bf16() || output.is_bf16() {
+                    return Err(GpuError::invalid_argument(
+                        &label,
+                        "the tiled weight gradient reads f32 rows: bf16 rows need uniform windows",
+                    ));
+                }
                 let pipeline = pipelines.get(ctx, DenseKernel::PartialSums, shape).await?;
                 let workgroups = [
                     spec.in_dim.div_ceil(shape.tile_columns()),
@@ -511,6 +539,7 @@ impl DenseBackward {
             chunks,
             dz: dz_kept,
             row_count: rows,
+            formats: (input.format, output.format),
         })
     }
 
@@ -526,7 +555,8 @@ impl DenseBackward {
     }
 
     /// Bytes its dispatches move through global memory over `rows` rows (every element a
-    /// dispatch reads or writes counted once; dZ = dY masked by the ReLU reads Y as well):
+    /// dispatch reads or writes counted once, bf16 rows as their words; dZ = dY masked by the
+    /// ReLU reads Y as well):
     /// - dX: dY (and Y) and the weights (or their packed copy) read, dX written, and dZ in padded
     ///   rows where the uniform-window weight gradient reads it;
     /// - uniform weight gradient: dZ formed by its own kernel where dX's does not, then X and dZ
@@ -538,7 +568,11 @@ impl DenseBackward {
         let relu = u64::from(self.spec.activation == Activation::Relu);
         // dZ's bf16 rows, in words.
         let dz_row = u64::from(crate::field::bf16::row_words(self.spec.out_dim));
-        let dz_from_dy = rows * o * (1 + relu);
+        let (x_row, y_row) = (
+            row_words(self.formats.0, self.spec.in_dim),
+            row_words(self.formats.1, self.spec.out_dim),
+        );
+        let dz_from_dy = rows * (o + relu * y_row);
         // dX's kernel forms the dZ the uniform windows read unless the layer masks it itself.
         let dz_written = matches!(&self.partial_sums, WeightPartials::Uniform(p) if !p.masks());
         let input_grad = match &self.input_grad {
@@ -557,9 +591,9 @@ impl DenseBackward {
         let weight_grad = match &self.partial_sums {
             WeightPartials::Uniform(_) => {
                 let mask = if dz_written { 0 } else { dz_from_dy + rows * dz_row };
-                mask + rows * (i + dz_row) + partials
+                mask + rows * (x_row + dz_row) + partials
             }
-            WeightPartials::Tiled(_) => dz_from_dy + rows * i + partials,
+            WeightPartials::Tiled(_) => dz_from_dy + rows * x_row + partials,
         };
         WORD * (input_grad + weight_grad + partials + 2 * i * o)
     }
@@ -583,6 +617,11 @@ impl DenseBackward {
     pub fn uses_uniform_windows(&self) -> bool {
         matches!(self.partial_sums, WeightPartials::Uniform(_))
     }
+}
+
+/// Words one row of `width` values takes in `format` (bf16: pairs, what the traffic counts).
+pub(super) fn row_words(format: RowFormat, width: u32) -> u64 {
+    RowView::words(format, 1, width)
 }
 
 #[cfg(test)]

@@ -3,7 +3,8 @@ use super::chain::{BackwardChain, ChainDesc, chain_block};
 use super::layer::{DenseBackward, DenseForward, DenseGradients, DenseLayerSpec};
 use super::pipelines::ProductKind;
 use super::uniform::MlpPacking;
-use super::{Activation, DenseFamily, DensePipelines, RowView};
+use super::uniform::uniform_weight_chunks;
+use super::{Activation, DenseFamily, DensePipelines, RowFormat, RowView};
 use crate::field::gpu::keep::HeadRows;
 use crate::field::params::MlpLayout;
 use crate::gpu::buffers::storage_buffer_zeroed;
@@ -97,24 +98,29 @@ impl MlpPass {
             })
             .collect();
 
-        let mut outputs = Vec::with_capacity(layers);
-        for (k, spec) in specs.iter().enumerate() {
-            let view = match (&output, k + 1 == layers) {
-                (Some(view), true) => view.clone(),
-                _ => {
-                    let count = rows as usize * spec.out_dim as usize;
-                    let buffer = storage_buffer_zeroed::<f32>(ctx, &format!("{} output", spec.label), count)?;
-                    RowView::packed(&buffer, spec.out_dim)
-                }
-            };
-            outputs.push(view);
-        }
         // dX of layer 0 only where the caller wants the input's gradient; of every later layer
         // whenever there is a backward.
         let input_grads: Vec<bool> = (0..layers)
             .map(|k| gradients.as_ref().is_some_and(|g| k > 0 || g.input_grad.is_some()))
             .collect();
         let packing = MlpPacking::new(ctx, pipelines, label, params, &specs, &input_grads).await?;
+        let hidden = hidden_format(ctx, pipelines, &specs, &packing, &input_grads, gradients.is_some());
+        let mut outputs = Vec::with_capacity(layers);
+        for (k, spec) in specs.iter().enumerate() {
+            let view = match (&output, k + 1 == layers) {
+                (Some(view), true) => view.clone(),
+                (_, last) => {
+                    let format = if last { RowFormat::F32 } else { hidden };
+                    let words = RowView::words(format, rows, spec.out_dim) as usize;
+                    let buffer = storage_buffer_zeroed::<f32>(ctx, &format!("{} output", spec.label), words)?;
+                    match format {
+                        RowFormat::F32 => RowView::packed(&buffer, spec.out_dim),
+                        RowFormat::Bf16 => RowView::packed_bf16(&buffer, spec.out_dim),
+                    }
+                }
+            };
+            outputs.push(view);
+        }
         let mut forward = Vec::with_capacity(layers);
         for (k, spec) in specs.iter().enumerate() {
             let layer_input = if k == 0 { &input } else { &outputs[k - 1] };
@@ -299,8 +305,42 @@ impl MlpPass {
             .collect()
     }
 
+    /// How the hidden layers' outputs are stored (f32 where there are none).
+    pub fn hidden_rows(&self) -> RowFormat {
+        let last = self.outputs.len().saturating_sub(1);
+        self.outputs[..last].first().map_or(RowFormat::F32, |view| view.format)
+    }
+
     /// The kernel family each layer's forward (and input gradient) runs.
     pub fn layer_families(&self) -> impl Iterator<Item = DenseFamily> + '_ {
         self.forward.iter().map(DenseForward::family)
+    }
+}
+
+/// How the hidden layers' outputs are stored: bf16 rows where every kernel that writes or reads
+/// them is of the packed-weight family (every layer's forward, every input gradient the MLP
+/// runs, every weight gradient through uniform windows) and `pipelines` does not ask for f32;
+/// f32 otherwise (the tiled kernels read f32 alone).
+fn hidden_format(
+    ctx: &GpuContext,
+    pipelines: &DensePipelines,
+    specs: &[DenseLayerSpec],
+    packing: &MlpPacking,
+    input_grads: &[bool],
+    backward: bool,
+) -> RowFormat {
+    let packed = |k: usize, kind| packing.window(k, kind).is_some();
+    let forward = (0..specs.len()).all(|k| packed(k, ProductKind::Forward));
+    let backward_packed = !backward
+        || (input_grads
+            .iter()
+            .enumerate()
+            .all(|(k, &dx)| !dx || packed(k, ProductKind::BackwardInput))
+            && specs.iter().all(|spec| uniform_weight_chunks(ctx, spec).is_some()));
+    let uniform = pipelines.family == DenseFamily::UniformWeights;
+    if uniform && forward && backward_packed {
+        pipelines.hidden_rows()
+    } else {
+        RowFormat::F32
     }
 }

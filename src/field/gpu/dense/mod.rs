@@ -37,6 +37,12 @@
 //! storage bindings in the page, whose compiler (Tint) divides on every uniform access
 //! (`shaders/_dense_uniform.wgsl`).
 //!
+//! Where every product of an MLP runs this family, its hidden layers' outputs are stored as
+//! bf16 rows ([`RowFormat::Bf16`], two values per word; `shaders/_bf16.wgsl`), which halves
+//! what the forward writes and every later pass reads of them (docs/architecture.md, "Hidden
+//! activations in bf16"). The MLP's input and output stay f32, and so does everything the
+//! tiled kernels touch.
+//!
 //! On lavapipe an MLP of 2 or 3 such layers whose hidden widths fit one invocation runs all its
 //! input gradients as one kernel ([`chain`]), each hidden layer's dX kept in registers.
 //!
@@ -57,8 +63,14 @@ pub use pipelines::DensePipelines;
 pub use tiled::TileShape;
 pub use uniform::{PackedReads, UNIFORM_WEIGHT_FLOATS};
 
-pub use crate::field::gpu::row_view::RowView;
+pub use crate::field::gpu::row_view::{RowFormat, RowView};
 use crate::gpu::GpuContext;
+
+/// The override constant `name` (`X_BF16`, `Y_BF16`) that makes a packed-weight kernel read or
+/// write `view`'s rows in its format.
+pub(super) fn bf16_rows(name: &'static str, view: &RowView) -> (&'static str, f64) {
+    (name, f64::from(u8::from(view.is_bf16())))
+}
 
 /// Which kernels compute the forward and input gradient of a layer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

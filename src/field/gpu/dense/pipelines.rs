@@ -2,12 +2,12 @@
 //! kernel family for one product. Compiled pipelines are kept by the context's pipeline cache,
 //! so every layer of every MLP (and every later trainer on the device) shares them.
 
-use super::DenseFamily;
 use super::layer::{DenseLayerSpec, range_binding};
 use super::tiled::{TileShape, row_tile_dispatch};
 use super::uniform::{
     MAX_UNROLLED, PackedReads, padded_to_vec4, uniform_block, uniform_dispatch, unrolls_on, widest_uniform_block,
 };
+use super::{DenseFamily, RowFormat};
 use crate::gpu::pipeline::{KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
@@ -110,6 +110,8 @@ pub struct DensePipelines {
     /// Whether the uniform-weight products write their reductions out step by step; `None`:
     /// where the device is faster with it (`uniform::unrolls_on`).
     unrolled_reductions: Option<bool>,
+    /// How MLPs whose kernels all run this family store their hidden outputs.
+    hidden_rows: RowFormat,
 }
 
 impl Default for DensePipelines {
@@ -131,7 +133,21 @@ impl DensePipelines {
             input_gradient_chain: None,
             packed_reads: None,
             unrolled_reductions: None,
+            hidden_rows: RowFormat::Bf16,
         }
+    }
+
+    /// The same with the hidden outputs of MLPs that run the uniform-weight family stored as
+    /// `format` (bf16 by default), so tests and benchmarks can compare both.
+    pub fn with_hidden_rows(self, format: RowFormat) -> DensePipelines {
+        DensePipelines {
+            hidden_rows: format,
+            ..self
+        }
+    }
+
+    pub(super) fn hidden_rows(&self) -> RowFormat {
+        self.hidden_rows
     }
 
     /// The same with the uniform-weight family reading its packed copies and dZ as `reads` says
@@ -331,8 +347,9 @@ impl DensePipelines {
     /// The kernel for one of a layer's weight products, given where the weights are: the
     /// parameters, and the window of the MLP's packed copy for this product if it has one
     /// (`MlpPacking::window`; then the uniform-weight kernel runs, tiled otherwise).
-    /// `writes_dz` (input gradient only): the uniform-weight kernel also writes dZ for the
-    /// uniform-window weight gradient (`dz_out`, WRITE_DZ).
+    /// `constants`: the uniform-weight kernel's own (the rows' formats, `X_BF16` and `Y_BF16`,
+    /// and for the input gradient `WRITE_DZ`: it also writes dZ for the uniform-window weight
+    /// gradient); a tiled product reads and writes f32 rows only, so a bf16 row is an error there.
     pub(super) async fn product_kernel<'a>(
         &self,
         ctx: &GpuContext,
@@ -340,7 +357,7 @@ impl DensePipelines {
         (params, packed): (&'a wgpu::Buffer, Option<wgpu::BindingResource<'a>>),
         spec: &DenseLayerSpec,
         kind: ProductKind,
-        writes_dz: bool,
+        constants: &[(&'static str, f64)],
     ) -> Result<ProductKernel<'a>, GpuError> {
         // The columns one invocation computes, the reduction's length, and the tiled kernel.
         let (columns, reduced, tiled_kernel) = match kind {
@@ -356,11 +373,10 @@ impl DensePipelines {
             if fixed.len() > 1 {
                 workgroups[2] = 1;
             }
+            let own = constants;
             let mut constants = vec![("BLOCK", f64::from(block))];
             constants.extend(unroll_constants);
-            if kind == ProductKind::BackwardInput {
-                constants.push(("WRITE_DZ", f64::from(u8::from(writes_dz))));
-            }
+            constants.extend_from_slice(own);
             let mut pipelines = Vec::with_capacity(fixed.len());
             for fixed_block in fixed {
                 let mut constants = constants.clone();
@@ -373,6 +389,15 @@ impl DensePipelines {
                 workgroups,
                 DenseFamily::UniformWeights,
                 super::uniform::UNIFORM_WORKGROUP,
+            ));
+        }
+        if let Some((name, _)) = constants
+            .iter()
+            .find(|(name, value)| name.ends_with("_BF16") && *value != 0.0)
+        {
+            return Err(GpuError::invalid_argument(
+                label,
+                format!("the tiled kernels take no {name}: bf16 rows need the packed-weight kernels"),
             ));
         }
         let shape = TileShape::for_product(columns, None);

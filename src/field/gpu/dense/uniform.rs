@@ -6,7 +6,7 @@ use std::num::NonZeroU64;
 
 use super::layer::{DenseLayerSpec, bound, range_binding};
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
-use super::{DenseFamily, RowView};
+use super::{DenseFamily, RowView, bf16_rows};
 use crate::field::bf16;
 use crate::gpu::buffers::uniform_buffer_from;
 use crate::gpu::dispatch::{Dispatch, IndirectArgs, bind_named};
@@ -197,7 +197,9 @@ impl UniformWeightPartials {
         let mask = if dz_written {
             None
         } else {
-            let mask_pipeline = pipelines.compile(ctx, DenseKernel::MaskOutputGradient, &[]).await?;
+            let mask_pipeline = pipelines
+                .compile(ctx, DenseKernel::MaskOutputGradient, &[bf16_rows("Y_BF16", output)])
+                .await?;
             let groups = Dispatch1d::for_device(
                 ctx,
                 u64::from(spec.rows) * u64::from(bf16::row_words(spec.out_dim)),
@@ -221,7 +223,9 @@ impl UniformWeightPartials {
 
         let block = weight_gradient_block(spec.out_dim, pipelines.uniform_block_limit(ctx));
         let columns = spec.in_dim.next_power_of_two().clamp(8, UNIFORM_WORKGROUP);
-        let (pipeline, layouts) = pipelines.chunk_sums_pipeline(ctx, block, columns).await?;
+        let (pipeline, layouts) = pipelines
+            .chunk_sums_pipeline(ctx, block, columns, (input, output))
+            .await?;
         let sums = pipelines.chunk_sums_kernel().spec();
         let common = bind_named(
             ctx,
@@ -381,6 +385,7 @@ impl DensePipelines {
         ctx: &GpuContext,
         block: u32,
         columns: u32,
+        (x, y): (&RowView, &RowView),
     ) -> Result<(wgpu::ComputePipeline, [wgpu::BindGroupLayout; 2]), GpuError> {
         let entry = |binding, ty, min: Option<u64>| wgpu::BindGroupLayoutEntry {
             binding,
@@ -418,7 +423,12 @@ impl DensePipelines {
             source,
             entry_point,
             layout: Some(&[&common, &windows]),
-            constants: &[("BLOCK", f64::from(block)), ("COLUMNS", f64::from(columns))],
+            constants: &[
+                ("BLOCK", f64::from(block)),
+                ("COLUMNS", f64::from(columns)),
+                bf16_rows("X_BF16", x),
+                bf16_rows("Y_BF16", y),
+            ],
         };
         let pipeline = create_compute_pipeline(ctx, &spec).await?;
         // The context hands out the very layouts the pipeline was built with.

@@ -25,7 +25,7 @@ use crate::scene::{Bounds, Pca, Scene};
 
 use super::adam::{AdamBuffers, AdamPass};
 use super::composite::{CompositeInputs, CompositeLayout, CompositePass, LOSS_WORDS};
-use super::dense::{DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowView};
+use super::dense::{DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowFormat, RowView};
 use super::encoding::{
     AtomicAdd, DirectionLayout, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
     PositionEncodeBuffers, PositionEncodePass, ShOutputLayout,
@@ -37,7 +37,7 @@ use super::rays::{NO_LABEL, RayGeometry, TARGET_FLAGS, TARGET_HEADER_WORDS, TARG
 use super::scene_buffers::{LabelIndex, SceneBuffers};
 use super::view::view_rays;
 pub use super::view::{DepthGuide, FrameAssembler, RenderedFrame, ViewCamera};
-use crate::field::reference::mlp::DzRows;
+use crate::field::reference::mlp::{Rounding, StoredRows};
 pub use stages::StageShape;
 use stages::{FIELD_STAGES, StepStage, TRAINING_STEP};
 
@@ -230,37 +230,17 @@ impl Trainer {
             cfg,
             &CompositeInputs {
                 step_uniforms: &step_uniforms,
-                h0: RowView {
-                    buffer: samples.density_out.clone(),
-                    stride: 1 + g,
-                    offset: 0,
-                },
-                color: RowView {
-                    buffer: color_out.clone(),
-                    stride: 3,
-                    offset: 0,
-                },
-                logits: RowView {
-                    buffer: logits.clone(),
-                    stride: c,
-                    offset: 0,
-                },
-                feature: RowView {
-                    buffer: samples.feature_out.clone(),
-                    stride: d,
-                    offset: 0,
-                },
+                h0: RowView::new(&samples.density_out, 1 + g, 0),
+                color: RowView::new(&color_out, 3, 0),
+                logits: RowView::new(&logits, c, 0),
+                feature: RowView::new(&samples.feature_out, d, 0),
                 intervals: &sample_points.intervals,
                 targets: &ray_batch.targets,
                 slot: &head_rows.slot,
             },
         )
         .await?;
-        let grad_view = |offset: usize| RowView {
-            buffer: composite.head_grads.clone(),
-            stride: grad_stride,
-            offset: offset as u32,
-        };
+        let grad_view = |offset: usize| RowView::new(&composite.head_grads, grad_stride, offset as u32);
         let grads = &optimizer.grads;
         let density = MlpPass::new(
             ctx,
@@ -292,11 +272,7 @@ impl Trainer {
                 layout: &layout.feature,
                 rows: n,
                 params: &optimizer.params,
-                input: RowView {
-                    buffer: samples.density_packed.clone(),
-                    stride: 1 + g,
-                    offset: 1,
-                },
+                input: RowView::new(&samples.density_packed, 1 + g, 1),
                 output: Some(RowView::packed(&samples.feature_out, d)),
                 gradients: Some(MlpGradients {
                     grads: grads.clone(),
@@ -561,16 +537,16 @@ impl Trainer {
         self.labelled_pixels > 0
     }
 
-    /// Which MLP layers' weight gradients sum dZ stored as bf16 (those reading it through
-    /// uniform windows), for the reference to round the same way.
-    pub fn dz_rows(&self) -> crate::field::reference::FieldDzRows {
-        let rows = |mlp: &MlpPass| {
-            mlp.weight_gradient_windows()
-                .into_iter()
-                .map(|windowed| if windowed { DzRows::Bf16 } else { DzRows::Exact })
-                .collect()
+    /// Which MLPs store their hidden outputs as bf16, and which layers' weight gradients sum
+    /// dZ stored as bf16 (those reading it through uniform windows), for the reference to round
+    /// the same way.
+    pub fn stored_rows(&self) -> crate::field::reference::FieldRows {
+        let bf16 = |yes: bool| if yes { Rounding::Bf16 } else { Rounding::Exact };
+        let rows = |mlp: &MlpPass| StoredRows {
+            dz: mlp.weight_gradient_windows().into_iter().map(bf16).collect(),
+            hidden: bf16(mlp.hidden_rows() == RowFormat::Bf16),
         };
-        crate::field::reference::FieldDzRows {
+        crate::field::reference::FieldRows {
             density: rows(&self.density),
             color: rows(&self.color),
             feature: rows(&self.feature),
