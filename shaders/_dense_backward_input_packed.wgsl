@@ -9,12 +9,16 @@
 // (`_bf16.wgsl`).
 override WRITE_DZ: bool = false;
 override Y_BF16: bool = false;
+override DY_BF16: bool = false;
+override DX_BF16: bool = false;
 
 @group(0) @binding(0) var<uniform> dims: DenseDims;
-@group(0) @binding(1) var<storage, read> dy: array<f32>;
+// dY and dX in f32 or bf16 rows (DY_BF16, DX_BF16: the input gradients between hidden layers
+// of an MLP whose kernels all read bf16 rows).
+@group(0) @binding(1) var<storage, read> dy: array<u32>;
 // Y in f32 or bf16 rows (Y_BF16: a hidden layer of an MLP whose kernels all read bf16 rows).
 @group(0) @binding(2) var<storage, read> y: array<u32>;
-@group(0) @binding(4) var<storage, read_write> dx: array<f32>;
+@group(0) @binding(4) var<storage, read_write> dx: array<u32>;
 @group(0) @binding(6) var<storage, read_write> dz_out: array<u32>;
 
 // Where one row's steps read and write (UNROLL); `dz` is the row's first word.
@@ -31,7 +35,11 @@ fn row_gradient(row: InputRow, o: u32) -> f32 {
     if o >= dims.out_dim {
         return 0.0;
     }
-    return output_gradient(dy[row.dy + o], row.y, o);
+    return output_gradient(dy_value(row.dy, o), row.y, o);
+}
+
+fn dy_value(row: u32, j: u32) -> f32 {
+    return row_value(dy[row_word(row, j, DY_BF16)], j, DY_BF16);
 }
 
 fn y_value(row: u32, j: u32) -> f32 {
@@ -43,10 +51,10 @@ fn y_value(row: u32, j: u32) -> f32 {
 // each times W[·][i0 .. i0 + BLOCK], o first.
 fn input_pair(acc: ptr<function, Acc>, row: InputRow, o: u32) {
     if o < REDUCED {
-        let g = output_gradient(dy[row.dy + o], row.y, o);
+        let g = output_gradient(dy_value(row.dy, o), row.y, o);
         var h = 0.0;
         if o + 1u < REDUCED {
-            h = output_gradient(dy[row.dy + o + 1u], row.y, o + 1u);
+            h = output_gradient(dy_value(row.dy, o + 1u), row.y, o + 1u);
         }
         if row.writes_dz {
             dz_out[row.dz + (o >> 1u)] = bf16_pair(g, h);
@@ -131,10 +139,24 @@ fn backward_input(
         }
     }
     let dx_row = n * dims.dx_stride + dims.dx_offset;
-    for (var j = 0u; j < BLOCK; j++) {
+    // Pairs of inputs (BLOCK and i0 are multiples of 4): a bf16 pair is one word, the second 0
+    // past an odd width (the row's padding).
+    for (var j = 0u; j < BLOCK; j += 2u) {
         let i = i0 + j;
         if i < dims.in_dim {
-            dx[dx_row + i] = acc_value(&acc, j);
+            let first = acc_value(&acc, j);
+            var second = 0.0;
+            if i + 1u < dims.in_dim {
+                second = acc_value(&acc, j + 1u);
+            }
+            if DX_BF16 {
+                dx[row_word(dx_row, i, true)] = bf16_pair(first, second);
+            } else {
+                dx[dx_row + i] = bitcast<u32>(first);
+                if i + 1u < dims.in_dim {
+                    dx[dx_row + i + 1u] = bitcast<u32>(second);
+                }
+            }
         }
     }
 }

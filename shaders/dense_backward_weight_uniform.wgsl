@@ -18,7 +18,9 @@
 
 const WORKGROUP: u32 = 64u;
 
-@group(0) @binding(1) var<storage, read> dy: array<f32>;
+// dY in f32 or bf16 rows (DY_BF16, as in `_dense_backward_input_packed.wgsl`).
+@group(0) @binding(1) var<storage, read> dy: array<u32>;
+override DY_BF16: bool = false;
 @group(0) @binding(6) var<storage, read_write> dz_out: array<u32>;
 
 // dZ[n][o] of the layer, 0 past its outputs.
@@ -26,7 +28,9 @@ fn dz_value(n: u32, o: u32) -> f32 {
     if o >= dims.out_dim {
         return 0.0;
     }
-    return output_gradient(dy[n * dims.dy_stride + dims.dy_offset + o], n * dims.y_stride + dims.y_offset, o);
+    let dy_row = n * dims.dy_stride + dims.dy_offset;
+    let dy_value = row_value(dy[row_word(dy_row, o, DY_BF16)], o, DY_BF16);
+    return output_gradient(dy_value, n * dims.y_stride + dims.y_offset, o);
 }
 
 @compute @workgroup_size(WORKGROUP)

@@ -16,7 +16,7 @@ use scribblefield::field::gpu::dense::{
 };
 use scribblefield::field::gpu::keep::{HeadRows, workgroup_counts};
 use scribblefield::field::params::{MlpLayout, ParamLayout};
-use scribblefield::field::reference::mlp::{MlpTrace, backward, forward, layer_output_gradients};
+use scribblefield::field::reference::mlp::{MlpTrace, backward, forward};
 use scribblefield::field::{Encoding, FieldConfig};
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{
@@ -362,6 +362,25 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
         Vec::new()
     };
     let mut worst_input_grad = 0.0f64;
+    let mut worst_hidden_grad = 0.0f64;
+    // Each hidden layer's dX as the GPU stored it, decoded into packed f32 rows.
+    let hidden_grads_bf16 = mlp.hidden_gradient_rows() == RowFormat::Bf16;
+    let gpu_hidden_grads: Vec<Option<Vec<f32>>> = (0..layers)
+        .map(|k| {
+            let buffer = mlp.hidden_gradient(k)?;
+            let words: Vec<u32> = read_buffer_blocking(ctx, buffer).unwrap();
+            let width = dims[k];
+            Some(if hidden_grads_bf16 {
+                let row_words = width.div_ceil(2);
+                (0..active)
+                    .flat_map(|n| (0..width).map(move |i| (n, i)))
+                    .map(|(n, i)| bf16::row_value(&words[n * row_words..(n + 1) * row_words], i))
+                    .collect()
+            } else {
+                words[..active * width].iter().map(|&w| f32::from_bits(w)).collect()
+            })
+        })
+        .collect();
     for n in 0..active {
         let x = to_f64(input_layout.row(&input, n));
         // Each layer is checked on its input as the GPU stored it, so the reference takes the
@@ -381,7 +400,11 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
                 .iter()
                 .map(|&v| relu(v))
                 .collect();
-            let magnitude = forward(&[n_in, n_out], &abs(layer_weights), &abs(&activations[k]));
+            let magnitude = forward(
+                &[n_in, n_out],
+                &abs_weights[offset - n_in * n_out..offset],
+                &abs(&activations[k]),
+            );
             let rounding = if formats[k] == RowFormat::Bf16 {
                 BF16_TOLERANCE
             } else {
@@ -402,13 +425,67 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
             activations: trace.activations.iter().map(|a| abs(a)).collect(),
         };
         let dy = to_f64(output_grad_layout.row(&output_grad, n));
-        let mut unused = vec![0.0f64; weights.len()];
-        let dx = backward(dims, &weights, &trace, &dy, &mut unused);
-        let dx_magnitude = backward(dims, &abs_weights, &abs_trace, &abs(&dy), &mut unused);
-        // dW from each layer's dZ: the reference's, or where the GPU stored it as bf16, the
-        // stored values (checked here to be the reference's within bf16 rounding).
-        let dz = layer_output_gradients(dims, &weights, &trace, &dy);
-        let dz_magnitude = layer_output_gradients(dims, &abs_weights, &abs_trace, &abs(&dy));
+        // Layer by layer from the last: dZ_k is dY for the last layer, below it the dX of the
+        // layer above as the GPU stored it (where it stores it; f32 registers in a chain: the
+        // reference's) masked by the ReLU; each layer's dX is checked against W_kᵀ·dZ_k.
+        let mut dz = vec![Vec::new(); layers];
+        let mut dz_magnitude = vec![Vec::new(); layers];
+        let (mut upstream, mut upstream_magnitude) = (dy.clone(), abs(&dy));
+        let mut offset = weights.len();
+        for k in (0..layers).rev() {
+            let (n_in, n_out) = (dims[k], dims[k + 1]);
+            offset -= n_in * n_out;
+            let w = &weights[offset..offset + n_in * n_out];
+            let abs_w = &abs_weights[offset..offset + n_in * n_out];
+            let mask = |g: &[f64]| -> Vec<f64> {
+                if k + 1 == layers {
+                    return g.to_vec();
+                }
+                g.iter()
+                    .zip(&trace.activations[k + 1])
+                    .map(|(g, y)| if *y > 0.0 { *g } else { 0.0 })
+                    .collect()
+            };
+            dz[k] = mask(&upstream);
+            dz_magnitude[k] = mask(&upstream_magnitude);
+            let single = |w: &[f64], x: &[f64], g: &[f64]| {
+                let trace = MlpTrace {
+                    activations: vec![x.to_vec(), vec![0.0; n_out]],
+                };
+                let mut unused = vec![0.0f64; w.len()];
+                backward(&[n_in, n_out], w, &trace, g, &mut unused)
+            };
+            let dx = single(w, &trace.activations[k], &dz[k]);
+            let dx_magnitude = single(abs_w, &abs_trace.activations[k], &dz_magnitude[k]);
+            if k == 0 {
+                if input_grad {
+                    let what = format!("{name} row {n} input gradient");
+                    let gpu = input_grad_layout.row(&gpu_input_grad, n);
+                    let worst = assert_close(&what, gpu, &dx, &dx_magnitude, FORWARD_TOLERANCE);
+                    worst_input_grad = worst_input_grad.max(worst);
+                }
+                break;
+            }
+            upstream = match &gpu_hidden_grads[k] {
+                None => dx,
+                Some(stored) => {
+                    let gpu = &stored[n * n_in..(n + 1) * n_in];
+                    let rounding = if hidden_grads_bf16 { BF16_TOLERANCE } else { 0.0 };
+                    let allowed: Vec<f64> = dx
+                        .iter()
+                        .zip(&dx_magnitude)
+                        .map(|(r, m)| m + rounding / FORWARD_TOLERANCE * r.abs())
+                        .collect();
+                    let what = format!("{name} row {n} layer {k} input gradient");
+                    let worst = assert_close(&what, gpu, &dx, &allowed, FORWARD_TOLERANCE);
+                    worst_hidden_grad = worst_hidden_grad.max(worst);
+                    to_f64(gpu)
+                }
+            };
+            upstream_magnitude = dx_magnitude;
+        }
+        // dW from each layer's dZ: the one above, or where the GPU stored it as bf16, the
+        // stored values (checked here to be it within bf16 rounding).
         let mut offset = 0;
         for k in 0..layers {
             let summed: Vec<f64> = match &gpu_dz[k] {
@@ -438,11 +515,6 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
             }
             offset += width * summed.len();
         }
-        if input_grad {
-            let what = format!("{name} row {n} input gradient");
-            let gpu = input_grad_layout.row(&gpu_input_grad, n);
-            worst_input_grad = worst_input_grad.max(assert_close(&what, gpu, &dx, &dx_magnitude, FORWARD_TOLERANCE));
-        }
     }
     if input_grad {
         input_grad_layout.assert_gaps_untouched(&format!("{name} input gradient"), &gpu_input_grad, rows);
@@ -452,15 +524,14 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
             let Some(hidden) = mlp.hidden_gradient(k) else {
                 continue;
             };
-            let hidden: Vec<f32> = read_buffer_blocking(ctx, hidden).unwrap();
-            let packed = ViewLayout::padded(width, 0, 0);
-            assert_rows_untouched(
-                &format!("{name} layer {k} input gradient"),
-                packed,
-                &hidden,
-                active,
-                rows,
-            );
+            let what = format!("{name} layer {k} input gradient");
+            if hidden_grads_bf16 {
+                let words: Vec<u32> = read_buffer_blocking(ctx, hidden).unwrap();
+                assert_bf16_rows_untouched(&what, &words, width.div_ceil(2), active, rows);
+            } else {
+                let hidden: Vec<f32> = read_buffer_blocking(ctx, hidden).unwrap();
+                assert_rows_untouched(&what, ViewLayout::padded(width, 0, 0), &hidden, active, rows);
+            }
         }
     } else {
         let untouched: Vec<f32> = read_buffer_blocking(ctx, &input_grad_buffer).unwrap();
@@ -499,7 +570,7 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
     let chained = mlp.chains_input_gradients();
     eprintln!(
         "{name} {dims:?} × {active} of {rows} rows, kernels {families:?}, hidden rows {formats:?}, input gradients chained {chained}: worst error / \
-         magnitude: forward {worst_forward:.2e}, input gradient {worst_input_grad:.2e}, stored dZ {worst_dz:.2e}, weight gradient {worst_weight:.2e}"
+         magnitude: forward {worst_forward:.2e}, input gradient {worst_input_grad:.2e}, hidden input gradients {worst_hidden_grad:.2e}, stored dZ {worst_dz:.2e}, weight gradient {worst_weight:.2e}"
     );
     gpu_outputs
         .iter()

@@ -82,6 +82,9 @@ pub struct StoredRows {
     pub dz: Vec<Rounding>,
     /// How the hidden layers' outputs are stored ([`forward_stored`]).
     pub hidden: Rounding,
+    /// How the input gradients between hidden layers (dX of every layer but the first) are
+    /// stored ([`backward_stored`]).
+    pub hidden_gradients: Rounding,
 }
 
 /// Vector-Jacobian product: given `grad_out` = ∂L/∂output (`dims[last]` values), adds
@@ -108,6 +111,25 @@ pub fn backward_with_dz<R: Real>(
     weight_grad: &mut [R],
     dz: &[Rounding],
 ) -> Vec<R> {
+    let rows = StoredRows {
+        dz: dz.to_vec(),
+        ..StoredRows::default()
+    };
+    backward_stored(dims, weights, trace, grad_out, weight_grad, &rows)
+}
+
+/// [`backward`] with the rows seen as `rows` says: each layer's weight gradient reads dZ as
+/// `rows.dz[k]`, and each hidden layer's input gradient is seen as `rows.hidden_gradients` by
+/// the layer below (the trace's activations are the forward's, [`forward_stored`]).
+pub fn backward_stored<R: Real>(
+    dims: &[usize],
+    weights: &[R],
+    trace: &MlpTrace<R>,
+    grad_out: &[R],
+    weight_grad: &mut [R],
+    rows: &StoredRows,
+) -> Vec<R> {
+    let dz = &rows.dz;
     let layers = dims.len() - 1;
     let mut offsets = Vec::with_capacity(layers);
     let mut offset = 0;
@@ -133,9 +155,11 @@ pub fn backward_with_dz<R: Real>(
         if k > 0 {
             // x is the ReLU output of the previous layer.
             for (gi, xi) in grad_in.iter_mut().zip(x) {
-                if *xi <= R::ZERO {
-                    *gi = R::ZERO;
-                }
+                *gi = if *xi <= R::ZERO {
+                    R::ZERO
+                } else {
+                    rows.hidden_gradients.apply(*gi)
+                };
             }
         }
         grad = grad_in;

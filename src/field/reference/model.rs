@@ -313,13 +313,13 @@ impl FieldModel {
         let mut grad_density_out = Vec::with_capacity(1 + geometry_dim);
         grad_density_out.push(activations::density_backward(sample.density.output()[0], grad_sigma));
         grad_density_out.extend_from_slice(&grad_geometry);
-        let grad_encoding = mlp::backward_with_dz(
+        let grad_encoding = mlp::backward_stored(
             &l.density.dims,
             &params[l.density.range()],
             &sample.density,
             &grad_density_out,
             &mut grad[l.density.range()],
-            &self.stored_rows.density.dz,
+            &self.stored_rows.density,
         );
 
         // Hash grid (the frequency part has no parameters).
@@ -350,13 +350,13 @@ impl FieldModel {
 
         // Semantic head → [relu(f), g].
         let grad_logits = &grad_value[Channels::SEMANTIC..Channels::SEMANTIC + ch.classes];
-        let grad_semantic_in = mlp::backward_with_dz(
+        let grad_semantic_in = mlp::backward_stored(
             &l.semantic.dims,
             &params[l.semantic.range()],
             &sample.semantic,
             grad_logits,
             &mut grad[l.semantic.range()],
-            &self.stored_rows.semantic.dz,
+            &self.stored_rows.semantic,
         );
         // Only a share of it reaches the shared field (FieldConfig::semantic_trunk_gradient).
         let trunk = R::of_f32(self.config.semantic_trunk_gradient);
@@ -374,13 +374,13 @@ impl FieldModel {
         add_into(grad_geometry, &grad_semantic_in[feature_dim..]);
 
         // Feature MLP → g.
-        let grad_feature_in = mlp::backward_with_dz(
+        let grad_feature_in = mlp::backward_stored(
             &l.feature.dims,
             &params[l.feature.range()],
             &sample.feature,
             &grad_f,
             &mut grad[l.feature.range()],
-            &self.stored_rows.feature.dz,
+            &self.stored_rows.feature,
         );
         add_into(grad_geometry, &grad_feature_in);
 
@@ -388,13 +388,13 @@ impl FieldModel {
         let grad_color_out: Vec<R> = (0..3)
             .map(|c| activations::sigmoid_backward(sample.rgb[c], grad_value[Channels::RGB + c]))
             .collect();
-        let grad_color_in = mlp::backward_with_dz(
+        let grad_color_in = mlp::backward_stored(
             &l.color.dims,
             &params[l.color.range()],
             &sample.color,
             &grad_color_out,
             &mut grad[l.color.range()],
-            &self.stored_rows.color.dz,
+            &self.stored_rows.color,
         );
         add_into(grad_geometry, &grad_color_in[sh::SH_COEFFS..]);
     }

@@ -311,8 +311,8 @@ pub struct DenseBackward {
     dz: Option<wgpu::Buffer>,
     /// The row-count word its kernels read.
     row_count: wgpu::Buffer,
-    /// How X and Y are stored.
-    formats: (RowFormat, RowFormat),
+    /// How X, Y, dY and dX are stored.
+    formats: [RowFormat; 4],
 }
 
 /// The first half of dW: every chunk of rows' partial matrix.
@@ -352,11 +352,6 @@ impl DenseBackward {
         output.check(&format!("{label} output"), spec.rows, spec.out_dim)?;
         let output_grad = gradients.output_grad;
         output_grad.check(&format!("{label} output gradient"), spec.rows, spec.out_dim)?;
-        // (A chained layer's output gradient is a stand-in it never reads.)
-        let dy_bf16 = output_grad.is_bf16() && !gradients.dz_from_chain;
-        if dy_bf16 || gradients.input_grad.is_some_and(RowView::is_bf16) {
-            return Err(GpuError::invalid_argument(&label, "gradients are f32 rows"));
-        }
         for buffer in [&input.buffer, &output.buffer, &output_grad.buffer] {
             check_binding(ctx, &label, buffer)?;
         }
@@ -398,6 +393,8 @@ impl DenseBackward {
                 let constants = [
                     ("WRITE_DZ", f64::from(u8::from(writes_dz))),
                     bf16_rows("Y_BF16", output),
+                    bf16_rows("DY_BF16", output_grad),
+                    bf16_rows("DX_BF16", input_grad),
                 ];
                 let (kernel, product_weights, workgroups, family, rows_per_workgroup) = pipelines
                     .product_kernel(
@@ -491,7 +488,7 @@ impl DenseBackward {
                 .await?,
             ),
             None => {
-                if input.is_bf16() || output.is_bf16() {
+                if input.is_bf16() || output.is_bf16() || output_grad.is_bf16() {
                     return Err(GpuError::invalid_argument(
                         &label,
                         "the tiled weight gradient reads f32 rows: bf16 rows need uniform windows",
@@ -539,7 +536,12 @@ impl DenseBackward {
             chunks,
             dz: dz_kept,
             row_count: rows,
-            formats: (input.format, output.format),
+            formats: [
+                input.format,
+                output.format,
+                output_grad.format,
+                gradients.input_grad.map_or(RowFormat::F32, |view| view.format),
+            ],
         })
     }
 
@@ -568,11 +570,14 @@ impl DenseBackward {
         let relu = u64::from(self.spec.activation == Activation::Relu);
         // dZ's bf16 rows, in words.
         let dz_row = u64::from(crate::field::bf16::row_words(self.spec.out_dim));
-        let (x_row, y_row) = (
-            row_words(self.formats.0, self.spec.in_dim),
-            row_words(self.formats.1, self.spec.out_dim),
-        );
-        let dz_from_dy = rows * (o + relu * y_row);
+        let [x_row, y_row, dy_row, dx_row] = [
+            (self.formats[0], self.spec.in_dim),
+            (self.formats[1], self.spec.out_dim),
+            (self.formats[2], self.spec.out_dim),
+            (self.formats[3], self.spec.in_dim),
+        ]
+        .map(|(format, width)| row_words(format, width));
+        let dz_from_dy = rows * (dy_row + relu * y_row);
         // dX's kernel forms the dZ the uniform windows read unless the layer masks it itself.
         let dz_written = matches!(&self.partial_sums, WeightPartials::Uniform(p) if !p.masks());
         let input_grad = match &self.input_grad {
@@ -584,7 +589,7 @@ impl DenseBackward {
                     i * o
                 };
                 let dz = if dz_written { rows * dz_row } else { 0 };
-                dz_from_dy + weights + rows * i + dz
+                dz_from_dy + weights + rows * dx_row + dz
             }
         };
         let partials = u64::from(self.chunks) * i * o;

@@ -136,18 +136,22 @@ impl MlpPass {
             Some(gradients) => {
                 let chain_block = chain_block(ctx, pipelines, &specs, &packing, gradients.input_grad.is_some());
                 let chained = chain_block.is_some();
+                // The input gradients between hidden layers are stored like the hidden outputs.
                 for spec in specs[1..].iter().filter(|_| !chained) {
-                    let count = rows as usize * spec.in_dim as usize;
+                    let words = RowView::words(hidden, rows, spec.in_dim) as usize;
                     hidden_grads.push(storage_buffer_zeroed::<f32>(
                         ctx,
                         &format!("{} input gradient", spec.label),
-                        count,
+                        words,
                     )?);
                 }
                 let hidden_views: Vec<RowView> = hidden_grads
                     .iter()
                     .zip(&specs[1..])
-                    .map(|(b, spec)| RowView::packed(b, spec.in_dim))
+                    .map(|(b, spec)| match hidden {
+                        RowFormat::F32 => RowView::packed(b, spec.in_dim),
+                        RowFormat::Bf16 => RowView::packed_bf16(b, spec.in_dim),
+                    })
                     .collect();
                 let mut backward = Vec::with_capacity(layers);
                 for (k, spec) in specs.iter().enumerate() {
@@ -309,6 +313,17 @@ impl MlpPass {
     pub fn hidden_rows(&self) -> RowFormat {
         let last = self.outputs.len().saturating_sub(1);
         self.outputs[..last].first().map_or(RowFormat::F32, |view| view.format)
+    }
+
+    /// How the input gradients between hidden layers are stored ([`MlpPass::hidden_gradient`]:
+    /// as the hidden outputs; f32 where there are none, e.g. in a chain, which keeps them in
+    /// registers).
+    pub fn hidden_gradient_rows(&self) -> RowFormat {
+        if self.hidden_grads.is_empty() {
+            RowFormat::F32
+        } else {
+            self.hidden_rows()
+        }
     }
 
     /// The kernel family each layer's forward (and input gradient) runs.

@@ -198,7 +198,11 @@ impl UniformWeightPartials {
             None
         } else {
             let mask_pipeline = pipelines
-                .compile(ctx, DenseKernel::MaskOutputGradient, &[bf16_rows("Y_BF16", output)])
+                .compile(
+                    ctx,
+                    DenseKernel::MaskOutputGradient,
+                    &[bf16_rows("Y_BF16", output), bf16_rows("DY_BF16", output_grad)],
+                )
                 .await?;
             let groups = Dispatch1d::for_device(
                 ctx,

@@ -545,6 +545,7 @@ impl Trainer {
         let rows = |mlp: &MlpPass| StoredRows {
             dz: mlp.weight_gradient_windows().into_iter().map(bf16).collect(),
             hidden: bf16(mlp.hidden_rows() == RowFormat::Bf16),
+            hidden_gradients: bf16(mlp.hidden_gradient_rows() == RowFormat::Bf16),
         };
         crate::field::reference::FieldRows {
             density: rows(&self.density),
