@@ -98,24 +98,7 @@ pub fn backward<R: Real>(
     grad_out: &[R],
     weight_grad: &mut [R],
 ) -> Vec<R> {
-    backward_with_dz(dims, weights, trace, grad_out, weight_grad, &[])
-}
-
-/// [`backward`] with layer k's weight gradient reading dZ as `dz[k]` says (layers past the
-/// slice's end: [`Rounding::Exact`]).
-pub fn backward_with_dz<R: Real>(
-    dims: &[usize],
-    weights: &[R],
-    trace: &MlpTrace<R>,
-    grad_out: &[R],
-    weight_grad: &mut [R],
-    dz: &[Rounding],
-) -> Vec<R> {
-    let rows = StoredRows {
-        dz: dz.to_vec(),
-        ..StoredRows::default()
-    };
-    backward_stored(dims, weights, trace, grad_out, weight_grad, &rows)
+    backward_stored(dims, weights, trace, grad_out, weight_grad, &StoredRows::default())
 }
 
 /// [`backward`] with the rows seen as `rows` says: each layer's weight gradient reads dZ as
@@ -258,7 +241,11 @@ mod tests {
         // Layer 1 rounded: its dW takes bf16(dZ); the other layers and dX stay exact.
         let mut rounded = vec![0.0; weights.len()];
         let rows = [Rounding::Exact, Rounding::Bf16];
-        let input_grad_rounded = backward_with_dz(&dims, &weights, &trace, &probe, &mut rounded, &rows);
+        let rows = StoredRows {
+            dz: rows.to_vec(),
+            ..StoredRows::default()
+        };
+        let input_grad_rounded = backward_stored(&dims, &weights, &trace, &probe, &mut rounded, &rows);
         assert_eq!(input_grad_rounded, input_grad);
         let layer1 = 35..35 + 42;
         let mut expected = exact.clone();
