@@ -28,6 +28,9 @@ impl Annotator {
     /// What the store has to say this frame.
     pub(super) fn take_store_news(&mut self) {
         self.doc.store.poll();
+        for warning in self.doc.store.take_takeover_warnings() {
+            self.notify(&warning, true);
+        }
         if let Some(labels) = self.doc.store.take_followed()
             && labels != self.doc.labels
         {

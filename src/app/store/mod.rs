@@ -102,6 +102,8 @@ struct Inner {
     error: Option<String>,
     /// The writer's newest labels, for a follower to show (taken by the annotator).
     followed: Option<LabelSet>,
+    /// Problems met while taking over from a closed writer, for the annotator to show.
+    takeover_warnings: Vec<String>,
     /// Whether the browser granted persistent storage (`None`: not answered).
     persisted: Option<bool>,
     channel: Option<web_sys::BroadcastChannel>,
@@ -279,17 +281,24 @@ impl SceneStore {
         self.inner.borrow_mut().followed.take()
     }
 
-    /// Called every frame: a follower that has just been granted the lock reads what the
-    /// writer left, then becomes the writer.
+    /// Called every frame: a follower that has just been granted the lock takes back the
+    /// journal the writer left as it closed (edits its last write did not get to disk), reads
+    /// what the writer saved, then becomes the writer.
     pub fn poll(&self) {
         if self.lock.granted.replace(false) {
             let inner = self.inner.clone();
             let role = self.lock.role.clone();
             wasm_bindgen_futures::spawn_local(async move {
+                take_writers_journal(&inner).await;
                 refresh(&inner).await;
                 role.set(Role::Writer);
             });
         }
+    }
+
+    /// Problems met while taking over from a closed writer, once.
+    pub fn take_takeover_warnings(&self) -> Vec<String> {
+        std::mem::take(&mut self.inner.borrow_mut().takeover_warnings)
     }
 
     /// A set-aside record's stored value, as text, for download.
@@ -383,6 +392,21 @@ async fn write_loop(inner: &Rc<RefCell<Inner>>) {
         }
     }
     inner.borrow_mut().in_flight = false;
+}
+
+/// The journal a closed writer left, into the store, before a follower takes over: otherwise
+/// the new writer's next save could take the journal's slot and the journal would look stale.
+async fn take_writers_journal(inner: &Rc<RefCell<Inner>>) {
+    let (db, key, shape) = {
+        let i = inner.borrow();
+        let Some(db) = i.db.clone() else { return };
+        (db, i.key.clone(), i.shape)
+    };
+    let (mut warnings, mut aside) = (Vec::new(), Vec::new());
+    open::take_journal(&db, &key, shape, &mut warnings, &mut aside).await;
+    let mut i = inner.borrow_mut();
+    i.takeover_warnings.extend(warnings);
+    i.aside.extend(aside);
 }
 
 /// Re-reads the scene's snapshots (a follower, after the writer saved or went); the newest

@@ -108,6 +108,7 @@ pub async fn open_scene(content_id: &str, source: &SceneSource, shape: SceneShap
         in_flight: false,
         error: None,
         followed: None,
+        takeover_warnings: Vec::new(),
         persisted,
         channel,
     };
@@ -220,7 +221,13 @@ async fn migrate(
 
 /// A journal left by a page that closed before its last write finished: stored if it is
 /// newer than what the store has, then removed.
-async fn take_journal(db: &Db, key: &SceneKey, shape: SceneShape, warnings: &mut Vec<String>, aside: &mut Vec<String>) {
+pub(super) async fn take_journal(
+    db: &Db,
+    key: &SceneKey,
+    shape: SceneShape,
+    warnings: &mut Vec<String>,
+    aside: &mut Vec<String>,
+) {
     let journal_key = key.journal();
     let Some(text) = legacy::get(&journal_key) else { return };
     let (lower, upper) = key.range();
