@@ -81,8 +81,11 @@ pub fn show(
     // Draw with the left button: every press, move and release of this frame, in order.
     let events = ui.input(|i| i.events.clone());
     let class = (brush.tool == Tool::Brush).then_some(brush.class);
-    // Not when a popup (a colour picker) over the canvas has the pointer.
-    let hovered = response.hovered();
+    // Not where a window or popup (a colour picker) lies over the canvas. Asked of the layers
+    // rather than of `response.hovered()`: on a slow page a whole press-move-release can arrive
+    // in one pass, and the hover state then depends on the previous pass's layout.
+    let on_canvas =
+        |pos: Pos2| rect.contains(pos) && ui.ctx().layer_id_at(pos).is_none_or(|layer| layer == ui.layer_id());
     for event in events {
         match event {
             Event::PointerButton {
@@ -90,7 +93,7 @@ pub fn show(
                 button: PointerButton::Primary,
                 pressed: true,
                 ..
-            } if hovered && drawing.is_none() && rect.contains(pos) && view.hits_image(&viewport, [pos.x, pos.y]) => {
+            } if drawing.is_none() && on_canvas(pos) && view.hits_image(&viewport, [pos.x, pos.y]) => {
                 let at = view.to_image(&viewport, [pos.x, pos.y]);
                 *drawing = Some(StrokeBuilder::new(class, brush.radius, width, height, at));
             }

@@ -2,7 +2,8 @@
 // local-storage save is migrated; two tabs on one scene (the second follows read-only, takes
 // over when the first closes, and a reload loses no stroke); a corrupted save is set aside and
 // the next edit leaves it alone; a full disk (IndexedDB put stubbed to fail) shows "not saved",
-// also in the GPU-lost notice; a reload in the middle of training loses nothing; opening a
+// also in the GPU-lost notice, and a second tab taking over from it keeps the edit it could
+// not save; a reload in the middle of training loses nothing; opening a
 // share link, twice, keeps the version it displaced among the snapshots; a changed archive at
 // the same URL (an entry added, served through a route) gets none of the old labels but is
 // offered them. Starts no server:
@@ -216,6 +217,7 @@ await runBrowserTest("durable", {
   });
   const strokesBefore = (await status(b)).strokes;
   await b.close();
+  let follower;
 
   // --- a full disk ---
   await checks.check("a failing write (quota) shows \"not saved\", also in the GPU-lost notice", async () => {
@@ -240,8 +242,23 @@ await runBrowserTest("durable", {
       const notice = await c.evaluate(() => document.getElementById("notice-text").textContent);
       assert(/NOT be saved/.test(notice) && !/annotations are saved/.test(notice), `notice: ${notice}`);
       await c.screenshot({ path: join(outDir, "durable-not-saved-gpu-lost.png") });
+      // Opened while this tab still saves: it follows, and takes over once this one closes.
+      follower = await open("follower");
+      const f = await status(follower);
+      assert(f.save.state === "read_only", `the second tab: ${show(f.save)}`);
     } finally {
       await c.close();
+    }
+  });
+
+  await checks.check("a tab taking over from one that could not save keeps the edit it could not save", async () => {
+    assert(follower, "no second tab was opened");
+    try {
+      const f = await waitForStatus(follower, (t) => t.save.state === "saved", "the second tab to take over", 60_000);
+      console.log(`     after taking over: ${f.strokes} strokes; snapshots ${show(f.save.snapshots)}`);
+      assert(f.strokes === strokesBefore + 1, `the second tab has ${f.strokes} strokes, the closed one drew ${strokesBefore + 1}`);
+    } finally {
+      await follower.close();
     }
   });
 
@@ -249,14 +266,20 @@ await runBrowserTest("durable", {
   let d;
   await checks.check("a reload in the middle of training loses nothing", async () => {
     d = await open("training");
-    const before = (await status(d)).strokes;
+    // The tab closed just before may hold the scene's lock a moment longer: draw once this
+    // tab saves, or the stroke would be refused as read-only.
+    const before = (await waitForStatus(d, (t) => t.save.state === "saved", "the tab to save the scene",
+      SAVE_TIMEOUT_MS)).strokes;
     await waitForStatus(d, (t) => {
       if (t.training === "failed") throw new Error(`training failed: ${t.failure}`);
       return t.training === "running" && t.steps > 0;
     }, "training to run", TRAIN_TIMEOUT_MS);
     await d.focus("#scribblefield");
     await draw(d, 70);
-    await waitForStatus(d, (t) => t.strokes === before + 1, "the stroke", SAVE_TIMEOUT_MS);
+    await waitForStatus(d, (t) => t.strokes === before + 1, "the stroke", SAVE_TIMEOUT_MS).catch(async (e) => {
+      await d.screenshot({ path: join(outDir, "durable-stroke-missing.png") });
+      throw e;
+    });
     // No wait for the save: reload at once.
     await d.reload({ waitUntil: "load" });
     const s = await settledStatus(d, LOAD_TIMEOUT_MS);
