@@ -6,8 +6,10 @@
 // (keep.wgsl), packed: `assemble` and `gather_feature` work on the first row_count[0] packed
 // rows (density_out is then the packed copy of the density rows), `gather_geometry` on every
 // sample, reading the heads' gradients from the sample's packed row (`slot`) and 0 for a
-// sample that was not kept.
+// sample that was not kept. The semantic input and its gradient are f32 or bf16 rows
+// (SEMANTIC_IN_BF16, SEMANTIC_GRAD_BF16: as the semantic MLP stores them, `dense::MlpPass::input`).
 //!include _dispatch.wgsl
+//!include _bf16.wgsl
 
 const WORKGROUP_SIZE: u32 = 128u;
 
@@ -25,10 +27,14 @@ struct GlueDims {
     semantic_trunk_scale: f32,
     // Columns of g in the semantic input: geometry, or 0 (FieldConfig::semantic_geometry_dim).
     semantic_geometry: u32,
+    // Row strides, in values, of the semantic input and of its gradient.
+    semantic_in_stride: u32,
+    semantic_grad_stride: u32,
     pad0: u32,
-    pad1: u32,
-    pad2: u32,
 }
+
+override SEMANTIC_IN_BF16: bool = false;
+override SEMANTIC_GRAD_BF16: bool = false;
 
 // Each entry point uses its own subset of these bindings (derived layouts).
 @group(0) @binding(0) var<uniform> dims: GlueDims;
@@ -38,10 +44,10 @@ struct GlueDims {
 @group(0) @binding(2) var<storage, read> feature_out: array<f32>;
 // [SH | g], row stride sh + geometry.
 @group(0) @binding(3) var<storage, read_write> color_in: array<f32>;
-// [relu(f) | g], row stride feature + semantic_geometry.
-@group(0) @binding(4) var<storage, read_write> semantic_in: array<f32>;
-// Gradients, same strides as their forward buffers.
-@group(0) @binding(5) var<storage, read> semantic_in_grad: array<f32>;
+// [relu(f) | g], row stride semantic_in_stride.
+@group(0) @binding(4) var<storage, read_write> semantic_in: array<u32>;
+// Its gradient, row stride semantic_grad_stride; the colour input's, as the colour input.
+@group(0) @binding(5) var<storage, read> semantic_in_grad: array<u32>;
 // The composite's [dL/dh0, dL/dcolour, dL/dlogits, dL/df] rows; gather_feature adds into dL/df.
 @group(0) @binding(6) var<storage, read_write> grad_heads: array<f32>;
 @group(0) @binding(7) var<storage, read_write> density_out_grad: array<f32>;
@@ -65,6 +71,24 @@ fn sample_index(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
     return linear_item_index(wid, nwg, lid, WORKGROUP_SIZE);
 }
 
+// Value j of packed row n's semantic input: relu(f), then g, then 0 (a bf16 row's padding).
+fn semantic_value(n: u32, j: u32) -> f32 {
+    let d = dims.feature;
+    if j < d {
+        return max(feature_out[n * d + j], 0.0);
+    }
+    if j < d + dims.semantic_geometry {
+        return density_out[n * (1u + dims.geometry) + 1u + j - d];
+    }
+    return 0.0;
+}
+
+// Value j of packed row k's semantic input gradient.
+fn semantic_gradient(k: u32, j: u32) -> f32 {
+    let row = k * dims.semantic_grad_stride;
+    return row_value(semantic_in_grad[row_word(row, j, SEMANTIC_GRAD_BF16)], j, SEMANTIC_GRAD_BF16);
+}
+
 // Forward: copy g into the colour and semantic inputs, relu(f) into the semantic input.
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn assemble(
@@ -77,18 +101,22 @@ fn assemble(
         return;
     }
     let g = dims.geometry;
-    let d = dims.feature;
     let density_row = n * (1u + g) + 1u;
     let color_row = n * (dims.sh + g) + dims.sh;
-    let semantic_row = n * (d + dims.semantic_geometry);
     for (var j = 0u; j < g; j++) {
         color_in[color_row + j] = density_out[density_row + j];
     }
-    for (var j = 0u; j < dims.semantic_geometry; j++) {
-        semantic_in[semantic_row + d + j] = density_out[density_row + j];
-    }
-    for (var k = 0u; k < d; k++) {
-        semantic_in[semantic_row + k] = max(feature_out[n * d + k], 0.0);
+    let width = dims.feature + dims.semantic_geometry;
+    let row = n * dims.semantic_in_stride;
+    if SEMANTIC_IN_BF16 {
+        // Whole words: the row's padding value too.
+        for (var j = 0u; j < width; j += 2u) {
+            semantic_in[(row + j) >> 1u] = bf16_pair(semantic_value(n, j), semantic_value(n, j + 1u));
+        }
+    } else {
+        for (var j = 0u; j < width; j++) {
+            semantic_in[row + j] = bitcast<u32>(semantic_value(n, j));
+        }
     }
 }
 
@@ -105,11 +133,10 @@ fn gather_feature(
         return;
     }
     let d = dims.feature;
-    let semantic_row = n * (d + dims.semantic_geometry);
     for (var k = 0u; k < d; k++) {
         if feature_out[n * d + k] > 0.0 {
             let at = n * dims.grad_stride + dims.grad_feature + k;
-            grad_heads[at] += dims.semantic_trunk_scale * semantic_in_grad[semantic_row + k];
+            grad_heads[at] += dims.semantic_trunk_scale * semantic_gradient(n, k);
         }
     }
 }
@@ -141,7 +168,7 @@ fn gather_geometry(
     for (var j = 0u; j < g; j++) {
         var semantic = 0.0;
         if j < sg {
-            semantic = dims.semantic_trunk_scale * semantic_in_grad[k * (d + sg) + d + j];
+            semantic = dims.semantic_trunk_scale * semantic_gradient(k, d + j);
         }
         density_out_grad[n * (1u + g) + 1u + j] = color_in_grad[k * (dims.sh + g) + dims.sh + j] + semantic
             + feature_in_grad[k * g + j];

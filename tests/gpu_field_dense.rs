@@ -11,7 +11,7 @@
 //! must be the reference's dZ within bf16 rounding, and dW the sum of the stored values.
 use scribblefield::field::bf16;
 use scribblefield::field::gpu::dense::{
-    DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, PackedReads, RowFormat, RowView,
+    DenseFamily, DensePipelines, InputRows, MlpGradients, MlpPass, MlpPassDesc, PackedReads, RowFormat, RowView,
     UNIFORM_WEIGHT_FLOATS,
 };
 use scribblefield::field::gpu::keep::{HeadRows, workgroup_counts};
@@ -244,12 +244,12 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
         layout,
         rows: rows as u32,
         params: &params_buffer,
-        input: input_layout.view(&input_buffer),
+        input: InputRows::Given(input_layout.view(&input_buffer)),
         output: output_view.then(|| output_layout.view(&output_buffer)),
         gradients: Some(MlpGradients {
             grads: grads_buffer.clone(),
             output_grad: output_grad_layout.view(&output_grad_buffer),
-            input_grad: input_grad.then(|| input_grad_layout.view(&input_grad_buffer)),
+            input_grad: input_grad.then(|| InputRows::Given(input_grad_layout.view(&input_grad_buffer))),
         }),
         kept: head_rows.as_ref(),
     };
@@ -621,7 +621,7 @@ fn every_mlp_matches_the_reference_with_uniform_weights() {
         layout: &layout.density,
         rows,
         params: &params,
-        input: RowView::packed(&input, layout.density.input_dim() as u32),
+        input: InputRows::Given(RowView::packed(&input, layout.density.input_dim() as u32)),
         output: None,
         gradients: None,
         kept: None,
@@ -796,12 +796,12 @@ fn uniform_mlps_chain_their_input_gradients_where_they_fit() {
                 layout: mlp,
                 rows,
                 params: &params,
-                input: RowView::packed(&input, in_dim),
+                input: InputRows::Given(RowView::packed(&input, in_dim)),
                 output: None,
                 gradients: Some(MlpGradients {
                     grads: storage_buffer_zeroed::<f32>(&ctx, "grads", layout.total).unwrap(),
                     output_grad: RowView::packed(&output_grad, out_dim),
-                    input_grad: (mlp_name != "color").then(|| RowView::packed(&input_grad, in_dim)),
+                    input_grad: (mlp_name != "color").then(|| InputRows::Given(RowView::packed(&input_grad, in_dim))),
                 }),
                 kept: None,
             };
@@ -911,7 +911,7 @@ fn forward_only_pass_refuses_backward_and_bad_views_are_errors() {
         layout: &layout.density,
         rows: rows as u32,
         params: &params,
-        input,
+        input: InputRows::Given(input),
         output: None,
         gradients: None,
         kept: None,
@@ -953,6 +953,59 @@ fn forward_only_pass_refuses_backward_and_bad_views_are_errors() {
     let mut f32_rows = DensePipelines::with_family(DenseFamily::UniformWeights).with_hidden_rows(RowFormat::F32);
     let mlp = pollster::block_on(MlpPass::new(&ctx, &mut f32_rows, desc(RowView::packed(&input, width)))).unwrap();
     assert_eq!(mlp.hidden_rows(), RowFormat::F32);
+}
+
+/// An MLP that owns its input rows (`InputRows::Owned`) stores them as its hidden rows, and its
+/// input gradient too where no chain writes it (a chain writes f32); the caller reaches both
+/// through `input` and `input_gradient`.
+#[test]
+fn owned_input_rows_take_the_hidden_rows_format() {
+    let Some(ctx) = gpu_for_tests("owned_input_rows_take_the_hidden_rows_format") else {
+        return;
+    };
+    let layout = ParamLayout::new(&FieldConfig::small());
+    let params = storage_buffer_from(&ctx, "params", &layout.init(1)).unwrap();
+    let grads = storage_buffer_zeroed::<f32>(&ctx, "grads", layout.total).unwrap();
+    let rows = 300u32;
+    let mlp = &layout.semantic;
+    let (in_dim, out_dim) = (mlp.input_dim() as u32, mlp.output_dim() as u32);
+    let output_grad = storage_buffer_garbage::<f32>(&ctx, "output grad", (rows * out_dim) as usize).unwrap();
+    let build = |pipelines: &mut DensePipelines| {
+        let desc = MlpPassDesc {
+            label: "semantic",
+            layout: mlp,
+            rows,
+            params: &params,
+            input: InputRows::Owned,
+            output: None,
+            gradients: Some(MlpGradients {
+                grads: grads.clone(),
+                output_grad: RowView::packed(&output_grad, out_dim),
+                input_grad: Some(InputRows::Owned),
+            }),
+            kept: None,
+        };
+        pollster::block_on(MlpPass::new(&ctx, pipelines, desc)).unwrap()
+    };
+    let check = |pass: &MlpPass, input: RowFormat, gradient: RowFormat| {
+        assert_eq!(pass.input().format, input);
+        pass.input().check("input", rows, in_dim).unwrap();
+        let grad = pass.input_gradient().expect("an input gradient");
+        assert_eq!(grad.format, gradient);
+        grad.check("input gradient", rows, in_dim).unwrap();
+    };
+    let uniform = build(&mut DensePipelines::with_family(DenseFamily::UniformWeights));
+    let chained_format = if uniform.chains_input_gradients() {
+        RowFormat::F32
+    } else {
+        RowFormat::Bf16
+    };
+    check(&uniform, RowFormat::Bf16, chained_format);
+    let f32_rows =
+        build(&mut DensePipelines::with_family(DenseFamily::UniformWeights).with_hidden_rows(RowFormat::F32));
+    check(&f32_rows, RowFormat::F32, RowFormat::F32);
+    let tiled = build(&mut DensePipelines::with_family(DenseFamily::Tiled));
+    check(&tiled, RowFormat::F32, RowFormat::F32);
 }
 
 /// Measurement, not a check: GFLOP/s of the default density MLP's forward and backward at
@@ -1015,12 +1068,12 @@ fn density_mlp_throughput_report() {
         layout: mlp_layout,
         rows: rows as u32,
         params: &params,
-        input: RowView::packed(&input, in_dim as u32),
+        input: InputRows::Given(RowView::packed(&input, in_dim as u32)),
         output: None,
         gradients: Some(MlpGradients {
             grads: grads.clone(),
             output_grad: RowView::packed(&output_grad, out_dim as u32),
-            input_grad: Some(RowView::packed(&input_grad, in_dim as u32)),
+            input_grad: Some(InputRows::Given(RowView::packed(&input_grad, in_dim as u32))),
         }),
         kept: None,
     };

@@ -1,6 +1,9 @@
 //! The head glue against the per-sample arithmetic of `reference::model`, on the packed rows of
 //! the samples kept for the heads (a third of them dropped): the forward and the feature gather
-//! on the packed rows alone, the geometry gather on every sample.
+//! on the packed rows alone, the geometry gather on every sample; the semantic input and its
+//! gradient as f32 rows and as bf16 rows (the semantic MLP's own rows on CPU devices).
+use scribblefield::field::bf16;
+use scribblefield::field::gpu::dense::{RowFormat, RowView};
 use scribblefield::field::gpu::head_glue::{GlueBuffers, GlueDims, GlueRows, HeadGluePass, WORKGROUP_SIZE};
 use scribblefield::field::gpu::keep::{HeadRows, NOT_KEPT, workgroup_counts};
 use scribblefield::gpu::buffers::{read_buffer_blocking, storage_buffer_from, storage_buffer_garbage};
@@ -14,17 +17,54 @@ fn values(len: usize, salt: f32) -> Vec<f32> {
 
 #[test]
 fn glue_matches_reference_arithmetic() {
-    check_glue("glue_matches_reference_arithmetic", true);
+    check_glue("glue_matches_reference_arithmetic", true, RowFormat::F32);
 }
 
 /// `SemanticInput::Feature`: the semantic input is relu(f) alone, and no semantic
 /// gradient reaches g.
 #[test]
 fn glue_without_geometry_in_the_semantic_input() {
-    check_glue("glue_without_geometry_in_the_semantic_input", false);
+    check_glue("glue_without_geometry_in_the_semantic_input", false, RowFormat::F32);
 }
 
-fn check_glue(name: &str, semantic_sees_geometry: bool) {
+/// bf16 semantic rows: an odd width (8 + 15), so every row ends in a padding value, and an even
+/// one.
+#[test]
+fn glue_with_bf16_semantic_rows() {
+    check_glue("glue_with_bf16_semantic_rows", true, RowFormat::Bf16);
+    check_glue("glue_with_bf16_semantic_rows", false, RowFormat::Bf16);
+}
+
+/// Rows of `width` values in `format`: their words, and the values as stored.
+fn stored_rows(values: &[f32], width: usize, format: RowFormat) -> (Vec<u32>, Vec<f32>) {
+    match format {
+        RowFormat::F32 => (values.iter().map(|v| v.to_bits()).collect(), values.to_vec()),
+        RowFormat::Bf16 => {
+            let stride = width.next_multiple_of(2);
+            let mut words = Vec::new();
+            let mut stored = Vec::new();
+            for row in values.chunks(width) {
+                let padded: Vec<f32> = (0..stride).map(|j| row.get(j).copied().unwrap_or(0.0)).collect();
+                words.extend(padded.chunks(2).map(|p| bf16::pair(p[0], p[1])));
+                stored.extend(row.iter().map(|&v| bf16::round(v)));
+            }
+            (words, stored)
+        }
+    }
+}
+
+/// Value `j` of row `p` of `width`-value rows held in `words`.
+fn row_value(words: &[u32], p: usize, j: usize, width: usize, format: RowFormat) -> f32 {
+    match format {
+        RowFormat::F32 => f32::from_bits(words[p * width + j]),
+        RowFormat::Bf16 => {
+            let stride = width.next_multiple_of(2);
+            bf16::row_value(&words[p * stride / 2..], j)
+        }
+    }
+}
+
+fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
     let Some(ctx) = gpu_for_tests(name) else {
         return;
     };
@@ -35,7 +75,8 @@ fn check_glue(name: &str, semantic_sees_geometry: bool) {
     let (stride, h0_at, f_at) = (1 + 3 + 2 + d, 0usize, 6usize);
     let density_out = values(n * (1 + g), 0.1);
     let feature_out = values(n * d, 0.2);
-    let semantic_in_grad = values(n * (d + sg), 0.3);
+    // The gradient as the semantic MLP stored it, and the values the glue should read.
+    let (semantic_grad_words, semantic_in_grad) = stored_rows(&values(n * (d + sg), 0.3), d + sg, format);
     let grad_heads0 = values(n * stride, 0.4);
     let grad_h0 = values(n * stride, 0.8);
     // Every third sample dropped; the rest packed in order.
@@ -55,8 +96,13 @@ fn check_glue(name: &str, semantic_sees_geometry: bool) {
     let density_out_b = buf("density out", &density_out);
     let feature_out_b = buf("feature out", &feature_out);
     let color_in_b = buf("color in", &color_sh);
-    let semantic_in_b = storage_buffer_garbage::<f32>(&ctx, "semantic in", n * (d + sg)).unwrap();
-    let semantic_in_grad_b = buf("semantic in grad", &semantic_in_grad);
+    let view = |buffer: &wgpu::Buffer| match format {
+        RowFormat::F32 => RowView::packed(buffer, (d + sg) as u32),
+        RowFormat::Bf16 => RowView::packed_bf16(buffer, (d + sg) as u32),
+    };
+    let semantic_words = RowView::words(format, n as u32, (d + sg) as u32) as usize;
+    let semantic_in_b = view(&storage_buffer_garbage::<u32>(&ctx, "semantic in", semantic_words).unwrap());
+    let semantic_in_grad_b = view(&storage_buffer_from(&ctx, "semantic in grad", &semantic_grad_words).unwrap());
     let grad_heads_b = buf("grad heads", &grad_heads0);
     let density_out_grad_b = storage_buffer_garbage::<f32>(&ctx, "density out grad", n * (1 + g)).unwrap();
     let color_in_grad_b = buf("color in grad", &color_in_grad);
@@ -84,7 +130,9 @@ fn check_glue(name: &str, semantic_sees_geometry: bool) {
         grad_feature: f_at as u32,
         semantic_trunk_scale: 1.0,
         semantic_geometry: sg as u32,
-        _pad: [0; 3],
+        semantic_in_stride: 0,
+        semantic_grad_stride: 0,
+        _pad: 0,
     };
     let buffers = GlueBuffers {
         density_out: &density_out_b,
@@ -114,7 +162,11 @@ fn check_glue(name: &str, semantic_sees_geometry: bool) {
     ctx.queue.submit([encoder.finish()]);
 
     let color_in: Vec<f32> = read_buffer_blocking(&ctx, &color_in_b).unwrap();
-    let semantic_in: Vec<f32> = read_buffer_blocking(&ctx, &semantic_in_b).unwrap();
+    let semantic_in: Vec<u32> = read_buffer_blocking(&ctx, &semantic_in_b.buffer).unwrap();
+    let stored = |v: f32| match format {
+        RowFormat::F32 => v,
+        RowFormat::Bf16 => bf16::round(v),
+    };
     let grad_heads: Vec<f32> = read_buffer_blocking(&ctx, &grad_heads_b).unwrap();
     let density_grad: Vec<f32> = read_buffer_blocking(&ctx, &density_out_grad_b).unwrap();
     for p in 0..n {
@@ -136,9 +188,23 @@ fn check_glue(name: &str, semantic_sees_geometry: bool) {
             continue;
         }
         assert_eq!(&color_in[row + sh..row + sh + g], geo);
-        let relu: Vec<f32> = f.iter().map(|v| v.max(0.0)).collect();
-        assert_eq!(&semantic_in[p * (d + sg)..p * (d + sg) + d], &relu[..]);
-        assert_eq!(&semantic_in[p * (d + sg) + d..(p + 1) * (d + sg)], &geo[..sg]);
+        let want: Vec<f32> = f
+            .iter()
+            .map(|v| v.max(0.0))
+            .chain(geo[..sg].iter().copied())
+            .map(stored)
+            .collect();
+        let got: Vec<f32> = (0..d + sg)
+            .map(|j| row_value(&semantic_in, p, j, d + sg, format))
+            .collect();
+        assert_eq!(got, want, "semantic input of row {p}");
+        if format == RowFormat::Bf16 && (d + sg) % 2 == 1 {
+            assert_eq!(
+                row_value(&semantic_in, p, d + sg, d + sg, format),
+                0.0,
+                "padding of row {p}"
+            );
+        }
         for k in 0..d {
             let at = p * stride + f_at + k;
             let via_semantic = if f[k] > 0.0 {

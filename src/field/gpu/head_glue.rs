@@ -5,6 +5,7 @@
 //! gather run on those rows (indirect dispatches), the geometry gather on every sample.
 use bytemuck::{Pod, Zeroable};
 
+use super::row_view::RowView;
 use crate::gpu::buffers::uniform_buffer_from;
 use crate::gpu::dispatch::{Dispatch, IndirectArgs, whole};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec};
@@ -30,7 +31,11 @@ pub struct GlueDims {
     pub semantic_trunk_scale: f32,
     /// Columns of g in the semantic input (`FieldConfig::semantic_geometry_dim`: geometry or 0).
     pub semantic_geometry: u32,
-    pub _pad: [u32; 3],
+    /// Row strides, in values, of the semantic input and its gradient (set by
+    /// [`HeadGluePass::new`] from their views).
+    pub semantic_in_stride: u32,
+    pub semantic_grad_stride: u32,
+    pub _pad: u32,
 }
 
 /// The buffers the glue reads and writes (row strides in `GlueDims` terms); all but
@@ -42,9 +47,10 @@ pub struct GlueBuffers<'a> {
     pub feature_out: &'a wgpu::Buffer,
     /// [SH | g], stride sh + geometry.
     pub color_in: &'a wgpu::Buffer,
-    /// [relu(f) | g], stride feature + semantic_geometry.
-    pub semantic_in: &'a wgpu::Buffer,
-    pub semantic_in_grad: &'a wgpu::Buffer,
+    /// [relu(f) | g] per row, f32 or bf16: the semantic MLP's input rows.
+    pub semantic_in: &'a RowView,
+    /// Their gradient, as the semantic MLP writes it.
+    pub semantic_in_grad: &'a RowView,
     /// The composite's packed head-gradient rows; `gather_feature` adds the semantic path into
     /// dL/df.
     pub grad_heads: &'a wgpu::Buffer,
@@ -79,14 +85,13 @@ async fn stage(
     entry: &str,
     groups: Dispatch1d,
     bindings: &[(&str, &wgpu::Buffer)],
+    constants: &[(&str, f64)],
 ) -> Result<Dispatch, GpuError> {
-    Dispatch::build(
-        ctx,
-        &KernelSpec::new(entry, shaders::HEAD_GLUE, entry),
-        &whole(bindings),
-        groups,
-    )
-    .await
+    let spec = KernelSpec {
+        constants,
+        ..KernelSpec::new(entry, shaders::HEAD_GLUE, entry)
+    };
+    Dispatch::build(ctx, &spec, &whole(bindings), groups).await
 }
 
 impl HeadGluePass {
@@ -96,6 +101,23 @@ impl HeadGluePass {
         b: &GlueBuffers<'_>,
         rows: &GlueRows<'_>,
     ) -> Result<Self, GpuError> {
+        let width = dims.feature + dims.semantic_geometry;
+        b.semantic_in.check("head glue: semantic input", dims.samples, width)?;
+        b.semantic_in_grad
+            .check("head glue: semantic input gradient", dims.samples, width)?;
+        if b.semantic_in.offset != 0 || b.semantic_in_grad.offset != 0 {
+            return Err(GpuError::invalid_argument(
+                "head glue",
+                "the semantic input and its gradient must start their rows",
+            ));
+        }
+        let dims = GlueDims {
+            semantic_in_stride: b.semantic_in.stride,
+            semantic_grad_stride: b.semantic_in_grad.stride,
+            ..dims
+        };
+        let input_bf16 = [("SEMANTIC_IN_BF16", f64::from(u8::from(b.semantic_in.is_bf16())))];
+        let grad_bf16 = [("SEMANTIC_GRAD_BF16", f64::from(u8::from(b.semantic_in_grad.is_bf16())))];
         let uniform = uniform_buffer_from(ctx, "head glue dims", &dims);
         let groups = Dispatch1d::for_device(ctx, dims.samples.into(), WORKGROUP_SIZE)?;
         let assemble = stage(
@@ -107,9 +129,10 @@ impl HeadGluePass {
                 ("density_out", b.density_out),
                 ("feature_out", b.feature_out),
                 ("color_in", b.color_in),
-                ("semantic_in", b.semantic_in),
+                ("semantic_in", &b.semantic_in.buffer),
                 ("row_count", rows.row_count),
             ],
+            &input_bf16,
         )
         .await?
         .with_indirect(rows.dispatch.clone());
@@ -120,10 +143,11 @@ impl HeadGluePass {
             &[
                 ("dims", &uniform),
                 ("feature_out", b.feature_out),
-                ("semantic_in_grad", b.semantic_in_grad),
+                ("semantic_in_grad", &b.semantic_in_grad.buffer),
                 ("grad_heads", b.grad_heads),
                 ("row_count", rows.row_count),
             ],
+            &grad_bf16,
         )
         .await?
         .with_indirect(rows.dispatch.clone());
@@ -133,13 +157,14 @@ impl HeadGluePass {
             groups,
             &[
                 ("dims", &uniform),
-                ("semantic_in_grad", b.semantic_in_grad),
+                ("semantic_in_grad", &b.semantic_in_grad.buffer),
                 ("grad_h0_source", b.grad_h0_source),
                 ("slot", rows.slot),
                 ("density_out_grad", b.density_out_grad),
                 ("color_in_grad", b.color_in_grad),
                 ("feature_in_grad", b.feature_in_grad),
             ],
+            &grad_bf16,
         )
         .await?;
         Ok(HeadGluePass {

@@ -29,17 +29,19 @@ impl<R: Real> MlpTrace<R> {
 
 /// Forward pass of one input vector (`dims[0]` values).
 pub fn forward<R: Real>(dims: &[usize], weights: &[R], input: &[R]) -> MlpTrace<R> {
-    forward_stored(dims, weights, input, Rounding::Exact)
+    forward_stored(dims, weights, input, &StoredRows::default())
 }
 
-/// [`forward`] with every hidden layer's output (after the ReLU) seen as `hidden` says: as the
-/// GPU stores it, so every later layer and the backward read what the GPU's read.
-pub fn forward_stored<R: Real>(dims: &[usize], weights: &[R], input: &[R], hidden: Rounding) -> MlpTrace<R> {
+/// [`forward`] with the input and every hidden layer's output (after the ReLU) seen as `rows`
+/// says (`input`, `hidden`): as the GPU stores them, so every layer and the backward read what
+/// the GPU's read.
+pub fn forward_stored<R: Real>(dims: &[usize], weights: &[R], input: &[R], rows: &StoredRows) -> MlpTrace<R> {
     debug_assert_eq!(weights.len(), weight_count(dims));
     debug_assert_eq!(input.len(), dims[0]);
     let layers = dims.len() - 1;
+    let hidden = rows.hidden;
     let mut activations = Vec::with_capacity(dims.len());
-    activations.push(input.to_vec());
+    activations.push(input.iter().map(|&v| rows.input.apply(v)).collect::<Vec<R>>());
     let mut offset = 0;
     for k in 0..layers {
         let (n_in, n_out) = (dims[k], dims[k + 1]);
@@ -85,6 +87,12 @@ pub struct StoredRows {
     /// How the input gradients between hidden layers (dX of every layer but the first) are
     /// stored ([`backward_stored`]).
     pub hidden_gradients: Rounding,
+    /// How the MLP's input rows are stored ([`forward_stored`]): bf16 where the MLP owns them
+    /// (`dense::MlpPass::input`) and stores its hidden rows so.
+    pub input: Rounding,
+    /// How the first layer's input gradient (the MLP's ∂L/∂input) is stored
+    /// ([`backward_stored`]).
+    pub input_gradient: Rounding,
 }
 
 /// Vector-Jacobian product: given `grad_out` = ∂L/∂output (`dims[last]` values), adds
@@ -102,8 +110,9 @@ pub fn backward<R: Real>(
 }
 
 /// [`backward`] with the rows seen as `rows` says: each layer's weight gradient reads dZ as
-/// `rows.dz[k]`, and each hidden layer's input gradient is seen as `rows.hidden_gradients` by
-/// the layer below (the trace's activations are the forward's, [`forward_stored`]).
+/// `rows.dz[k]`, each hidden layer's input gradient is seen as `rows.hidden_gradients` by the
+/// layer below, and the MLP's input gradient is returned as `rows.input_gradient` (the trace's
+/// activations are the forward's, [`forward_stored`]).
 pub fn backward_stored<R: Real>(
     dims: &[usize],
     weights: &[R],
@@ -147,7 +156,7 @@ pub fn backward_stored<R: Real>(
         }
         grad = grad_in;
     }
-    grad
+    grad.iter().map(|&g| rows.input_gradient.apply(g)).collect()
 }
 
 /// dZ of every layer (∂L/∂ its output before the ReLU; the last layer's is `grad_out`), first

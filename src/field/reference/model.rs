@@ -175,25 +175,15 @@ impl FieldModel {
         let mut encoding = vec![R::ZERO; self.config.encoding_dim()];
         self.encode_position(params, pos, &mut encoding);
         let rows = &self.stored_rows;
-        let density = mlp::forward_stored(
-            &l.density.dims,
-            &params[l.density.range()],
-            &encoding,
-            rows.density.hidden,
-        );
+        let density = mlp::forward_stored(&l.density.dims, &params[l.density.range()], &encoding, &rows.density);
         let sigma = activations::density(density.output()[0]);
         let geometry = &density.output()[1..];
 
         let color_in: Vec<R> = view_sh.iter().chain(geometry).copied().collect();
-        let color = mlp::forward_stored(&l.color.dims, &params[l.color.range()], &color_in, rows.color.hidden);
+        let color = mlp::forward_stored(&l.color.dims, &params[l.color.range()], &color_in, &rows.color);
         let rgb: [R; 3] = std::array::from_fn(|c| activations::sigmoid(color.output()[c]));
 
-        let feature = mlp::forward_stored(
-            &l.feature.dims,
-            &params[l.feature.range()],
-            geometry,
-            rows.feature.hidden,
-        );
+        let feature = mlp::forward_stored(&l.feature.dims, &params[l.feature.range()], geometry, &rows.feature);
         let semantic_in: Vec<R> = feature
             .output()
             .iter()
@@ -204,7 +194,7 @@ impl FieldModel {
             &l.semantic.dims,
             &params[l.semantic.range()],
             &semantic_in,
-            rows.semantic.hidden,
+            &rows.semantic,
         );
 
         let mut value = Vec::with_capacity(self.channels.count());

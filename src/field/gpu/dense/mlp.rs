@@ -10,6 +10,15 @@ use crate::field::params::MlpLayout;
 use crate::gpu::buffers::storage_buffer_zeroed;
 use crate::gpu::{GpuContext, GpuError};
 
+/// Rows at the MLP's input side: the caller's, or rows the pass allocates in the format its
+/// kernels read best (bf16 where it stores its hidden rows so), for the caller to write or read
+/// through [`MlpPass::input`] and [`MlpPass::input_gradient`].
+#[derive(Debug, Clone)]
+pub enum InputRows {
+    Given(RowView),
+    Owned,
+}
+
 /// Gradient buffers of an MLP's backward.
 #[derive(Debug, Clone)]
 pub struct MlpGradients {
@@ -18,7 +27,7 @@ pub struct MlpGradients {
     /// dL/d(output), `output_dim` values per row.
     pub output_grad: RowView,
     /// Where dL/d(input) goes (overwritten); `None` when the input needs no gradient.
-    pub input_grad: Option<RowView>,
+    pub input_grad: Option<InputRows>,
 }
 
 /// What an MLP reads and writes.
@@ -29,7 +38,7 @@ pub struct MlpPassDesc<'a> {
     pub rows: u32,
     pub params: &'a wgpu::Buffer,
     /// `input_dim` values per row.
-    pub input: RowView,
+    pub input: InputRows,
     /// Where the last layer writes; `None`: a packed buffer the pass allocates.
     pub output: Option<RowView>,
     /// `None` builds a forward-only pass (rendering).
@@ -53,6 +62,19 @@ pub struct MlpPass {
     outputs: Vec<RowView>,
     /// dL/d(input of layer k) for k ≥ 1, packed, owned (none in a chain: registers).
     hidden_grads: Vec<wgpu::Buffer>,
+    input: RowView,
+    input_grad: Option<RowView>,
+}
+
+/// Rows of `width` values, in `format`, in a buffer of their own.
+fn owned_rows(ctx: &GpuContext, label: &str, format: RowFormat, rows: u32, width: u32) -> Result<RowView, GpuError> {
+    let words = RowView::words(format, rows, width) as usize;
+    ctx.ensure_storage_binding_fits(label, words as u64 * 4)?;
+    let buffer = storage_buffer_zeroed::<f32>(ctx, label, words)?;
+    Ok(match format {
+        RowFormat::F32 => RowView::packed(&buffer, width),
+        RowFormat::Bf16 => RowView::packed_bf16(&buffer, width),
+    })
 }
 
 impl MlpPass {
@@ -105,18 +127,17 @@ impl MlpPass {
             .collect();
         let packing = MlpPacking::new(ctx, pipelines, label, params, &specs, &input_grads).await?;
         let hidden = hidden_format(ctx, pipelines, &specs, &packing, &input_grads, gradients.is_some());
+        let input = match input {
+            InputRows::Given(view) => view,
+            InputRows::Owned => owned_rows(ctx, &format!("{label} input"), hidden, rows, dims[0])?,
+        };
         let mut outputs = Vec::with_capacity(layers);
         for (k, spec) in specs.iter().enumerate() {
             let view = match (&output, k + 1 == layers) {
                 (Some(view), true) => view.clone(),
                 (_, last) => {
                     let format = if last { RowFormat::F32 } else { hidden };
-                    let words = RowView::words(format, rows, spec.out_dim) as usize;
-                    let buffer = storage_buffer_zeroed::<f32>(ctx, &format!("{} output", spec.label), words)?;
-                    match format {
-                        RowFormat::F32 => RowView::packed(&buffer, spec.out_dim),
-                        RowFormat::Bf16 => RowView::packed_bf16(&buffer, spec.out_dim),
-                    }
+                    owned_rows(ctx, &format!("{} output", spec.label), format, rows, spec.out_dim)?
                 }
             };
             outputs.push(view);
@@ -131,11 +152,26 @@ impl MlpPass {
 
         let mut hidden_grads = Vec::new();
         let mut chain = None;
+        let mut input_grad = None;
         let backward = match gradients {
             None => None,
             Some(gradients) => {
                 let chain_block = chain_block(ctx, pipelines, &specs, &packing, gradients.input_grad.is_some());
                 let chained = chain_block.is_some();
+                // A chain writes the input gradient in f32; otherwise it is stored as the hidden
+                // layers' input gradients are.
+                let gradient_format = if chained { RowFormat::F32 } else { hidden };
+                input_grad = match &gradients.input_grad {
+                    None => None,
+                    Some(InputRows::Given(view)) => Some(view.clone()),
+                    Some(InputRows::Owned) => Some(owned_rows(
+                        ctx,
+                        &format!("{label} input gradient"),
+                        gradient_format,
+                        rows,
+                        dims[0],
+                    )?),
+                };
                 // The input gradients between hidden layers are stored like the hidden outputs.
                 for spec in specs[1..].iter().filter(|_| !chained) {
                     let words = RowView::words(hidden, rows, spec.in_dim) as usize;
@@ -165,17 +201,17 @@ impl MlpPass {
                     } else {
                         &hidden_views[k]
                     };
-                    let input_grad = if chained {
+                    let layer_input_grad = if chained {
                         None
                     } else if k == 0 {
-                        gradients.input_grad.as_ref()
+                        input_grad.as_ref()
                     } else {
                         Some(&hidden_views[k - 1])
                     };
                     let layer_gradients = DenseGradients {
                         grads: &gradients.grads,
                         output_grad,
-                        input_grad,
+                        input_grad: layer_input_grad,
                         kept,
                         dz_from_chain: chained,
                     };
@@ -205,7 +241,7 @@ impl MlpPass {
                         block,
                         outputs: &outputs,
                         output_grad: &gradients.output_grad,
-                        input_grad: gradients.input_grad.as_ref(),
+                        input_grad: input_grad.as_ref(),
                         dz,
                         row_count: backward[0].row_count(),
                         kept,
@@ -222,7 +258,19 @@ impl MlpPass {
             chain,
             outputs,
             hidden_grads,
+            input,
+            input_grad,
         })
+    }
+
+    /// The rows the MLP reads as its input (the caller's, or its own: [`InputRows::Owned`]).
+    pub fn input(&self) -> &RowView {
+        &self.input
+    }
+
+    /// Where the backward writes ∂L/∂input, where it computes it.
+    pub fn input_gradient(&self) -> Option<&RowView> {
+        self.input_grad.as_ref()
     }
 
     /// Records every layer's forward, in order, after refreshing the packed weights that both

@@ -25,7 +25,7 @@ use crate::scene::{Bounds, Pca, Scene};
 
 use super::adam::{AdamBuffers, AdamPass};
 use super::composite::{CompositeInputs, CompositeLayout, CompositePass, LOSS_WORDS};
-use super::dense::{DenseFamily, DensePipelines, MlpGradients, MlpPass, MlpPassDesc, RowFormat, RowView};
+use super::dense::{DenseFamily, DensePipelines, InputRows, MlpGradients, MlpPass, MlpPassDesc, RowFormat, RowView};
 use super::encoding::{
     AtomicAdd, DirectionLayout, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
     PositionEncodeBuffers, PositionEncodePass, ShOutputLayout,
@@ -76,15 +76,12 @@ struct SampleBuffers {
     feature_in_grad: wgpu::Buffer,
     color_in: wgpu::Buffer,
     color_in_grad: wgpu::Buffer,
-    semantic_in: wgpu::Buffer,
-    semantic_in_grad: wgpu::Buffer,
 }
 
 impl SampleBuffers {
     fn new(ctx: &GpuContext, cfg: &FieldConfig) -> Result<Self, GpuError> {
         let n = cfg.batch_rays as usize * cfg.samples_per_ray();
         let (e, g, d) = (cfg.encoding_dim(), cfg.geometry_dim as usize, cfg.feature_dim as usize);
-        let sg = cfg.semantic_geometry_dim();
         let sh = SH as usize;
         let make = |label: &str, width: usize| {
             ctx.ensure_storage_binding_fits(label, (n * width * 4) as u64)?;
@@ -101,8 +98,6 @@ impl SampleBuffers {
             feature_in_grad: make("feature input gradient", g)?,
             color_in: make("colour input", sh + g)?,
             color_in_grad: make("colour input gradient", sh + g)?,
-            semantic_in: make("semantic input", d + sg)?,
-            semantic_in_grad: make("semantic input gradient", d + sg)?,
         })
     }
 }
@@ -250,7 +245,7 @@ impl Trainer {
                 layout: &layout.density,
                 rows: n,
                 params: &optimizer.params,
-                input: RowView::packed(&samples.encoding, cfg.encoding_dim() as u32),
+                input: InputRows::Given(RowView::packed(&samples.encoding, cfg.encoding_dim() as u32)),
                 output: Some(RowView::packed(&samples.density_out, 1 + g)),
                 gradients: Some(MlpGradients {
                     grads: grads.clone(),
@@ -258,7 +253,7 @@ impl Trainer {
                     input_grad: cfg
                         .encoding
                         .uses_hash_grid()
-                        .then(|| RowView::packed(&samples.encoding_grad, cfg.encoding_dim() as u32)),
+                        .then(|| InputRows::Given(RowView::packed(&samples.encoding_grad, cfg.encoding_dim() as u32))),
                 }),
                 kept: None,
             },
@@ -272,12 +267,12 @@ impl Trainer {
                 layout: &layout.feature,
                 rows: n,
                 params: &optimizer.params,
-                input: RowView::new(&samples.density_packed, 1 + g, 1),
+                input: InputRows::Given(RowView::new(&samples.density_packed, 1 + g, 1)),
                 output: Some(RowView::packed(&samples.feature_out, d)),
                 gradients: Some(MlpGradients {
                     grads: grads.clone(),
                     output_grad: grad_view(composite_layout.grad_feature_offset()),
-                    input_grad: Some(RowView::packed(&samples.feature_in_grad, g)),
+                    input_grad: Some(InputRows::Given(RowView::packed(&samples.feature_in_grad, g))),
                 }),
                 kept: Some(&head_rows),
             },
@@ -291,12 +286,12 @@ impl Trainer {
                 layout: &layout.color,
                 rows: n,
                 params: &optimizer.params,
-                input: RowView::packed(&samples.color_in, SH + g),
+                input: InputRows::Given(RowView::packed(&samples.color_in, SH + g)),
                 output: Some(RowView::packed(&color_out, 3)),
                 gradients: Some(MlpGradients {
                     grads: grads.clone(),
                     output_grad: grad_view(CompositeLayout::GRAD_COLOR),
-                    input_grad: Some(RowView::packed(&samples.color_in_grad, SH + g)),
+                    input_grad: Some(InputRows::Given(RowView::packed(&samples.color_in_grad, SH + g))),
                 }),
                 kept: Some(&head_rows),
             },
@@ -310,12 +305,13 @@ impl Trainer {
                 layout: &layout.semantic,
                 rows: n,
                 params: &optimizer.params,
-                input: RowView::packed(&samples.semantic_in, d + sg),
+                // Its own rows, bf16 where it stores its hidden rows so: the glue writes them.
+                input: InputRows::Owned,
                 output: Some(RowView::packed(&logits, c)),
                 gradients: Some(MlpGradients {
                     grads: grads.clone(),
                     output_grad: grad_view(composite_layout.grad_logits_offset()),
-                    input_grad: Some(RowView::packed(&samples.semantic_in_grad, d + sg)),
+                    input_grad: Some(InputRows::Owned),
                 }),
                 kept: Some(&head_rows),
             },
@@ -333,14 +329,18 @@ impl Trainer {
                 grad_feature: composite_layout.grad_feature_offset() as u32,
                 semantic_trunk_scale: cfg.semantic_trunk_gradient,
                 semantic_geometry: sg,
-                _pad: [0; 3],
+                semantic_in_stride: 0,
+                semantic_grad_stride: 0,
+                _pad: 0,
             },
             &GlueBuffers {
                 density_out: &samples.density_packed,
                 feature_out: &samples.feature_out,
                 color_in: &samples.color_in,
-                semantic_in: &samples.semantic_in,
-                semantic_in_grad: &samples.semantic_in_grad,
+                semantic_in: semantic.input(),
+                semantic_in_grad: semantic
+                    .input_gradient()
+                    .ok_or_else(|| GpuError::invalid_argument("semantic", "no input gradient"))?,
                 grad_heads: &composite.head_grads,
                 grad_h0_source: &composite.grad_heads,
                 density_out_grad: &samples.density_out_grad,
@@ -546,6 +546,8 @@ impl Trainer {
             dz: mlp.weight_gradient_windows().into_iter().map(bf16).collect(),
             hidden: bf16(mlp.hidden_rows() == RowFormat::Bf16),
             hidden_gradients: bf16(mlp.hidden_gradient_rows() == RowFormat::Bf16),
+            input: bf16(mlp.input().is_bf16()),
+            input_gradient: bf16(mlp.input_gradient().is_some_and(RowView::is_bf16)),
         };
         crate::field::reference::FieldRows {
             density: rows(&self.density),

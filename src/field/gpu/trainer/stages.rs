@@ -4,6 +4,7 @@
 use super::Trainer;
 use crate::field::config::FieldConfig;
 use crate::field::gpu::composite::CompositeLayout;
+use crate::field::gpu::dense::{RowFormat, RowView};
 use crate::field::gpu::encoding::AtomicAdd;
 use crate::field::gpu::rays::TARGET_HEADER_WORDS;
 use crate::field::params::ParamLayout;
@@ -90,6 +91,14 @@ impl StepStage {
 
 /// Bytes per `f32`/`u32` element.
 const WORD: u64 = 4;
+
+/// How the semantic MLP stores its input rows and their gradient (it owns both:
+/// `dense::MlpPass::input`), for the glue's traffic.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct SemanticRows {
+    pub input: RowFormat,
+    pub gradient: RowFormat,
+}
 /// Bytes of one `RayGeometry` (origin, z per t, direction, near, far, depth, pixel, flags).
 const RAY_GEOMETRY_BYTES: u64 = 48;
 /// Bytes of one sample's position (vec4) and interval (vec2).
@@ -112,18 +121,18 @@ impl StepStage {
     /// | sh | R ray geometries | N·16 |
     /// | density mlp, the heads' MLPs (N rows, K rows) | see `DenseForward::global_bytes` | |
     /// | keep | N h₀ and intervals twice, R flags and counts, K·(1 + g + 16) gathered | R counts, N slots, K rows, K·(1 + g + 16) |
-    /// | glue | density (K·(1+g)) and feature (K·f) rows | colour input's g, semantic input (K·(f + sg)) |
+    /// | glue | density (K·(1+g)) and feature (K·f) rows | colour input's g, semantic input (K·(f + sg), in its format) |
     /// | composite | N h₀, intervals and slots, K head values, R targets | N·3 (∂L/∂h₀ and scratch), K head gradients, R ray outputs |
     /// | an MLP backward (K rows for the heads, N for density) | see `DenseBackward::global_bytes` | |
-    /// | glue backward (feature) | K·f semantic-input and K·f feature-loss gradients | K·f |
-    /// | glue backward (geometry) | N slots and ∂L/∂h₀, K·(g + g + sg) gradients | N·(1 + g) |
+    /// | glue backward (feature) | K·f semantic-input (in its format) and K·f feature-loss gradients | K·f |
+    /// | glue backward (geometry) | N slots and ∂L/∂h₀, K·(g + g) gradients and K·sg of the semantic input's | N·(1 + g) |
     /// | encoding backward | N hash-grid gradients and positions (fixed point: the gradients twice; one invocation per level: the positions once per level; `Trainer::stage_bytes`) | an atomic add (read and write) per corner, level and feature (fixed point: and an exponent per level) |
     /// | adam | parameters, gradients, both moments: 4·P | parameters, gradients (zeroed), both moments: 4·P |
     ///
     /// The MLPs' stages are `None`: their passes know which kernels they record, and count
     /// them (`Trainer::stage_bytes`). Adam zeroes the gradient it consumed, so there is no
     /// separate clear of the gradient buffer before a step ([`gradient_clear_bytes`] is 0).
-    pub(super) fn global_bytes(self, cfg: &FieldConfig, kept: u64) -> Option<u64> {
+    pub(super) fn global_bytes(self, cfg: &FieldConfig, kept: u64, semantic: SemanticRows) -> Option<u64> {
         let layout = ParamLayout::new(cfg);
         let r = u64::from(cfg.batch_rays);
         let n = r * cfg.samples_per_ray() as u64;
@@ -137,6 +146,8 @@ impl StepStage {
         } else {
             0
         };
+        // Words of `width` semantic-input (gradient) values stored as `format`.
+        let words = |format, width: u64| RowView::words(format, 1, width as u32);
         let composite = CompositeLayout::new(cfg);
         let heads = composite.grad_stride() as u64;
         let bytes = match self {
@@ -145,7 +156,7 @@ impl StepStage {
             StepStage::Encoding => n * 16 + n * corners * WORD + n * cfg.encoding_dim() as u64 * WORD,
             StepStage::Sh => r * RAY_GEOMETRY_BYTES + n * 16 * WORD,
             StepStage::Keep => WORD * (2 * 3 * n + 3 * r + n + k + 2 * k * (1 + g + 16)),
-            StepStage::GlueAssemble => WORD * k * ((1 + g) + f + g + (f + sg)),
+            StepStage::GlueAssemble => WORD * k * ((1 + g) + f + g + words(semantic.input, f + sg)),
             StepStage::Composite => {
                 n * (2 * WORD + 8)
                     + k * (heads - 1) * WORD
@@ -154,8 +165,8 @@ impl StepStage {
                     + k * heads * WORD
                     + composite.ray_output_words() as u64 * WORD
             }
-            StepStage::GlueGatherFeature => WORD * k * 3 * f,
-            StepStage::GlueGatherGeometry => WORD * (2 * n + k * (g + g + sg) + n * (1 + g)),
+            StepStage::GlueGatherFeature => WORD * k * (2 * f + words(semantic.gradient, f)),
+            StepStage::GlueGatherGeometry => WORD * (2 * n + k * (g + g + words(semantic.gradient, sg)) + n * (1 + g)),
             StepStage::EncodingBackward if hash => {
                 n * 16 + n * cfg.hash_encoding_dim() as u64 * WORD + 2 * n * corners * WORD
             }
@@ -232,7 +243,9 @@ impl Trainer {
             StepStage::ColorBackward => self.color.backward_bytes(k),
             StepStage::DensityBackward => self.density.backward_bytes(n),
             StepStage::EncodingBackward => {
-                let adds = stage.global_bytes(&self.cfg, samples_to_heads).unwrap_or(0);
+                let adds = stage
+                    .global_bytes(&self.cfg, samples_to_heads, self.semantic_rows())
+                    .unwrap_or(0);
                 // Fixed point first bounds each level's sums: one more read of the hash
                 // columns of every gradient row, one exponent written per level.
                 let scale = match self.hash_backward.fixed_point_table() {
@@ -246,7 +259,19 @@ impl Trainer {
                 };
                 adds + scale + positions_again
             }
-            _ => stage.global_bytes(&self.cfg, samples_to_heads).unwrap_or(0),
+            _ => stage
+                .global_bytes(&self.cfg, samples_to_heads, self.semantic_rows())
+                .unwrap_or(0),
+        }
+    }
+
+    fn semantic_rows(&self) -> SemanticRows {
+        SemanticRows {
+            input: self.semantic.input().format,
+            gradient: self
+                .semantic
+                .input_gradient()
+                .map_or(RowFormat::F32, |view| view.format),
         }
     }
 
@@ -314,9 +339,10 @@ mod tests {
         // The MLPs' passes count their own traffic (tests/gpu_trainer.rs checks the whole step).
         let cfg = FieldConfig::default();
         let all = u64::from(cfg.batch_rays) * cfg.samples_per_ray() as u64;
+        let f32_rows = SemanticRows::default();
         for stage in TRAINING_STEP {
             let is_mlp = stage.name().contains("mlp");
-            match stage.global_bytes(&cfg, all) {
+            match stage.global_bytes(&cfg, all, f32_rows) {
                 Some(bytes) => assert!(!is_mlp && bytes > 0, "{}: {bytes}", stage.name()),
                 None => assert!(is_mlp, "{} has no model", stage.name()),
             }
@@ -325,12 +351,18 @@ mod tests {
             batch_rays: 2048,
             ..cfg.clone()
         };
-        assert!(StepStage::Encoding.global_bytes(&half, all) < StepStage::Encoding.global_bytes(&cfg, all));
+        assert!(
+            StepStage::Encoding.global_bytes(&half, all, f32_rows)
+                < StepStage::Encoding.global_bytes(&cfg, all, f32_rows)
+        );
         // Fewer samples at the heads: the glue moves less, the encoding the same.
-        assert!(StepStage::GlueAssemble.global_bytes(&cfg, all / 10) < StepStage::GlueAssemble.global_bytes(&cfg, all));
+        assert!(
+            StepStage::GlueAssemble.global_bytes(&cfg, all / 10, f32_rows)
+                < StepStage::GlueAssemble.global_bytes(&cfg, all, f32_rows)
+        );
         assert_eq!(
-            StepStage::Encoding.global_bytes(&cfg, all / 10),
-            StepStage::Encoding.global_bytes(&cfg, all)
+            StepStage::Encoding.global_bytes(&cfg, all / 10, f32_rows),
+            StepStage::Encoding.global_bytes(&cfg, all, f32_rows)
         );
     }
 }
