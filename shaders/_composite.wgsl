@@ -18,6 +18,9 @@
 // Losses are weighted and divided by the whole batch B. Rays that miss the scene box render
 // nothing and contribute no loss and no gradient (the reference never builds them).
 //
+// The feature head's rows are f32 or bf16 (FEATURE_BF16: as the feature MLP stores its output,
+// `dense::mlp_row_format`).
+//
 // Each kernel has two entry points: `composite` (training: all of the above) and `composite_render` (display:
 // the rendered block only, no loss and no backward; the forward is the same function, so the
 // rendered values are the same).
@@ -57,7 +60,9 @@ const NO_FAR_CLASS: u32 = 0xffffffffu;
 @group(0) @binding(2) var<storage, read> h0_source: array<f32>;
 @group(0) @binding(3) var<storage, read> color_source: array<f32>;
 @group(0) @binding(4) var<storage, read> logits_source: array<f32>;
-@group(0) @binding(5) var<storage, read> feature_source: array<f32>;
+@group(0) @binding(5) var<storage, read> feature_source: array<u32>;
+
+override FEATURE_BF16: bool = false;
 @group(0) @binding(6) var<storage, read> intervals: array<vec2<f32>>;
 @group(0) @binding(7) var<storage, read> targets: array<u32>;
 @group(0) @binding(8) var<storage, read_write> grad_heads: array<f32>;
@@ -97,7 +102,8 @@ fn feature_of(n: u32, d: u32) -> f32 {
     if h == NOT_KEPT {
         return 0.0;
     }
-    return feature_source[h * params.feature_stride + params.feature_offset + d];
+    let row = h * params.feature_stride + params.feature_offset;
+    return row_value(feature_source[row_word(row, d, FEATURE_BF16)], d, FEATURE_BF16);
 }
 
 fn target_f32(row: u32, word: u32) -> f32 {

@@ -9,6 +9,7 @@
 //!include _step.wgsl
 //!include _ray_layout.wgsl
 //!include _density.wgsl
+//!include _bf16.wgsl
 //!include _composite.wgsl
 
 const WORKGROUP_SIZE: u32 = 64u;

@@ -11,6 +11,7 @@
 //!include _step.wgsl
 //!include _ray_layout.wgsl
 //!include _density.wgsl
+//!include _bf16.wgsl
 //!include _composite.wgsl
 
 // Invocations per ray: samples are staged LANES at a time, channels split LANES ways.

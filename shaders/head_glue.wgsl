@@ -6,8 +6,9 @@
 // (keep.wgsl), packed: `assemble` and `gather_feature` work on the first row_count[0] packed
 // rows (density_out is then the packed copy of the density rows), `gather_geometry` on every
 // sample, reading the heads' gradients from the sample's packed row (`slot`) and 0 for a
-// sample that was not kept. The semantic input and its gradient are f32 or bf16 rows
-// (SEMANTIC_IN_BF16, SEMANTIC_GRAD_BF16: as the semantic MLP stores them, `dense::MlpPass::input`).
+// sample that was not kept. f and the semantic input and its gradient are f32 or bf16 rows
+// (FEATURE_BF16, SEMANTIC_IN_BF16, SEMANTIC_GRAD_BF16: as the feature and semantic MLPs store
+// them, `dense::mlp_row_format`, `dense::MlpPass::input`).
 //!include _dispatch.wgsl
 //!include _bf16.wgsl
 
@@ -30,9 +31,11 @@ struct GlueDims {
     // Row strides, in values, of the semantic input and of its gradient.
     semantic_in_stride: u32,
     semantic_grad_stride: u32,
-    pad0: u32,
+    // Row stride, in values, of f.
+    feature_stride: u32,
 }
 
+override FEATURE_BF16: bool = false;
 override SEMANTIC_IN_BF16: bool = false;
 override SEMANTIC_GRAD_BF16: bool = false;
 
@@ -40,8 +43,8 @@ override SEMANTIC_GRAD_BF16: bool = false;
 @group(0) @binding(0) var<uniform> dims: GlueDims;
 // [h0 | g] per sample, row stride 1 + geometry.
 @group(0) @binding(1) var<storage, read> density_out: array<f32>;
-// f per sample, row stride feature.
-@group(0) @binding(2) var<storage, read> feature_out: array<f32>;
+// f per packed row, row stride feature_stride.
+@group(0) @binding(2) var<storage, read> feature_out: array<u32>;
 // [SH | g], row stride sh + geometry.
 @group(0) @binding(3) var<storage, read_write> color_in: array<f32>;
 // [relu(f) | g], row stride semantic_in_stride.
@@ -71,11 +74,17 @@ fn sample_index(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
     return linear_item_index(wid, nwg, lid, WORKGROUP_SIZE);
 }
 
+// Value k of packed row n's f.
+fn feature_value(n: u32, k: u32) -> f32 {
+    let row = n * dims.feature_stride;
+    return row_value(feature_out[row_word(row, k, FEATURE_BF16)], k, FEATURE_BF16);
+}
+
 // Value j of packed row n's semantic input: relu(f), then g, then 0 (a bf16 row's padding).
 fn semantic_value(n: u32, j: u32) -> f32 {
     let d = dims.feature;
     if j < d {
-        return max(feature_out[n * d + j], 0.0);
+        return max(feature_value(n, j), 0.0);
     }
     if j < d + dims.semantic_geometry {
         return density_out[n * (1u + dims.geometry) + 1u + j - d];
@@ -134,7 +143,7 @@ fn gather_feature(
     }
     let d = dims.feature;
     for (var k = 0u; k < d; k++) {
-        if feature_out[n * d + k] > 0.0 {
+        if feature_value(n, k) > 0.0 {
             let at = n * dims.grad_stride + dims.grad_feature + k;
             grad_heads[at] += dims.semantic_trunk_scale * semantic_gradient(n, k);
         }

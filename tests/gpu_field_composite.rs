@@ -4,7 +4,6 @@
 //! Run in release: `cargo test --release --test gpu_field_composite`.
 use std::time::Instant;
 
-use scribblefield::field::FieldConfig;
 use scribblefield::field::gpu::composite::{
     CompositeInputs, CompositeKernel, CompositeLayout, CompositePass, CompositeUniforms, RowView,
 };
@@ -15,6 +14,7 @@ use scribblefield::field::gpu::rays::{
 };
 use scribblefield::field::reference::loss::{RayTarget, add_opacity, opacity_loss, ray_loss};
 use scribblefield::field::reference::{Channels, activations, render};
+use scribblefield::field::{FieldConfig, bf16};
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{fill_with_garbage, read_buffer_blocking, storage_buffer_from, uniform_buffer_from};
 use scribblefield::gpu::test_support::gpu_for_tests;
@@ -278,6 +278,11 @@ fn run_on_gpu(ctx: &GpuContext, batch: &Batch) -> GpuRun {
 
 /// Runs the training entry point, or with `render` the forward alone, on garbage-filled outputs.
 fn run_entry(ctx: &GpuContext, batch: &Batch, render: bool) -> GpuRun {
+    run_with_features(ctx, batch, render, false)
+}
+
+/// [`run_entry`], with the feature head's rows in bf16 rows of their own where `bf16_features`.
+fn run_with_features(ctx: &GpuContext, batch: &Batch, render: bool, bf16_features: bool) -> GpuRun {
     let cfg = &batch.cfg;
     let step = uniform_buffer_from(ctx, "step", &StepUniforms::for_step(cfg, 1, 0, 1e-3));
     let density = storage_buffer_from(ctx, "density out", &batch.density).unwrap();
@@ -292,12 +297,28 @@ fn run_entry(ctx: &GpuContext, batch: &Batch, render: bool) -> GpuRun {
     let targets = storage_buffer_from(ctx, "targets", &batch.targets).unwrap();
     let slot = storage_buffer_from(ctx, "slot", &batch.slot).unwrap();
     let hs = batch.heads_stride() as u32;
+    let (c, d) = (cfg.num_classes as usize, cfg.feature_dim as usize);
+    let feature = if bf16_features {
+        // Each packed row's D values as bf16 pairs, rows padded to an even length.
+        let packed = batch.packed(&batch.logits_and_feature, hs as usize);
+        let words: Vec<u32> = packed
+            .chunks(hs as usize)
+            .flat_map(|row| {
+                let mut f = row[c..c + d].to_vec();
+                f.resize(d.next_multiple_of(2), 0.0);
+                f.chunks(2).map(|p| bf16::pair(p[0], p[1])).collect::<Vec<_>>()
+            })
+            .collect();
+        RowView::packed_bf16(&storage_buffer_from(ctx, "bf16 features", &words).unwrap(), d as u32)
+    } else {
+        RowView::new(&heads, hs, cfg.num_classes)
+    };
     let inputs = CompositeInputs {
         step_uniforms: &step,
         h0: RowView::new(&density, DENSITY_STRIDE, 0),
         color: RowView::new(&color, 3, 0),
         logits: RowView::new(&heads, hs, 0),
-        feature: RowView::new(&heads, hs, cfg.num_classes),
+        feature,
         intervals: &intervals,
         targets: &targets,
         slot: &slot,
@@ -483,6 +504,41 @@ fn with_each_kernel(ctx: &GpuContext) -> [GpuContext; 2] {
         CompositeKernel::WorkgroupPerRay
     );
     kernels
+}
+
+/// Feature rows in bf16 (as the feature MLP stores them on CPU devices) composite exactly as f32
+/// rows holding the same rounded values, in training and in the render, with each kernel.
+#[test]
+fn bf16_feature_rows_composite_as_their_rounded_values() {
+    let Some(ctx) = gpu_for_tests("bf16_feature_rows_composite_as_their_rounded_values") else {
+        return;
+    };
+    for ctx in with_each_kernel(&ctx) {
+        // An odd feature width: every bf16 row ends in a padding value.
+        let mut batch = Batch::random(config(3, 5, 5, 7, 300, true), 21);
+        let (c, d, hs) = (3, 5, batch.heads_stride());
+        for row in batch.logits_and_feature.chunks_mut(hs) {
+            for v in &mut row[c..c + d] {
+                *v = bf16::round(*v);
+            }
+        }
+        let layout = CompositeLayout::new(&batch.cfg);
+        let rendered = layout.rendered(0..batch.cfg.batch_rays as usize);
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        for render in [false, true] {
+            let f32_rows = run_with_features(&ctx, &batch, render, false);
+            let bf16_rows = run_with_features(&ctx, &batch, render, true);
+            assert_eq!(
+                bits(&f32_rows.ray_outputs[rendered.clone()]),
+                bits(&bf16_rows.ray_outputs[rendered.clone()]),
+                "render {render}"
+            );
+            if !render {
+                assert_eq!(bits(&f32_rows.ray_outputs), bits(&bf16_rows.ray_outputs));
+                assert_eq!(bits(&f32_rows.head_grads), bits(&bf16_rows.head_grads));
+            }
+        }
+    }
 }
 
 #[test]

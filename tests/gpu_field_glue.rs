@@ -1,7 +1,7 @@
 //! The head glue against the per-sample arithmetic of `reference::model`, on the packed rows of
 //! the samples kept for the heads (a third of them dropped): the forward and the feature gather
-//! on the packed rows alone, the geometry gather on every sample; the semantic input and its
-//! gradient as f32 rows and as bf16 rows (the semantic MLP's own rows on CPU devices).
+//! on the packed rows alone, the geometry gather on every sample; f, the semantic input and its
+//! gradient as f32 rows and as bf16 rows (the feature and semantic MLPs' rows on CPU devices).
 use scribblefield::field::bf16;
 use scribblefield::field::gpu::dense::{RowFormat, RowView};
 use scribblefield::field::gpu::head_glue::{GlueBuffers, GlueDims, GlueRows, HeadGluePass, WORKGROUP_SIZE};
@@ -27,8 +27,8 @@ fn glue_without_geometry_in_the_semantic_input() {
     check_glue("glue_without_geometry_in_the_semantic_input", false, RowFormat::F32);
 }
 
-/// bf16 semantic rows: an odd width (8 + 15), so every row ends in a padding value, and an even
-/// one.
+/// bf16 rows of f and of the semantic input: an odd semantic width (8 + 15), so every row ends
+/// in a padding value, and an even one.
 #[test]
 fn glue_with_bf16_semantic_rows() {
     check_glue("glue_with_bf16_semantic_rows", true, RowFormat::Bf16);
@@ -74,7 +74,8 @@ fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
     // Composite rows [dh0, dcolour (3), dlogits (C = 2), df (D)].
     let (stride, h0_at, f_at) = (1 + 3 + 2 + d, 0usize, 6usize);
     let density_out = values(n * (1 + g), 0.1);
-    let feature_out = values(n * d, 0.2);
+    // f as the feature MLP stored it, and the values the glue should read.
+    let (feature_words, feature_out) = stored_rows(&values(n * d, 0.2), d, format);
     // The gradient as the semantic MLP stored it, and the values the glue should read.
     let (semantic_grad_words, semantic_in_grad) = stored_rows(&values(n * (d + sg), 0.3), d + sg, format);
     let grad_heads0 = values(n * stride, 0.4);
@@ -94,12 +95,13 @@ fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
 
     let buf = |label: &str, v: &[f32]| storage_buffer_from(&ctx, label, v).unwrap();
     let density_out_b = buf("density out", &density_out);
-    let feature_out_b = buf("feature out", &feature_out);
-    let color_in_b = buf("color in", &color_sh);
-    let view = |buffer: &wgpu::Buffer| match format {
-        RowFormat::F32 => RowView::packed(buffer, (d + sg) as u32),
-        RowFormat::Bf16 => RowView::packed_bf16(buffer, (d + sg) as u32),
+    let rows_of = |buffer: &wgpu::Buffer, width: usize| match format {
+        RowFormat::F32 => RowView::packed(buffer, width as u32),
+        RowFormat::Bf16 => RowView::packed_bf16(buffer, width as u32),
     };
+    let feature_out_b = rows_of(&storage_buffer_from(&ctx, "feature out", &feature_words).unwrap(), d);
+    let color_in_b = buf("color in", &color_sh);
+    let view = |buffer: &wgpu::Buffer| rows_of(buffer, d + sg);
     let semantic_words = RowView::words(format, n as u32, (d + sg) as u32) as usize;
     let semantic_in_b = view(&storage_buffer_garbage::<u32>(&ctx, "semantic in", semantic_words).unwrap());
     let semantic_in_grad_b = view(&storage_buffer_from(&ctx, "semantic in grad", &semantic_grad_words).unwrap());
@@ -130,9 +132,8 @@ fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
         grad_feature: f_at as u32,
         semantic_trunk_scale: 1.0,
         semantic_geometry: sg as u32,
-        semantic_in_stride: 0,
-        semantic_grad_stride: 0,
-        _pad: 0,
+        // The row strides: from the views.
+        ..bytemuck::Zeroable::zeroed()
     };
     let buffers = GlueBuffers {
         density_out: &density_out_b,

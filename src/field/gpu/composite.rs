@@ -81,7 +81,7 @@ pub struct CompositeInputs<'a> {
     pub color: RowView,
     /// Semantic logits: C values.
     pub logits: RowView,
-    /// Feature f: D values.
+    /// Feature f: D values, f32 or bf16 rows.
     pub feature: RowView,
     /// `SamplePointsPass::intervals`.
     pub intervals: &'a wgpu::Buffer,
@@ -201,25 +201,21 @@ impl CompositePass {
         let layout = CompositeLayout::new(cfg);
         let batch = cfg.batch_rays as usize;
         let samples = batch * cfg.samples_per_ray();
-        let heads = [("h0", &inputs.h0, 1), ("colour", &inputs.color, 3)];
-        let wide_heads = [
+        let heads = [
+            ("h0", &inputs.h0, 1),
+            ("colour", &inputs.color, 3),
             ("logits", &inputs.logits, cfg.num_classes),
             ("feature", &inputs.feature, cfg.feature_dim),
         ];
-        for (name, source, width) in heads.into_iter().chain(wide_heads) {
-            let needed = (samples as u64 - 1) * u64::from(source.stride) + u64::from(source.offset) + u64::from(width);
-            if source.stride < width || needed * 4 > source.buffer.size() {
+        for (name, source, width) in heads {
+            // Only the feature head's rows may be bf16.
+            if source.is_bf16() && name != "feature" {
                 return Err(GpuError::invalid_argument(
                     "composite pass",
-                    format!(
-                        "{name} head source (stride {}, offset {}) must hold {width} values for each of {samples} \
-                         samples in its {} bytes",
-                        source.stride,
-                        source.offset,
-                        source.buffer.size()
-                    ),
+                    format!("the {name} head's rows must be f32"),
                 ));
             }
+            source.check(&format!("composite pass: {name} head source"), samples as u32, width)?;
         }
         let uniforms = CompositeUniforms {
             classes: cfg.num_classes,
@@ -257,7 +253,11 @@ impl CompositePass {
                 (shaders::COMPOSITE_LANES, Dispatch1d::for_device(ctx, batch as u64, 1)?)
             }
         };
-        let spec = KernelSpec::new("composite", source, "composite");
+        let constants = [("FEATURE_BF16", f64::from(u8::from(inputs.feature.is_bf16())))];
+        let spec = KernelSpec {
+            constants: &constants,
+            ..KernelSpec::new("composite", source, "composite")
+        };
         let bindings = whole(&[
             ("step_info", inputs.step_uniforms),
             ("params", &uniform),
@@ -273,7 +273,10 @@ impl CompositePass {
             ("head_grads", &head_grads),
         ]);
         let dispatch = Dispatch::build(ctx, &spec, &bindings, groups).await?;
-        let render_spec = KernelSpec::new("composite (render)", source, "composite_render");
+        let render_spec = KernelSpec {
+            constants: &constants,
+            ..KernelSpec::new("composite (render)", source, "composite_render")
+        };
         let render_bindings: Vec<_> = bindings
             .iter()
             .filter(|(name, _)| *name != "head_grads")

@@ -35,7 +35,8 @@ pub struct GlueDims {
     /// [`HeadGluePass::new`] from their views).
     pub semantic_in_stride: u32,
     pub semantic_grad_stride: u32,
-    pub _pad: u32,
+    /// Row stride, in values, of f (set by [`HeadGluePass::new`]).
+    pub feature_stride: u32,
 }
 
 /// The buffers the glue reads and writes (row strides in `GlueDims` terms); all but
@@ -43,8 +44,8 @@ pub struct GlueDims {
 pub struct GlueBuffers<'a> {
     /// [h0 | g], stride 1 + geometry (the packed copy `keep.wgsl` gathers).
     pub density_out: &'a wgpu::Buffer,
-    /// f, stride feature.
-    pub feature_out: &'a wgpu::Buffer,
+    /// f per packed row, f32 or bf16: the feature MLP's output rows.
+    pub feature_out: &'a RowView,
     /// [SH | g], stride sh + geometry.
     pub color_in: &'a wgpu::Buffer,
     /// [relu(f) | g] per row, f32 or bf16: the semantic MLP's input rows.
@@ -102,22 +103,27 @@ impl HeadGluePass {
         rows: &GlueRows<'_>,
     ) -> Result<Self, GpuError> {
         let width = dims.feature + dims.semantic_geometry;
+        b.feature_out.check("head glue: f", dims.samples, dims.feature)?;
         b.semantic_in.check("head glue: semantic input", dims.samples, width)?;
         b.semantic_in_grad
             .check("head glue: semantic input gradient", dims.samples, width)?;
-        if b.semantic_in.offset != 0 || b.semantic_in_grad.offset != 0 {
+        if b.feature_out.offset != 0 || b.semantic_in.offset != 0 || b.semantic_in_grad.offset != 0 {
             return Err(GpuError::invalid_argument(
                 "head glue",
-                "the semantic input and its gradient must start their rows",
+                "f, the semantic input and its gradient must start their rows",
             ));
         }
         let dims = GlueDims {
             semantic_in_stride: b.semantic_in.stride,
             semantic_grad_stride: b.semantic_in_grad.stride,
+            feature_stride: b.feature_out.stride,
             ..dims
         };
-        let input_bf16 = [("SEMANTIC_IN_BF16", f64::from(u8::from(b.semantic_in.is_bf16())))];
-        let grad_bf16 = [("SEMANTIC_GRAD_BF16", f64::from(u8::from(b.semantic_in_grad.is_bf16())))];
+        let bf16 = |name, view: &RowView| (name, f64::from(u8::from(view.is_bf16())));
+        let feature_bf16 = bf16("FEATURE_BF16", b.feature_out);
+        let input_bf16 = [feature_bf16, bf16("SEMANTIC_IN_BF16", b.semantic_in)];
+        let grad_bf16 = [bf16("SEMANTIC_GRAD_BF16", b.semantic_in_grad)];
+        let feature_and_grad_bf16 = [feature_bf16, grad_bf16[0]];
         let uniform = uniform_buffer_from(ctx, "head glue dims", &dims);
         let groups = Dispatch1d::for_device(ctx, dims.samples.into(), WORKGROUP_SIZE)?;
         let assemble = stage(
@@ -127,7 +133,7 @@ impl HeadGluePass {
             &[
                 ("dims", &uniform),
                 ("density_out", b.density_out),
-                ("feature_out", b.feature_out),
+                ("feature_out", &b.feature_out.buffer),
                 ("color_in", b.color_in),
                 ("semantic_in", &b.semantic_in.buffer),
                 ("row_count", rows.row_count),
@@ -142,12 +148,12 @@ impl HeadGluePass {
             groups,
             &[
                 ("dims", &uniform),
-                ("feature_out", b.feature_out),
+                ("feature_out", &b.feature_out.buffer),
                 ("semantic_in_grad", &b.semantic_in_grad.buffer),
                 ("grad_heads", b.grad_heads),
                 ("row_count", rows.row_count),
             ],
-            &grad_bf16,
+            &feature_and_grad_bf16,
         )
         .await?
         .with_indirect(rows.dispatch.clone());

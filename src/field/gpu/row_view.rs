@@ -1,6 +1,7 @@
 //! Rows inside a buffer: how every per-sample GPU pass names the slice of a wider row it reads
 //! or writes (an MLP layer's input, a head's output inside the composite's rows).
-use crate::gpu::GpuError;
+use crate::gpu::buffers::storage_buffer_zeroed;
+use crate::gpu::{GpuContext, GpuError};
 
 /// How a row's values are stored.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -48,6 +49,23 @@ impl RowView {
             offset: 0,
             format: RowFormat::Bf16,
         }
+    }
+
+    /// `rows` rows of `width` values in `format`, back to back in a zeroed buffer of their own.
+    pub fn zeroed(
+        ctx: &GpuContext,
+        label: &str,
+        format: RowFormat,
+        rows: u32,
+        width: u32,
+    ) -> Result<RowView, GpuError> {
+        let words = RowView::words(format, rows, width);
+        ctx.ensure_storage_binding_fits(label, words * 4)?;
+        let buffer = storage_buffer_zeroed::<f32>(ctx, label, words as usize)?;
+        Ok(match format {
+            RowFormat::F32 => RowView::packed(&buffer, width),
+            RowFormat::Bf16 => RowView::packed_bf16(&buffer, width),
+        })
     }
 
     /// Words a buffer needs for `rows` such rows of `width` values, and their format.

@@ -32,9 +32,9 @@ pub fn forward<R: Real>(dims: &[usize], weights: &[R], input: &[R]) -> MlpTrace<
     forward_stored(dims, weights, input, &StoredRows::default())
 }
 
-/// [`forward`] with the input and every hidden layer's output (after the ReLU) seen as `rows`
-/// says (`input`, `hidden`): as the GPU stores them, so every layer and the backward read what
-/// the GPU's read.
+/// [`forward`] with the input, every hidden layer's output (after the ReLU) and the output seen
+/// as `rows` says (`input`, `hidden`, `output`): as the GPU stores them, so every layer, the
+/// backward and what reads the output see what the GPU's do.
 pub fn forward_stored<R: Real>(dims: &[usize], weights: &[R], input: &[R], rows: &StoredRows) -> MlpTrace<R> {
     debug_assert_eq!(weights.len(), weight_count(dims));
     debug_assert_eq!(input.len(), dims[0]);
@@ -50,6 +50,8 @@ pub fn forward_stored<R: Real>(dims: &[usize], weights: &[R], input: &[R], rows:
         layer.forward(&activations[k], &mut y);
         if k + 1 < layers {
             y.iter_mut().for_each(|v| *v = hidden.apply(v.max(R::ZERO)));
+        } else {
+            y.iter_mut().for_each(|v| *v = rows.output.apply(*v));
         }
         activations.push(y);
         offset += n_in * n_out;
@@ -93,6 +95,8 @@ pub struct StoredRows {
     /// How the first layer's input gradient (the MLP's ∂L/∂input) is stored
     /// ([`backward_stored`]).
     pub input_gradient: Rounding,
+    /// How the MLP's output rows are stored ([`forward_stored`]).
+    pub output: Rounding,
 }
 
 /// Vector-Jacobian product: given `grad_out` = ∂L/∂output (`dims[last]` values), adds

@@ -66,17 +66,6 @@ pub struct MlpPass {
     input_grad: Option<RowView>,
 }
 
-/// Rows of `width` values, in `format`, in a buffer of their own.
-fn owned_rows(ctx: &GpuContext, label: &str, format: RowFormat, rows: u32, width: u32) -> Result<RowView, GpuError> {
-    let words = RowView::words(format, rows, width) as usize;
-    ctx.ensure_storage_binding_fits(label, words as u64 * 4)?;
-    let buffer = storage_buffer_zeroed::<f32>(ctx, label, words)?;
-    Ok(match format {
-        RowFormat::F32 => RowView::packed(&buffer, width),
-        RowFormat::Bf16 => RowView::packed_bf16(&buffer, width),
-    })
-}
-
 impl MlpPass {
     pub async fn new(
         ctx: &GpuContext,
@@ -93,31 +82,10 @@ impl MlpPass {
             gradients,
             kept,
         } = desc;
-        let dims: Vec<u32> = layout
-            .dims
-            .iter()
-            .map(|&d| u32::try_from(d).map_err(|_| GpuError::invalid_argument(label, format!("width {d} exceeds u32"))))
-            .collect::<Result<_, _>>()?;
-        let layers = layout.layers.len();
-        if layers == 0 || dims.len() != layers + 1 {
-            return Err(GpuError::invalid_argument(
-                label,
-                format!("layout {layout:?} has no consistent layers"),
-            ));
-        }
-        let specs: Vec<DenseLayerSpec> = (0..layers)
-            .map(|k| DenseLayerSpec {
-                label: format!("{label}.{k}"),
-                rows,
-                in_dim: dims[k],
-                out_dim: dims[k + 1],
-                activation: if k + 1 < layers {
-                    Activation::Relu
-                } else {
-                    Activation::None
-                },
-                weights: layout.layers[k].clone(),
-            })
+        let specs = layer_specs(label, layout, rows)?;
+        let layers = specs.len();
+        let dims: Vec<u32> = std::iter::once(specs[0].in_dim)
+            .chain(specs.iter().map(|s| s.out_dim))
             .collect();
 
         // dX of layer 0 only where the caller wants the input's gradient; of every later layer
@@ -126,10 +94,10 @@ impl MlpPass {
             .map(|k| gradients.as_ref().is_some_and(|g| k > 0 || g.input_grad.is_some()))
             .collect();
         let packing = MlpPacking::new(ctx, pipelines, label, params, &specs, &input_grads).await?;
-        let hidden = hidden_format(ctx, pipelines, &specs, &packing, &input_grads, gradients.is_some());
+        let hidden = hidden_format(ctx, pipelines, &specs, &input_grads, gradients.is_some());
         let input = match input {
             InputRows::Given(view) => view,
-            InputRows::Owned => owned_rows(ctx, &format!("{label} input"), hidden, rows, dims[0])?,
+            InputRows::Owned => RowView::zeroed(ctx, &format!("{label} input"), hidden, rows, dims[0])?,
         };
         let mut outputs = Vec::with_capacity(layers);
         for (k, spec) in specs.iter().enumerate() {
@@ -137,7 +105,7 @@ impl MlpPass {
                 (Some(view), true) => view.clone(),
                 (_, last) => {
                     let format = if last { RowFormat::F32 } else { hidden };
-                    owned_rows(ctx, &format!("{} output", spec.label), format, rows, spec.out_dim)?
+                    RowView::zeroed(ctx, &format!("{} output", spec.label), format, rows, spec.out_dim)?
                 }
             };
             outputs.push(view);
@@ -164,7 +132,7 @@ impl MlpPass {
                 input_grad = match &gradients.input_grad {
                     None => None,
                     Some(InputRows::Given(view)) => Some(view.clone()),
-                    Some(InputRows::Owned) => Some(owned_rows(
+                    Some(InputRows::Owned) => Some(RowView::zeroed(
                         ctx,
                         &format!("{label} input gradient"),
                         gradient_format,
@@ -380,6 +348,55 @@ impl MlpPass {
     }
 }
 
+/// The layers of an MLP of `layout` over `rows` rows: ReLU after every hidden layer, linear
+/// output.
+fn layer_specs(label: &str, layout: &MlpLayout, rows: u32) -> Result<Vec<DenseLayerSpec>, GpuError> {
+    let dims: Vec<u32> = layout
+        .dims
+        .iter()
+        .map(|&d| u32::try_from(d).map_err(|_| GpuError::invalid_argument(label, format!("width {d} exceeds u32"))))
+        .collect::<Result<_, _>>()?;
+    let layers = layout.layers.len();
+    if layers == 0 || dims.len() != layers + 1 {
+        return Err(GpuError::invalid_argument(
+            label,
+            format!("layout {layout:?} has no consistent layers"),
+        ));
+    }
+    let specs: Vec<DenseLayerSpec> = (0..layers)
+        .map(|k| DenseLayerSpec {
+            label: format!("{label}.{k}"),
+            rows,
+            in_dim: dims[k],
+            out_dim: dims[k + 1],
+            activation: if k + 1 < layers {
+                Activation::Relu
+            } else {
+                Activation::None
+            },
+            weights: layout.layers[k].clone(),
+        })
+        .collect();
+    Ok(specs)
+}
+
+/// How an MLP of `layout` over `rows` rows stores its hidden rows ([`MlpPass::hidden_rows`]),
+/// known before it is built, for a caller that allocates rows the MLP writes or reads in the
+/// same format (e.g. its output). `input_grad`: whether its backward computes the input's
+/// gradient; `backward`: whether it has one.
+pub fn mlp_row_format(
+    ctx: &GpuContext,
+    pipelines: &DensePipelines,
+    layout: &MlpLayout,
+    rows: u32,
+    input_grad: bool,
+    backward: bool,
+) -> Result<RowFormat, GpuError> {
+    let specs = layer_specs("mlp", layout, rows)?;
+    let input_grads: Vec<bool> = (0..specs.len()).map(|k| backward && (k > 0 || input_grad)).collect();
+    Ok(hidden_format(ctx, pipelines, &specs, &input_grads, backward))
+}
+
 /// How the hidden layers' outputs are stored: bf16 rows where every kernel that writes or reads
 /// them is of the packed-weight family (every layer's forward, every input gradient the MLP
 /// runs, every weight gradient through uniform windows) and `pipelines` does not ask for f32;
@@ -388,11 +405,11 @@ fn hidden_format(
     ctx: &GpuContext,
     pipelines: &DensePipelines,
     specs: &[DenseLayerSpec],
-    packing: &MlpPacking,
     input_grads: &[bool],
     backward: bool,
 ) -> RowFormat {
-    let packed = |k: usize, kind| packing.window(k, kind).is_some();
+    // The layers whose packed copies `MlpPacking` makes.
+    let packed = |k: usize, kind| pipelines.packs(ctx, &specs[k], kind);
     let forward = (0..specs.len()).all(|k| packed(k, ProductKind::Forward));
     let backward_packed = !backward
         || (input_grads

@@ -58,7 +58,7 @@ mod tiled;
 mod uniform;
 
 pub use layer::{DenseBackward, DenseDims, DenseForward, DenseGradients, DenseLayerSpec};
-pub use mlp::{InputRows, MlpGradients, MlpPass, MlpPassDesc};
+pub use mlp::{InputRows, MlpGradients, MlpPass, MlpPassDesc, mlp_row_format};
 pub use pipelines::DensePipelines;
 pub use tiled::TileShape;
 pub use uniform::{PackedReads, UNIFORM_WEIGHT_FLOATS};

@@ -25,7 +25,9 @@ use crate::scene::{Bounds, Pca, Scene};
 
 use super::adam::{AdamBuffers, AdamPass};
 use super::composite::{CompositeInputs, CompositeLayout, CompositePass, LOSS_WORDS};
-use super::dense::{DenseFamily, DensePipelines, InputRows, MlpGradients, MlpPass, MlpPassDesc, RowFormat, RowView};
+use super::dense::{
+    DenseFamily, DensePipelines, InputRows, MlpGradients, MlpPass, MlpPassDesc, RowFormat, RowView, mlp_row_format,
+};
 use super::encoding::{
     AtomicAdd, DirectionLayout, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
     PositionEncodeBuffers, PositionEncodePass, ShOutputLayout,
@@ -72,7 +74,6 @@ struct SampleBuffers {
     /// The view's SH coefficients per sample, gathered into `color_in`'s packed rows.
     sh: wgpu::Buffer,
     density_packed: wgpu::Buffer,
-    feature_out: wgpu::Buffer,
     feature_in_grad: wgpu::Buffer,
     color_in: wgpu::Buffer,
     color_in_grad: wgpu::Buffer,
@@ -81,7 +82,7 @@ struct SampleBuffers {
 impl SampleBuffers {
     fn new(ctx: &GpuContext, cfg: &FieldConfig) -> Result<Self, GpuError> {
         let n = cfg.batch_rays as usize * cfg.samples_per_ray();
-        let (e, g, d) = (cfg.encoding_dim(), cfg.geometry_dim as usize, cfg.feature_dim as usize);
+        let (e, g) = (cfg.encoding_dim(), cfg.geometry_dim as usize);
         let sh = SH as usize;
         let make = |label: &str, width: usize| {
             ctx.ensure_storage_binding_fits(label, (n * width * 4) as u64)?;
@@ -94,7 +95,6 @@ impl SampleBuffers {
             density_out_grad: make("density output gradient", 1 + g)?,
             sh: make("view SH", sh)?,
             density_packed: make("kept density output", 1 + g)?,
-            feature_out: make("feature output", d)?,
             feature_in_grad: make("feature input gradient", g)?,
             color_in: make("colour input", sh + g)?,
             color_in_grad: make("colour input gradient", sh + g)?,
@@ -218,6 +218,10 @@ impl Trainer {
         let composite_layout = CompositeLayout::new(cfg);
         let grad_stride = composite_layout.grad_stride() as u32;
         let mut pipelines = DensePipelines::with_family(DenseFamily::for_device(ctx));
+        // f, in the feature MLP's row format: its last layer writes it, the composite and the
+        // glue read it.
+        let format = mlp_row_format(ctx, &pipelines, &layout.feature, n, true, true)?;
+        let feature_out = RowView::zeroed(ctx, "feature output", format, n, d)?;
         let color_out = storage_buffer_zeroed::<f32>(ctx, "colour output", n as usize * 3)?;
         let logits = storage_buffer_zeroed::<f32>(ctx, "semantic logits", n as usize * c as usize)?;
         let composite = CompositePass::new(
@@ -228,7 +232,7 @@ impl Trainer {
                 h0: RowView::new(&samples.density_out, 1 + g, 0),
                 color: RowView::new(&color_out, 3, 0),
                 logits: RowView::new(&logits, c, 0),
-                feature: RowView::new(&samples.feature_out, d, 0),
+                feature: feature_out.clone(),
                 intervals: &sample_points.intervals,
                 targets: &ray_batch.targets,
                 slot: &head_rows.slot,
@@ -268,7 +272,7 @@ impl Trainer {
                 rows: n,
                 params: &optimizer.params,
                 input: InputRows::Given(RowView::new(&samples.density_packed, 1 + g, 1)),
-                output: Some(RowView::packed(&samples.feature_out, d)),
+                output: Some(feature_out.clone()),
                 gradients: Some(MlpGradients {
                     grads: grads.clone(),
                     output_grad: grad_view(composite_layout.grad_feature_offset()),
@@ -329,13 +333,12 @@ impl Trainer {
                 grad_feature: composite_layout.grad_feature_offset() as u32,
                 semantic_trunk_scale: cfg.semantic_trunk_gradient,
                 semantic_geometry: sg,
-                semantic_in_stride: 0,
-                semantic_grad_stride: 0,
-                _pad: 0,
+                // The row strides: from the views.
+                ..bytemuck::Zeroable::zeroed()
             },
             &GlueBuffers {
                 density_out: &samples.density_packed,
-                feature_out: &samples.feature_out,
+                feature_out: &feature_out,
                 color_in: &samples.color_in,
                 semantic_in: semantic.input(),
                 semantic_in_grad: semantic
@@ -548,6 +551,7 @@ impl Trainer {
             hidden_gradients: bf16(mlp.hidden_gradient_rows() == RowFormat::Bf16),
             input: bf16(mlp.input().is_bf16()),
             input_gradient: bf16(mlp.input_gradient().is_some_and(RowView::is_bf16)),
+            output: bf16(mlp.output().is_bf16()),
         };
         crate::field::reference::FieldRows {
             density: rows(&self.density),

@@ -92,13 +92,16 @@ impl StepStage {
 /// Bytes per `f32`/`u32` element.
 const WORD: u64 = 4;
 
-/// How the semantic MLP stores its input rows and their gradient (it owns both:
-/// `dense::MlpPass::input`), for the glue's traffic.
+/// How the rows between the heads are stored (f32 or bf16), for the composite's and the
+/// glue's traffic: f as the feature MLP writes it, the semantic MLP's own input rows and their
+/// gradient (`dense::MlpPass::input`).
 #[derive(Clone, Copy, Debug, Default)]
-pub(super) struct SemanticRows {
-    pub input: RowFormat,
-    pub gradient: RowFormat,
+pub(super) struct HeadRowFormats {
+    pub feature: RowFormat,
+    pub semantic_input: RowFormat,
+    pub semantic_gradient: RowFormat,
 }
+
 /// Bytes of one `RayGeometry` (origin, z per t, direction, near, far, depth, pixel, flags).
 const RAY_GEOMETRY_BYTES: u64 = 48;
 /// Bytes of one sample's position (vec4) and interval (vec2).
@@ -121,8 +124,8 @@ impl StepStage {
     /// | sh | R ray geometries | N·16 |
     /// | density mlp, the heads' MLPs (N rows, K rows) | see `DenseForward::global_bytes` | |
     /// | keep | N h₀ and intervals twice, R flags and counts, K·(1 + g + 16) gathered | R counts, N slots, K rows, K·(1 + g + 16) |
-    /// | glue | density (K·(1+g)) and feature (K·f) rows | colour input's g, semantic input (K·(f + sg), in its format) |
-    /// | composite | N h₀, intervals and slots, K head values, R targets | N·3 (∂L/∂h₀ and scratch), K head gradients, R ray outputs |
+    /// | glue | density (K·(1+g)) and feature (K·f, in its format) rows | colour input's g, semantic input (K·(f + sg), in its format) |
+    /// | composite | N h₀, intervals and slots, K head values (f in its format), R targets | N·3 (∂L/∂h₀ and scratch), K head gradients, R ray outputs |
     /// | an MLP backward (K rows for the heads, N for density) | see `DenseBackward::global_bytes` | |
     /// | glue backward (feature) | K·f semantic-input (in its format) and K·f feature-loss gradients | K·f |
     /// | glue backward (geometry) | N slots and ∂L/∂h₀, K·(g + g) gradients and K·sg of the semantic input's | N·(1 + g) |
@@ -132,7 +135,7 @@ impl StepStage {
     /// The MLPs' stages are `None`: their passes know which kernels they record, and count
     /// them (`Trainer::stage_bytes`). Adam zeroes the gradient it consumed, so there is no
     /// separate clear of the gradient buffer before a step ([`gradient_clear_bytes`] is 0).
-    pub(super) fn global_bytes(self, cfg: &FieldConfig, kept: u64, semantic: SemanticRows) -> Option<u64> {
+    pub(super) fn global_bytes(self, cfg: &FieldConfig, kept: u64, heads: HeadRowFormats) -> Option<u64> {
         let layout = ParamLayout::new(cfg);
         let r = u64::from(cfg.batch_rays);
         let n = r * cfg.samples_per_ray() as u64;
@@ -149,24 +152,30 @@ impl StepStage {
         // Words of `width` semantic-input (gradient) values stored as `format`.
         let words = |format, width: u64| RowView::words(format, 1, width as u32);
         let composite = CompositeLayout::new(cfg);
-        let heads = composite.grad_stride() as u64;
+        let heads_row = composite.grad_stride() as u64;
         let bytes = match self {
             StepStage::Rays => 2 * targets + r * RAY_GEOMETRY_BYTES,
             StepStage::Samples => r * RAY_GEOMETRY_BYTES + n * SAMPLE_BYTES,
             StepStage::Encoding => n * 16 + n * corners * WORD + n * cfg.encoding_dim() as u64 * WORD,
             StepStage::Sh => r * RAY_GEOMETRY_BYTES + n * 16 * WORD,
             StepStage::Keep => WORD * (2 * 3 * n + 3 * r + n + k + 2 * k * (1 + g + 16)),
-            StepStage::GlueAssemble => WORD * k * ((1 + g) + f + g + words(semantic.input, f + sg)),
+            StepStage::GlueAssemble => {
+                WORD * k * ((1 + g) + words(heads.feature, f) + g + words(heads.semantic_input, f + sg))
+            }
             StepStage::Composite => {
                 n * (2 * WORD + 8)
-                    + k * (heads - 1) * WORD
+                    + k * (heads_row - 1 - f + words(heads.feature, f)) * WORD
                     + targets
                     + n * 3 * WORD
-                    + k * heads * WORD
+                    + k * heads_row * WORD
                     + composite.ray_output_words() as u64 * WORD
             }
-            StepStage::GlueGatherFeature => WORD * k * (2 * f + words(semantic.gradient, f)),
-            StepStage::GlueGatherGeometry => WORD * (2 * n + k * (g + g + words(semantic.gradient, sg)) + n * (1 + g)),
+            StepStage::GlueGatherFeature => {
+                WORD * k * (words(heads.feature, f) + f + words(heads.semantic_gradient, f))
+            }
+            StepStage::GlueGatherGeometry => {
+                WORD * (2 * n + k * (g + g + words(heads.semantic_gradient, sg)) + n * (1 + g))
+            }
             StepStage::EncodingBackward if hash => {
                 n * 16 + n * cfg.hash_encoding_dim() as u64 * WORD + 2 * n * corners * WORD
             }
@@ -244,7 +253,7 @@ impl Trainer {
             StepStage::DensityBackward => self.density.backward_bytes(n),
             StepStage::EncodingBackward => {
                 let adds = stage
-                    .global_bytes(&self.cfg, samples_to_heads, self.semantic_rows())
+                    .global_bytes(&self.cfg, samples_to_heads, self.head_row_formats())
                     .unwrap_or(0);
                 // Fixed point first bounds each level's sums: one more read of the hash
                 // columns of every gradient row, one exponent written per level.
@@ -260,15 +269,16 @@ impl Trainer {
                 adds + scale + positions_again
             }
             _ => stage
-                .global_bytes(&self.cfg, samples_to_heads, self.semantic_rows())
+                .global_bytes(&self.cfg, samples_to_heads, self.head_row_formats())
                 .unwrap_or(0),
         }
     }
 
-    fn semantic_rows(&self) -> SemanticRows {
-        SemanticRows {
-            input: self.semantic.input().format,
-            gradient: self
+    fn head_row_formats(&self) -> HeadRowFormats {
+        HeadRowFormats {
+            feature: self.feature.output().format,
+            semantic_input: self.semantic.input().format,
+            semantic_gradient: self
                 .semantic
                 .input_gradient()
                 .map_or(RowFormat::F32, |view| view.format),
@@ -339,7 +349,7 @@ mod tests {
         // The MLPs' passes count their own traffic (tests/gpu_trainer.rs checks the whole step).
         let cfg = FieldConfig::default();
         let all = u64::from(cfg.batch_rays) * cfg.samples_per_ray() as u64;
-        let f32_rows = SemanticRows::default();
+        let f32_rows = HeadRowFormats::default();
         for stage in TRAINING_STEP {
             let is_mlp = stage.name().contains("mlp");
             match stage.global_bytes(&cfg, all, f32_rows) {
