@@ -52,7 +52,9 @@ struct ChainDims {
 // Y_0, the first hidden layer's output; the hidden outputs are f32 or bf16 rows (Y_BF16).
 @group(0) @binding(2) var<storage, read> y: array<u32>;
 @group(0) @binding(3) var<uniform> weights: array<vec4<f32>, UNIFORM_WEIGHT_VEC4S>;
-@group(0) @binding(4) var<storage, read_write> dx: array<f32>;
+// The MLP's input gradient, f32 or bf16 rows (DX_BF16: an MLP's own input rows, `InputRows`).
+@group(0) @binding(4) var<storage, read_write> dx: array<u32>;
+override DX_BF16: bool = false;
 // Y_1 (3 layers).
 @group(0) @binding(5) var<storage, read> y_upper: array<u32>;
 override Y_BF16: bool = false;
@@ -306,10 +308,21 @@ fn backward_chain(
         return;
     }
     let dx_row = n * dims.dx_stride + dims.dx_offset;
-    for (var j = 0u; j < BLOCK; j++) {
-        let i = i0 + j;
-        if i < D0 {
-            dx[dx_row + i] = acc_value(&first, j);
+    if DX_BF16 {
+        // Pairs from an even column (BLOCK is a multiple of 4); past D0, the row's padding.
+        for (var j = 0u; j < BLOCK; j += 2u) {
+            let i = i0 + j;
+            if i < D0 {
+                let second = select(0.0, acc_value(&first, j + 1u), i + 1u < D0);
+                dx[(dx_row + i) >> 1u] = bf16_pair(acc_value(&first, j), second);
+            }
+        }
+    } else {
+        for (var j = 0u; j < BLOCK; j++) {
+            let i = i0 + j;
+            if i < D0 {
+                dx[dx_row + i] = bitcast<u32>(acc_value(&first, j));
+            }
         }
     }
 }

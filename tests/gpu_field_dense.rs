@@ -956,7 +956,7 @@ fn forward_only_pass_refuses_backward_and_bad_views_are_errors() {
 }
 
 /// An MLP that owns its input rows (`InputRows::Owned`) stores them as its hidden rows, and its
-/// input gradient too where no chain writes it (a chain writes f32); the caller reaches both
+/// input gradient too (written by a chain or a kernel per layer); the caller reaches both
 /// through `input` and `input_gradient`.
 #[test]
 fn owned_input_rows_take_the_hidden_rows_format() {
@@ -995,17 +995,98 @@ fn owned_input_rows_take_the_hidden_rows_format() {
         grad.check("input gradient", rows, in_dim).unwrap();
     };
     let uniform = build(&mut DensePipelines::with_family(DenseFamily::UniformWeights));
-    let chained_format = if uniform.chains_input_gradients() {
-        RowFormat::F32
-    } else {
-        RowFormat::Bf16
-    };
-    check(&uniform, RowFormat::Bf16, chained_format);
+    check(&uniform, RowFormat::Bf16, RowFormat::Bf16);
     let f32_rows =
         build(&mut DensePipelines::with_family(DenseFamily::UniformWeights).with_hidden_rows(RowFormat::F32));
     check(&f32_rows, RowFormat::F32, RowFormat::F32);
     let tiled = build(&mut DensePipelines::with_family(DenseFamily::Tiled));
     check(&tiled, RowFormat::F32, RowFormat::F32);
+}
+
+/// The input gradient an MLP stores in its own bf16 rows is the f32 one rounded, value for value
+/// (the padding of the odd-width colour input's rows 0), written by the chain and by the
+/// first layer's own kernel: the same MLP run on the same (bf16-exact) input with the caller's
+/// f32 rows is the reference.
+#[test]
+fn owned_bf16_input_gradient_is_the_f32_one_rounded() {
+    let Some(ctx) = gpu_for_tests("owned_bf16_input_gradient_is_the_f32_one_rounded") else {
+        return;
+    };
+    let layout = ParamLayout::new(&FieldConfig::small());
+    let params = trainer_params(&ctx, &layout.init(3));
+    let mlp = &layout.color;
+    let (in_dim, out_dim) = (mlp.input_dim(), mlp.output_dim());
+    assert_eq!(in_dim % 2, 1, "an odd width, so rows end in padding");
+    let rows = 300usize;
+    let mut rng = SplitMix64::new(5);
+    let input: Vec<f32> = random_values(&mut rng, rows * in_dim, 1.0)
+        .into_iter()
+        .map(bf16::round)
+        .collect();
+    let output_grad = storage_buffer_from(&ctx, "output grad", &random_values(&mut rng, rows * out_dim, 1.0)).unwrap();
+    let input_buffer = storage_buffer_from(&ctx, "input", &input).unwrap();
+    let f32_grad = storage_buffer_garbage::<f32>(&ctx, "input grad", rows * in_dim).unwrap();
+    for chain in [true, false] {
+        let mut pipelines = DensePipelines::with_family(DenseFamily::UniformWeights).with_input_gradient_chain(chain);
+        let build = |pipelines: &mut DensePipelines, input: InputRows, input_grad: InputRows| {
+            let grads = storage_buffer_zeroed::<f32>(&ctx, "grads", layout.total).unwrap();
+            let desc = MlpPassDesc {
+                label: "colour",
+                layout: mlp,
+                rows: rows as u32,
+                params: &params,
+                input,
+                output: None,
+                gradients: Some(MlpGradients {
+                    grads,
+                    output_grad: RowView::packed(&output_grad, out_dim as u32),
+                    input_grad: Some(input_grad),
+                }),
+                kept: None,
+            };
+            pollster::block_on(MlpPass::new(&ctx, pipelines, desc)).unwrap()
+        };
+        let given = build(
+            &mut pipelines,
+            InputRows::Given(RowView::packed(&input_buffer, in_dim as u32)),
+            InputRows::Given(RowView::packed(&f32_grad, in_dim as u32)),
+        );
+        let owned = build(&mut pipelines, InputRows::Owned, InputRows::Owned);
+        assert_eq!(owned.chains_input_gradients(), chain);
+        let stride = owned.input().stride as usize;
+        let words: Vec<u32> = input
+            .chunks(in_dim)
+            .flat_map(|row| {
+                let mut padded = row.to_vec();
+                padded.resize(stride, 0.0);
+                padded.chunks(2).map(|p| bf16::pair(p[0], p[1])).collect::<Vec<_>>()
+            })
+            .collect();
+        ctx.queue
+            .write_buffer(&owned.input().buffer, 0, bytemuck::cast_slice(&words));
+        let grad_rows = owned.input_gradient().unwrap();
+        fill_with_garbage(&ctx, &grad_rows.buffer);
+        fill_with_garbage(&ctx, &f32_grad);
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            for mlp in [&given, &owned] {
+                mlp.record_forward(&mut pass);
+                mlp.record_backward(&mut pass).unwrap();
+            }
+        }
+        ctx.queue.submit([encoder.finish()]);
+        let want: Vec<f32> = read_buffer_blocking(&ctx, &f32_grad).unwrap();
+        let got: Vec<u32> = read_buffer_blocking(&ctx, &grad_rows.buffer).unwrap();
+        for n in 0..rows {
+            let row = &got[n * stride / 2..(n + 1) * stride / 2];
+            for j in 0..in_dim {
+                let expected = bf16::round(want[n * in_dim + j]);
+                assert_eq!(bf16::row_value(row, j), expected, "chain {chain}: row {n}, value {j}");
+            }
+            assert_eq!(bf16::row_value(row, in_dim), 0.0, "chain {chain}: row {n}'s padding");
+        }
+    }
 }
 
 /// Measurement, not a check: GFLOP/s of the default density MLP's forward and backward at

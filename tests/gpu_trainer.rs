@@ -461,10 +461,13 @@ fn check_one_step_gradient(
             scale > 0.0,
             "{name}: the reference gradient is zero, the comparison would prove nothing"
         );
-        // f32 sums over 768 samples in another order than the f64 reference. Measured on
-        // lavapipe: at most 3.1e-6 of the scale (hash table), 3e-7 elsewhere.
+        // f32 sums over 768 samples in another order than the f64 reference, and, where the
+        // GPU stores rows as bf16, a value whose f32 and f64 evaluations straddle a bf16
+        // rounding boundary rounds to the neighbouring bf16 (2^-8 of itself) on one side only.
+        // docs/results/bench.md ("Heads' rows in bf16") has the measured worst; leaving out any
+        // of the reference's bf16 rounding fails this by several times.
         assert!(
-            err <= 1e-4 * scale,
+            err <= 1e-3 * scale,
             "{name}: GPU gradient differs from the reference by {err:.3e} (scale {scale:.3e})"
         );
     }

@@ -100,7 +100,8 @@ pub(super) struct BackwardChain {
     /// One per block of the first layer's dX.
     dispatches: Vec<Dispatch>,
     widths: Vec<u32>,
-    input_grad: bool,
+    /// How it stores the MLP's input gradient, where it writes one.
+    input_grad: Option<RowFormat>,
     blocks: u32,
     /// How the hidden outputs it masks with are stored.
     hidden: RowFormat,
@@ -201,6 +202,7 @@ impl BackwardChain {
                 ("W2", f64::from(base[2])),
                 ("FIXED_BLOCK", f64::from(dx_block)),
                 bf16_rows("Y_BF16", hidden0),
+                ("DX_BF16", f64::from(u8::from(input_grad.is_some_and(RowView::is_bf16)))),
             ];
             let pipeline = pipelines
                 .compile(ctx, DenseKernel::BackwardChainUniform, &constants)
@@ -229,7 +231,7 @@ impl BackwardChain {
         Ok(BackwardChain {
             dispatches,
             widths,
-            input_grad: input_grad.is_some(),
+            input_grad: input_grad.map(|view| view.format),
             blocks,
             hidden: hidden0.format,
         })
@@ -243,7 +245,7 @@ impl BackwardChain {
         let w: Vec<u64> = self.widths.iter().map(|&d| u64::from(d)).collect();
         let layers = w.len() - 1;
         let hidden: u64 = w[1..layers].iter().sum();
-        let first_fed = usize::from(!self.input_grad);
+        let first_fed = usize::from(self.input_grad.is_none());
         let weights: u64 = (first_fed..layers)
             .map(|k| w[k + 1] * u64::from(padded_to_vec4(self.widths[k])))
             .sum();
@@ -256,7 +258,9 @@ impl BackwardChain {
             .iter()
             .map(|&d| rows * u64::from(crate::field::bf16::row_words(d as u32)))
             .sum();
-        let dx = if self.input_grad { rows * w[0] } else { 0 };
+        let dx = self
+            .input_grad
+            .map_or(0, |format| RowView::words(format, rows as u32, self.widths[0]));
         4 * (u64::from(self.blocks) * reads + dz + dx)
     }
 

@@ -126,16 +126,13 @@ impl MlpPass {
             Some(gradients) => {
                 let chain_block = chain_block(ctx, pipelines, &specs, &packing, gradients.input_grad.is_some());
                 let chained = chain_block.is_some();
-                // A chain writes the input gradient in f32; otherwise it is stored as the hidden
-                // layers' input gradients are.
-                let gradient_format = if chained { RowFormat::F32 } else { hidden };
                 input_grad = match &gradients.input_grad {
                     None => None,
                     Some(InputRows::Given(view)) => Some(view.clone()),
                     Some(InputRows::Owned) => Some(RowView::zeroed(
                         ctx,
                         &format!("{label} input gradient"),
-                        gradient_format,
+                        hidden,
                         rows,
                         dims[0],
                     )?),
