@@ -6,9 +6,10 @@
 // (keep.wgsl), packed: `assemble` and `gather_feature` work on the first row_count[0] packed
 // rows (density_out is then the packed copy of the density rows), `gather_geometry` on every
 // sample, reading the heads' gradients from the sample's packed row (`slot`) and 0 for a
-// sample that was not kept. f and the semantic input and its gradient are f32 or bf16 rows
-// (FEATURE_BF16, SEMANTIC_IN_BF16, SEMANTIC_GRAD_BF16: as the feature and semantic MLPs store
-// them, `dense::mlp_row_format`, `dense::MlpPass::input`).
+// sample that was not kept. f, the colour and semantic inputs and the heads' input gradients
+// are f32 or bf16 rows (FEATURE_BF16, COLOR_IN_BF16, COLOR_GRAD_BF16, FEATURE_GRAD_BF16,
+// SEMANTIC_IN_BF16, SEMANTIC_GRAD_BF16: as the MLPs store them, `dense::mlp_row_format`,
+// `dense::MlpPass::input`).
 //!include _dispatch.wgsl
 //!include _bf16.wgsl
 
@@ -33,7 +34,17 @@ struct GlueDims {
     semantic_grad_stride: u32,
     // Row stride, in values, of f.
     feature_stride: u32,
+    // Row strides, in values, of the colour input and of its gradient.
+    color_in_stride: u32,
+    color_grad_stride: u32,
+    // Row stride, in values, of the feature MLP's input gradient.
+    feature_grad_stride: u32,
+    pad0: u32,
 }
+
+override COLOR_IN_BF16: bool = false;
+override FEATURE_GRAD_BF16: bool = false;
+override COLOR_GRAD_BF16: bool = false;
 
 override FEATURE_BF16: bool = false;
 override SEMANTIC_IN_BF16: bool = false;
@@ -45,8 +56,8 @@ override SEMANTIC_GRAD_BF16: bool = false;
 @group(0) @binding(1) var<storage, read> density_out: array<f32>;
 // f per packed row, row stride feature_stride.
 @group(0) @binding(2) var<storage, read> feature_out: array<u32>;
-// [SH | g], row stride sh + geometry.
-@group(0) @binding(3) var<storage, read_write> color_in: array<f32>;
+// [SH | g], row stride color_in_stride.
+@group(0) @binding(3) var<storage, read_write> color_in: array<u32>;
 // [relu(f) | g], row stride semantic_in_stride.
 @group(0) @binding(4) var<storage, read_write> semantic_in: array<u32>;
 // Its gradient, row stride semantic_grad_stride; the colour input's, as the colour input.
@@ -54,9 +65,9 @@ override SEMANTIC_GRAD_BF16: bool = false;
 // The composite's [dL/dh0, dL/dcolour, dL/dlogits, dL/df] rows; gather_feature adds into dL/df.
 @group(0) @binding(6) var<storage, read_write> grad_heads: array<f32>;
 @group(0) @binding(7) var<storage, read_write> density_out_grad: array<f32>;
-@group(0) @binding(8) var<storage, read> color_in_grad: array<f32>;
-// The feature MLP's input gradient dL/dg, row stride geometry.
-@group(0) @binding(9) var<storage, read> feature_in_grad: array<f32>;
+@group(0) @binding(8) var<storage, read> color_in_grad: array<u32>;
+// The feature MLP's input gradient dL/dg, row stride feature_grad_stride.
+@group(0) @binding(9) var<storage, read> feature_in_grad: array<u32>;
 // One word: the packed rows present (keep.wgsl).
 @group(0) @binding(10) var<storage, read> row_count: array<u32>;
 // Per sample: its packed row, or NOT_KEPT.
@@ -111,9 +122,17 @@ fn assemble(
     }
     let g = dims.geometry;
     let density_row = n * (1u + g) + 1u;
-    let color_row = n * (dims.sh + g) + dims.sh;
-    for (var j = 0u; j < g; j++) {
-        color_in[color_row + j] = density_out[density_row + j];
+    let color_row = n * dims.color_in_stride + dims.sh;
+    if COLOR_IN_BF16 {
+        // From the even column sh, a pair per word; past g, the row's padding.
+        for (var j = 0u; j < g; j += 2u) {
+            let second = select(0.0, density_out[density_row + j + 1u], j + 1u < g);
+            color_in[(color_row + j) >> 1u] = bf16_pair(density_out[density_row + j], second);
+        }
+    } else {
+        for (var j = 0u; j < g; j++) {
+            color_in[color_row + j] = bitcast<u32>(density_out[density_row + j]);
+        }
     }
     let width = dims.feature + dims.semantic_geometry;
     let row = n * dims.semantic_in_stride;
@@ -179,7 +198,10 @@ fn gather_geometry(
         if j < sg {
             semantic = dims.semantic_trunk_scale * semantic_gradient(k, d + j);
         }
-        density_out_grad[n * (1u + g) + 1u + j] = color_in_grad[k * (dims.sh + g) + dims.sh + j] + semantic
-            + feature_in_grad[k * g + j];
+        let color_row = k * dims.color_grad_stride;
+        let color = row_value(color_in_grad[row_word(color_row, dims.sh + j, COLOR_GRAD_BF16)], dims.sh + j, COLOR_GRAD_BF16);
+        let feature_row = k * dims.feature_grad_stride;
+        let feature = row_value(feature_in_grad[row_word(feature_row, j, FEATURE_GRAD_BF16)], j, FEATURE_GRAD_BF16);
+        density_out_grad[n * (1u + g) + 1u + j] = color + semantic + feature;
     }
 }

@@ -57,9 +57,13 @@ const NOT_KEPT: u32 = 0xffffffffu;
 @group(0) @binding(9) var<storage, read> arg_specs: array<vec4<u32>>;
 @group(0) @binding(10) var<storage, read_write> rows: array<u32>;
 @group(0) @binding(11) var<storage, read_write> slot: array<u32>;
-@group(0) @binding(12) var<storage, read> sh_rows: array<f32>;
+// In the colour rows' format (COLOR_BF16: both bf16).
+@group(0) @binding(12) var<storage, read> sh_rows: array<u32>;
 @group(0) @binding(13) var<storage, read_write> density_packed: array<f32>;
-@group(0) @binding(14) var<storage, read_write> color_packed: array<f32>;
+// The colour MLP's input rows, f32 or bf16 (COLOR_BF16: as the MLP stores them, `InputRows`; the
+// SH rows are then bf16 too, and their words are copied).
+@group(0) @binding(14) var<storage, read_write> color_packed: array<u32>;
+override COLOR_BF16: bool = false;
 // Two words: the kept rows summed over every run of `scan_kept`, and the runs (wrapping), so
 // `bench` can average the kept rows over the steps it timed without reading back each step.
 @group(0) @binding(15) var<storage, read_write> kept_tally: array<u32>;
@@ -196,7 +200,16 @@ fn gather_rows(
     for (var j = 0u; j < width; j++) {
         density_packed[k * width + j] = density_out[n * width + j];
     }
-    for (var j = 0u; j < keep.sh_width; j++) {
-        color_packed[k * keep.color_stride + j] = sh_rows[n * keep.sh_width + j];
+    let color_row = k * keep.color_stride;
+    if COLOR_BF16 {
+        // Whole words from the rows' starts (sh_width and the strides are even).
+        let words = keep.sh_width >> 1u;
+        for (var w = 0u; w < words; w++) {
+            color_packed[(color_row >> 1u) + w] = sh_rows[n * words + w];
+        }
+    } else {
+        for (var j = 0u; j < keep.sh_width; j++) {
+            color_packed[color_row + j] = sh_rows[n * keep.sh_width + j];
+        }
     }
 }

@@ -5,6 +5,7 @@
 // Rust side: field::gpu::encoding::DirectionShPass.
 
 //!include _dispatch.wgsl
+//!include _bf16.wgsl
 
 const WORKGROUP_SIZE: u32 = 64u;
 
@@ -25,7 +26,10 @@ struct ShUniforms {
 @group(0) @binding(0) var<uniform> sh_layout: ShUniforms;
 // Unit directions (xyz; w unused), see direction_stride.
 @group(0) @binding(1) var<storage, read> directions: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read_write> sh_out: array<f32>;
+// f32 or bf16 rows (SH_BF16: where the colour MLP's input rows are bf16, which the SH reach
+// unchanged, so rounding here loses nothing).
+@group(0) @binding(2) var<storage, read_write> sh_out: array<u32>;
+override SH_BF16: bool = false;
 
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn sh_encode(
@@ -49,20 +53,31 @@ fn sh_encode(
     let y2 = y * y;
     let z2 = z * z;
     let o = sample * sh_layout.row_stride + sh_layout.column_offset;
-    sh_out[o] = 0.28209479177387814;
-    sh_out[o + 1u] = -0.48860251190291987 * y;
-    sh_out[o + 2u] = 0.48860251190291987 * z;
-    sh_out[o + 3u] = -0.48860251190291987 * x;
-    sh_out[o + 4u] = 1.0925484305920792 * xy;
-    sh_out[o + 5u] = -1.0925484305920792 * yz;
-    sh_out[o + 6u] = 0.94617469575755997 * z2 - 0.31539156525251999;
-    sh_out[o + 7u] = -1.0925484305920792 * xz;
-    sh_out[o + 8u] = 0.54627421529603959 * x2 - 0.54627421529603959 * y2;
-    sh_out[o + 9u] = 0.59004358992664352 * y * (-3.0 * x2 + y2);
-    sh_out[o + 10u] = 2.8906114426405538 * xy * z;
-    sh_out[o + 11u] = 0.45704579946446572 * y * (1.0 - 5.0 * z2);
-    sh_out[o + 12u] = 0.3731763325901154 * z * (5.0 * z2 - 3.0);
-    sh_out[o + 13u] = 0.45704579946446572 * x * (1.0 - 5.0 * z2);
-    sh_out[o + 14u] = 1.4453057213202769 * z * (x2 - y2);
-    sh_out[o + 15u] = 0.59004358992664352 * x * (-x2 + 3.0 * y2);
+    var v: array<f32, 16>;
+    v[0] = 0.28209479177387814;
+    v[1] = -0.48860251190291987 * y;
+    v[2] = 0.48860251190291987 * z;
+    v[3] = -0.48860251190291987 * x;
+    v[4] = 1.0925484305920792 * xy;
+    v[5] = -1.0925484305920792 * yz;
+    v[6] = 0.94617469575755997 * z2 - 0.31539156525251999;
+    v[7] = -1.0925484305920792 * xz;
+    v[8] = 0.54627421529603959 * x2 - 0.54627421529603959 * y2;
+    v[9] = 0.59004358992664352 * y * (-3.0 * x2 + y2);
+    v[10] = 2.8906114426405538 * xy * z;
+    v[11] = 0.45704579946446572 * y * (1.0 - 5.0 * z2);
+    v[12] = 0.3731763325901154 * z * (5.0 * z2 - 3.0);
+    v[13] = 0.45704579946446572 * x * (1.0 - 5.0 * z2);
+    v[14] = 1.4453057213202769 * z * (x2 - y2);
+    v[15] = 0.59004358992664352 * x * (-x2 + 3.0 * y2);
+    if SH_BF16 {
+        // column_offset and row_stride are even: whole words.
+        for (var k = 0u; k < 16u; k += 2u) {
+            sh_out[(o + k) >> 1u] = bf16_pair(v[k], v[k + 1u]);
+        }
+    } else {
+        for (var k = 0u; k < 16u; k++) {
+            sh_out[o + k] = bitcast<u32>(v[k]);
+        }
+    }
 }

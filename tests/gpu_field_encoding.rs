@@ -2,13 +2,14 @@
 //! `frequency`, `sh`), on outputs filled with garbage first and sample counts that are not
 //! multiples of the workgroup size. Throughput: `cargo test --release --test gpu_field_encoding
 //! -- --ignored --nocapture`.
+use scribblefield::field::gpu::dense::RowFormat;
 use scribblefield::field::gpu::encoding::{
     AtomicAdd, BackwardStrategy, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
     PositionEncodeBuffers, PositionEncodePass, ShOutputLayout, WORKGROUP_SIZE,
 };
 use scribblefield::field::reference::hash_grid::{self, HashGrid};
 use scribblefield::field::reference::{frequency, sh};
-use scribblefield::field::{Encoding, FieldConfig};
+use scribblefield::field::{Encoding, FieldConfig, bf16};
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{GARBAGE_WORDS, read_buffer_blocking, storage_buffer_from, storage_buffer_garbage};
 use scribblefield::gpu::test_support::gpu_for_tests;
@@ -517,7 +518,15 @@ fn direction_sh_matches_reference_and_leaves_other_columns() {
         return;
     };
     let mut rng = SplitMix64::new(41);
-    for (rays, samples_per_ray, row_stride, column_offset) in [(37, 13, 31, 0), (5, 64, 40, 7), (300, 1, 16, 0)] {
+    let cases = [
+        (37, 13, 31, 0, RowFormat::F32),
+        (5, 64, 40, 7, RowFormat::F32),
+        (300, 1, 16, 0, RowFormat::F32),
+        // bf16 rows, as for the colour MLP's own input rows on CPU devices.
+        (37, 13, 32, 0, RowFormat::Bf16),
+        (5, 64, 40, 8, RowFormat::Bf16),
+    ];
+    for (rays, samples_per_ray, row_stride, column_offset, format) in cases {
         let directions: Vec<[f32; 4]> = (0..rays)
             .map(|_| {
                 let z = rng.uniform(-1.0, 1.0);
@@ -531,9 +540,13 @@ fn direction_sh_matches_reference_and_leaves_other_columns() {
             samples_per_ray,
             row_stride,
             column_offset,
+            format,
         };
+        let bf16_rows = format == RowFormat::Bf16;
+        // Values per word.
+        let per_word = if bf16_rows { 2 } else { 1 };
         let directions_buffer = storage_buffer_from(&ctx, "directions", &directions).unwrap();
-        let output = storage_buffer_garbage::<f32>(&ctx, "sh output", n * row_stride).unwrap();
+        let output = storage_buffer_garbage::<f32>(&ctx, "sh output", n * row_stride / per_word).unwrap();
         let buffers = DirectionShBuffers {
             directions: &directions_buffer,
             output: &output,
@@ -549,13 +562,20 @@ fn direction_sh_matches_reference_and_leaves_other_columns() {
         for sample in 0..n {
             let d = directions[sample / samples_per_ray];
             sh::encode([d[0], d[1], d[2]], &mut expect);
+            let row = sample * row_stride / per_word;
             for column in 0..row_stride {
-                let i = sample * row_stride + column;
+                let i = row + column / per_word;
                 if (column_offset..column_offset + sh::SH_COEFFS).contains(&column) {
-                    let (g, e) = (f32::from_bits(words[i]), expect[column - column_offset]);
-                    // Same products in the same order; FMA contraction may move the last bits.
+                    let e = expect[column - column_offset];
+                    let (g, bound) = if bf16_rows {
+                        // The GPU's f32 rounded to bf16: half a bf16 step of e, and the f32 slack.
+                        (bf16::row_value(&words[row..], column), e.abs() * 2f32.powi(-8) + 1e-6)
+                    } else {
+                        // Same products in the same order; FMA contraction may move the last bits.
+                        (f32::from_bits(words[i]), 1e-6)
+                    };
                     assert!(
-                        (g - e).abs() <= 1e-6,
+                        (g - e).abs() <= bound,
                         "{layout:?}: sample {sample} column {column}: GPU {g}, reference {e}"
                     );
                     worst = worst.max((g - e).abs());
@@ -603,6 +623,7 @@ fn passes_refuse_buffers_that_are_too_small() {
         samples_per_ray: 1,
         row_stride: 15,
         column_offset: 0,
+        format: RowFormat::F32,
     };
     assert!(pollster::block_on(DirectionShPass::new(&ctx, 100, layout, sh_buffers)).is_err());
 }
@@ -703,6 +724,7 @@ fn encoding_throughput_report() {
         samples_per_ray: 64,
         row_stride: 31,
         column_offset: 0,
+        format: RowFormat::F32,
     };
     let sh_buffers = DirectionShBuffers {
         directions: &directions,

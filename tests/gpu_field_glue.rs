@@ -89,9 +89,9 @@ fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
             kept += 1;
         }
     }
-    let color_in_grad = values(n * (sh + g), 0.5);
-    let feature_in_grad = values(n * g, 0.6);
-    let color_sh = values(n * (sh + g), 0.7);
+    let (color_grad_words, color_in_grad) = stored_rows(&values(n * (sh + g), 0.5), sh + g, format);
+    let (feature_grad_words, feature_in_grad) = stored_rows(&values(n * g, 0.6), g, format);
+    let (color_words, _) = stored_rows(&values(n * (sh + g), 0.7), sh + g, format);
 
     let buf = |label: &str, v: &[f32]| storage_buffer_from(&ctx, label, v).unwrap();
     let density_out_b = buf("density out", &density_out);
@@ -100,15 +100,18 @@ fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
         RowFormat::Bf16 => RowView::packed_bf16(buffer, width as u32),
     };
     let feature_out_b = rows_of(&storage_buffer_from(&ctx, "feature out", &feature_words).unwrap(), d);
-    let color_in_b = buf("color in", &color_sh);
+    let color_in_b = rows_of(&storage_buffer_from(&ctx, "color in", &color_words).unwrap(), sh + g);
     let view = |buffer: &wgpu::Buffer| rows_of(buffer, d + sg);
     let semantic_words = RowView::words(format, n as u32, (d + sg) as u32) as usize;
     let semantic_in_b = view(&storage_buffer_garbage::<u32>(&ctx, "semantic in", semantic_words).unwrap());
     let semantic_in_grad_b = view(&storage_buffer_from(&ctx, "semantic in grad", &semantic_grad_words).unwrap());
     let grad_heads_b = buf("grad heads", &grad_heads0);
     let density_out_grad_b = storage_buffer_garbage::<f32>(&ctx, "density out grad", n * (1 + g)).unwrap();
-    let color_in_grad_b = buf("color in grad", &color_in_grad);
-    let feature_in_grad_b = buf("feature in grad", &feature_in_grad);
+    let color_in_grad_b = rows_of(
+        &storage_buffer_from(&ctx, "color in grad", &color_grad_words).unwrap(),
+        sh + g,
+    );
+    let feature_in_grad_b = rows_of(&storage_buffer_from(&ctx, "feature in grad", &feature_grad_words).unwrap(), g);
     let grad_h0_b = buf("grad h0", &grad_h0);
     let rows = HeadRows::new(&ctx, n as u32).unwrap();
     let dispatch = rows.dispatch(1, WORKGROUP_SIZE, 1).unwrap();
@@ -162,7 +165,12 @@ fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
     }
     ctx.queue.submit([encoder.finish()]);
 
-    let color_in: Vec<f32> = read_buffer_blocking(&ctx, &color_in_b).unwrap();
+    let color_in: Vec<u32> = read_buffer_blocking(&ctx, &color_in_b.buffer).unwrap();
+    // Words per colour row and of its SH part.
+    let (cw, sh_words) = match format {
+        RowFormat::F32 => (sh + g, sh),
+        RowFormat::Bf16 => ((sh + g).div_ceil(2), sh / 2),
+    };
     let semantic_in: Vec<u32> = read_buffer_blocking(&ctx, &semantic_in_b.buffer).unwrap();
     let stored = |v: f32| match format {
         RowFormat::F32 => v,
@@ -173,22 +181,33 @@ fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
     for p in 0..n {
         let geo = &density_out[p * (1 + g) + 1..(p + 1) * (1 + g)];
         let f = &feature_out[p * d..(p + 1) * d];
-        let row = p * (sh + g);
+        let row = p * cw;
         assert_eq!(
-            &color_in[row..row + sh],
-            &color_sh[row..row + sh],
+            &color_in[row..row + sh_words],
+            &color_words[row..row + sh_words],
             "SH columns untouched"
         );
         if p >= kept {
             // Past the packed rows nothing is written.
-            assert_eq!(&color_in[row..row + sh + g], &color_sh[row..row + sh + g], "row {p}");
+            assert_eq!(&color_in[row..row + cw], &color_words[row..row + cw], "row {p}");
             assert_eq!(
                 &grad_heads[p * stride..(p + 1) * stride],
                 &grad_heads0[p * stride..(p + 1) * stride]
             );
             continue;
         }
-        assert_eq!(&color_in[row + sh..row + sh + g], geo);
+        let got: Vec<f32> = (sh..sh + g)
+            .map(|j| row_value(&color_in, p, j, sh + g, format))
+            .collect();
+        let want: Vec<f32> = geo.iter().copied().map(stored).collect();
+        assert_eq!(got, want, "g in the colour input of row {p}");
+        if format == RowFormat::Bf16 && (sh + g) % 2 == 1 {
+            assert_eq!(
+                row_value(&color_in, p, sh + g, sh + g, format),
+                0.0,
+                "padding of row {p}"
+            );
+        }
         let want: Vec<f32> = f
             .iter()
             .map(|v| v.max(0.0))
@@ -238,7 +257,8 @@ fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
             } else {
                 0.0
             };
-            let want = color_in_grad[p * (sh + g) + sh + j] + via_semantic + feature_in_grad[p * g + j];
+            let color = color_in_grad[p * (sh + g) + sh + j];
+            let want = color + via_semantic + feature_in_grad[p * g + j];
             assert!((got - want).abs() <= 1e-6 * want.abs().max(1.0));
         }
     }

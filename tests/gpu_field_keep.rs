@@ -5,10 +5,11 @@
 //! miss the box, and random ones.
 //!
 //! Run in release: `cargo test --release --test gpu_field_keep`.
-use scribblefield::field::FieldConfig;
+use scribblefield::field::gpu::dense::{RowFormat, RowView};
 use scribblefield::field::gpu::keep::{HeadRows, KeepBuffers, KeepPass, KeepShape, NOT_KEPT, workgroup_counts};
 use scribblefield::field::gpu::rays::{RAY_HITS_BOX, StepUniforms, TARGET_FLAGS, TARGET_HEADER_WORDS};
 use scribblefield::field::reference::render::{self, kept_samples};
+use scribblefield::field::{FieldConfig, bf16};
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{
     GARBAGE_WORDS, fill_with_garbage, read_buffer_blocking, storage_buffer_from, storage_buffer_garbage,
@@ -124,6 +125,12 @@ fn is_garbage(index: usize, value: u32) -> bool {
 }
 
 fn check_batch(ctx: &GpuContext, batch: &Batch) -> usize {
+    check_batch_with(ctx, batch, RowFormat::F32)
+}
+
+/// [`check_batch`] with the colour input's rows in `color` (bf16: the colour MLP's own rows on
+/// CPU devices).
+fn check_batch_with(ctx: &GpuContext, batch: &Batch, color: RowFormat) -> usize {
     let cfg = &batch.cfg;
     let s = batch.samples();
     let n = cfg.batch_rays as usize * s;
@@ -131,9 +138,19 @@ fn check_batch(ctx: &GpuContext, batch: &Batch) -> usize {
     let density = storage_buffer_from(ctx, "density", &batch.density).unwrap();
     let intervals = storage_buffer_from(ctx, "intervals", &batch.intervals).unwrap();
     let targets = storage_buffer_from(ctx, "targets", &batch.targets).unwrap();
-    let sh = storage_buffer_from(ctx, "sh", &batch.sh).unwrap();
+    // The SH rows come in the colour rows' format.
+    let sh_words: Vec<u32> = match color {
+        RowFormat::F32 => batch.sh.iter().map(|v| v.to_bits()).collect(),
+        RowFormat::Bf16 => batch.sh.chunks(2).map(|q| bf16::pair(q[0], q[1])).collect(),
+    };
+    let sh = storage_buffer_from(ctx, "sh", &sh_words).unwrap();
     let density_packed = storage_buffer_garbage::<f32>(ctx, "density packed", n * (1 + GEOMETRY)).unwrap();
-    let color_packed = storage_buffer_garbage::<f32>(ctx, "colour packed", n * (SH + GEOMETRY)).unwrap();
+    let color_words = RowView::words(color, n as u32, (SH + GEOMETRY) as u32) as usize;
+    let color_buffer = storage_buffer_garbage::<u32>(ctx, "colour packed", color_words).unwrap();
+    let color_packed = match color {
+        RowFormat::F32 => RowView::packed(&color_buffer, (SH + GEOMETRY) as u32),
+        RowFormat::Bf16 => RowView::packed_bf16(&color_buffer, (SH + GEOMETRY) as u32),
+    };
     let rows = HeadRows::new(ctx, n as u32).unwrap();
     // Shapes the head kernels would ask for: a tiled layer's row tiles, a uniform layer's rows,
     // a mask over rows × outputs (one asked twice shares its slot).
@@ -151,7 +168,6 @@ fn check_batch(ctx: &GpuContext, batch: &Batch) -> usize {
             threshold: cfg.head_weight_threshold,
             density_stride: 1 + GEOMETRY as u32,
             sh_width: SH as u32,
-            color_stride: (SH + GEOMETRY) as u32,
             target_stride: (TARGET_HEADER_WORDS + FEATURE) as u32,
         },
         &rows,
@@ -204,17 +220,24 @@ fn check_batch(ctx: &GpuContext, batch: &Batch) -> usize {
 
     // The gathered inputs: [h₀ | g] and the SH columns at each packed row; the rest untouched.
     let d = read_buffer_blocking::<f32>(ctx, &density_packed).unwrap();
-    let c = read_buffer_blocking::<f32>(ctx, &color_packed).unwrap();
-    let (dw, cw) = (1 + GEOMETRY, SH + GEOMETRY);
+    let c = read_buffer_blocking::<u32>(ctx, &color_buffer).unwrap();
+    let dw = 1 + GEOMETRY;
+    // Words per colour row, and the words of its SH part.
+    let (cw, sh_words) = match color {
+        RowFormat::F32 => (SH + GEOMETRY, SH),
+        RowFormat::Bf16 => ((SH + GEOMETRY).div_ceil(2), SH / 2),
+    };
     for (p, &sample) in packed_rows.iter().enumerate() {
         let sample = sample as usize;
         assert_eq!(&d[p * dw..(p + 1) * dw], &batch.density[sample * dw..(sample + 1) * dw]);
-        assert_eq!(&c[p * cw..p * cw + SH], &batch.sh[sample * SH..(sample + 1) * SH]);
-        for j in SH..cw {
-            assert!(
-                is_garbage(p * cw + j, c[p * cw + j].to_bits()),
-                "g columns are the glue's"
-            );
+        let sh = &batch.sh[sample * SH..(sample + 1) * SH];
+        let want: Vec<u32> = match color {
+            RowFormat::F32 => sh.iter().map(|v| v.to_bits()).collect(),
+            RowFormat::Bf16 => sh.chunks(2).map(|q| bf16::pair(q[0], q[1])).collect(),
+        };
+        assert_eq!(&c[p * cw..p * cw + sh_words], &want[..], "SH of packed row {p}");
+        for j in sh_words..cw {
+            assert!(is_garbage(p * cw + j, c[p * cw + j]), "g columns are the glue's");
         }
     }
     for (i, v) in d.iter().enumerate().take(n * dw).skip(kept * dw) {
@@ -244,6 +267,8 @@ fn keep_matches_its_cpu_twin() {
     // A few rays (fewer than the scan's invocations), and many (several per invocation).
     check_batch(&ctx, &Batch::random(3, 1e-3, 8));
     check_batch(&ctx, &Batch::random(1000, 1e-2, 9));
+    // The colour input's rows in bf16.
+    check_batch_with(&ctx, &Batch::random(300, 1e-4, 7), RowFormat::Bf16);
 }
 
 #[test]

@@ -19,6 +19,7 @@ use std::ops::Range;
 
 use crate::field::config::FieldConfig;
 use crate::field::gpu::fixed_point::decode_table;
+use crate::field::gpu::row_view::RowFormat;
 use crate::field::reference::hash_grid::HashGrid;
 use crate::field::reference::sh::SH_COEFFS;
 use crate::gpu::buffers::{PendingRead, read_buffer_async, storage_buffer_zeroed, uniform_buffer_from};
@@ -581,6 +582,8 @@ pub struct ShOutputLayout {
     pub row_stride: usize,
     /// Column of the first SH value; columns `column_offset..column_offset + 16` are written.
     pub column_offset: usize,
+    /// f32 rows, or bf16 rows (`row_stride` and `column_offset` even).
+    pub format: RowFormat,
 }
 
 /// The buffers of [`DirectionShPass`].
@@ -588,7 +591,8 @@ pub struct ShOutputLayout {
 pub struct DirectionShBuffers<'a> {
     /// One unit direction per ray as `vec4<f32>` (xyz; w unused).
     pub directions: &'a wgpu::Buffer,
-    /// Output: N rows of `row_stride` f32; only the SH columns are written.
+    /// Output: N rows of `row_stride` values in `ShOutputLayout::format`; only the SH columns
+    /// are written.
     pub output: &'a wgpu::Buffer,
 }
 
@@ -640,8 +644,16 @@ impl DirectionShPass {
             buffers.directions,
             direction_vec4s * VEC4_BYTES,
         )?;
+        let bf16 = layout.format == RowFormat::Bf16;
+        if bf16 && (!layout.row_stride.is_multiple_of(2) || !layout.column_offset.is_multiple_of(2)) {
+            return Err(GpuError::invalid_argument(
+                WHAT,
+                format!("{layout:?}: bf16 rows need an even row stride and column offset"),
+            ));
+        }
         let output_values = samples as u64 * layout.row_stride as u64;
-        check_buffer(ctx, WHAT, "output", buffers.output, output_values * F32_BYTES)?;
+        let output_words = if bf16 { output_values / 2 } else { output_values };
+        check_buffer(ctx, WHAT, "output", buffers.output, output_words * F32_BYTES)?;
         check_index_range(WHAT, output_values)?;
         check_index_range(WHAT, samples as u64 + u64::from(WORKGROUP_SIZE) * u64::from(u16::MAX))?;
         let uniforms = ShUniforms {
@@ -655,7 +667,11 @@ impl DirectionShPass {
             _pad1: 0,
         };
         let groups = Dispatch1d::for_device(ctx, samples as u64, WORKGROUP_SIZE)?;
-        let spec = KernelSpec::new(WHAT, shaders::SH_ENCODE, "sh_encode");
+        let constants = [("SH_BF16", f64::from(u8::from(bf16)))];
+        let spec = KernelSpec {
+            constants: &constants,
+            ..KernelSpec::new(WHAT, shaders::SH_ENCODE, "sh_encode")
+        };
         let uniform_buffer = uniform_buffer_from(ctx, "view direction SH uniforms", &uniforms);
         let bindings = whole(&[
             ("sh_layout", &uniform_buffer),

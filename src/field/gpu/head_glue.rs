@@ -37,6 +37,14 @@ pub struct GlueDims {
     pub semantic_grad_stride: u32,
     /// Row stride, in values, of f (set by [`HeadGluePass::new`]).
     pub feature_stride: u32,
+    /// Row strides, in values, of the colour input and its gradient (set by
+    /// [`HeadGluePass::new`]).
+    pub color_in_stride: u32,
+    pub color_grad_stride: u32,
+    /// Row stride, in values, of the feature MLP's input gradient (set by
+    /// [`HeadGluePass::new`]).
+    pub feature_grad_stride: u32,
+    pub _pad: u32,
 }
 
 /// The buffers the glue reads and writes (row strides in `GlueDims` terms); all but
@@ -46,8 +54,8 @@ pub struct GlueBuffers<'a> {
     pub density_out: &'a wgpu::Buffer,
     /// f per packed row, f32 or bf16: the feature MLP's output rows.
     pub feature_out: &'a RowView,
-    /// [SH | g], stride sh + geometry.
-    pub color_in: &'a wgpu::Buffer,
+    /// [SH | g] per row, f32 or bf16: the colour MLP's input rows.
+    pub color_in: &'a RowView,
     /// [relu(f) | g] per row, f32 or bf16: the semantic MLP's input rows.
     pub semantic_in: &'a RowView,
     /// Their gradient, as the semantic MLP writes it.
@@ -59,9 +67,10 @@ pub struct GlueBuffers<'a> {
     pub grad_h0_source: &'a wgpu::Buffer,
     /// [dL/dh0 | dL/dg], stride 1 + geometry: written whole by `gather_geometry`.
     pub density_out_grad: &'a wgpu::Buffer,
-    pub color_in_grad: &'a wgpu::Buffer,
-    /// The feature MLP's input gradient, stride geometry.
-    pub feature_in_grad: &'a wgpu::Buffer,
+    /// Their gradient, as the colour MLP writes it.
+    pub color_in_grad: &'a RowView,
+    /// The feature MLP's input gradient, f32 or bf16, as the feature MLP writes it.
+    pub feature_in_grad: &'a RowView,
 }
 
 /// The kept rows the glue works on (from `super::keep::HeadRows`).
@@ -104,26 +113,58 @@ impl HeadGluePass {
     ) -> Result<Self, GpuError> {
         let width = dims.feature + dims.semantic_geometry;
         b.feature_out.check("head glue: f", dims.samples, dims.feature)?;
+        b.feature_in_grad
+            .check("head glue: feature input gradient", dims.samples, dims.geometry)?;
+        let color_width = dims.sh + dims.geometry;
+        b.color_in.check("head glue: colour input", dims.samples, color_width)?;
+        b.color_in_grad
+            .check("head glue: colour input gradient", dims.samples, color_width)?;
+        if !dims.sh.is_multiple_of(2) && (b.color_in.is_bf16() || b.color_in_grad.is_bf16()) {
+            return Err(GpuError::invalid_argument(
+                "head glue",
+                format!("bf16 colour rows need an even SH width, not {}", dims.sh),
+            ));
+        }
         b.semantic_in.check("head glue: semantic input", dims.samples, width)?;
         b.semantic_in_grad
             .check("head glue: semantic input gradient", dims.samples, width)?;
-        if b.feature_out.offset != 0 || b.semantic_in.offset != 0 || b.semantic_in_grad.offset != 0 {
+        let views = [
+            b.feature_out,
+            b.color_in,
+            b.color_in_grad,
+            b.feature_in_grad,
+            b.semantic_in,
+            b.semantic_in_grad,
+        ];
+        if views.iter().any(|view| view.offset != 0) {
             return Err(GpuError::invalid_argument(
                 "head glue",
-                "f, the semantic input and its gradient must start their rows",
+                "f, the colour and semantic inputs and the heads' input gradients must start their rows",
             ));
         }
         let dims = GlueDims {
             semantic_in_stride: b.semantic_in.stride,
             semantic_grad_stride: b.semantic_in_grad.stride,
             feature_stride: b.feature_out.stride,
+            color_in_stride: b.color_in.stride,
+            color_grad_stride: b.color_in_grad.stride,
+            feature_grad_stride: b.feature_in_grad.stride,
             ..dims
         };
         let bf16 = |name, view: &RowView| (name, f64::from(u8::from(view.is_bf16())));
         let feature_bf16 = bf16("FEATURE_BF16", b.feature_out);
-        let input_bf16 = [feature_bf16, bf16("SEMANTIC_IN_BF16", b.semantic_in)];
-        let grad_bf16 = [bf16("SEMANTIC_GRAD_BF16", b.semantic_in_grad)];
-        let feature_and_grad_bf16 = [feature_bf16, grad_bf16[0]];
+        let semantic_grad_bf16 = bf16("SEMANTIC_GRAD_BF16", b.semantic_in_grad);
+        let input_bf16 = [
+            feature_bf16,
+            bf16("SEMANTIC_IN_BF16", b.semantic_in),
+            bf16("COLOR_IN_BF16", b.color_in),
+        ];
+        let grad_bf16 = [
+            semantic_grad_bf16,
+            bf16("COLOR_GRAD_BF16", b.color_in_grad),
+            bf16("FEATURE_GRAD_BF16", b.feature_in_grad),
+        ];
+        let feature_and_grad_bf16 = [feature_bf16, semantic_grad_bf16];
         let uniform = uniform_buffer_from(ctx, "head glue dims", &dims);
         let groups = Dispatch1d::for_device(ctx, dims.samples.into(), WORKGROUP_SIZE)?;
         let assemble = stage(
@@ -134,7 +175,7 @@ impl HeadGluePass {
                 ("dims", &uniform),
                 ("density_out", b.density_out),
                 ("feature_out", &b.feature_out.buffer),
-                ("color_in", b.color_in),
+                ("color_in", &b.color_in.buffer),
                 ("semantic_in", &b.semantic_in.buffer),
                 ("row_count", rows.row_count),
             ],
@@ -167,8 +208,8 @@ impl HeadGluePass {
                 ("grad_h0_source", b.grad_h0_source),
                 ("slot", rows.slot),
                 ("density_out_grad", b.density_out_grad),
-                ("color_in_grad", b.color_in_grad),
-                ("feature_in_grad", b.feature_in_grad),
+                ("color_in_grad", &b.color_in_grad.buffer),
+                ("feature_in_grad", &b.feature_in_grad.buffer),
             ],
             &grad_bf16,
         )

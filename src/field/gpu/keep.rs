@@ -13,6 +13,7 @@ use std::sync::Mutex;
 
 use bytemuck::{Pod, Zeroable};
 
+use super::row_view::RowView;
 use crate::gpu::buffers::{STORAGE_USAGE, storage_buffer_from, storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::{Dispatch, IndirectArgs, bindings_used, whole};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec};
@@ -142,12 +143,13 @@ pub struct KeepBuffers<'a> {
     pub intervals: &'a wgpu::Buffer,
     /// `RayBatchPass::targets` (the flags say which rays hit the box).
     pub targets: &'a wgpu::Buffer,
-    /// The view's SH coefficients, `sh_width` per sample.
+    /// The view's SH coefficients, `sh_width` per sample, in the colour rows' format.
     pub sh_rows: &'a wgpu::Buffer,
     /// Packed [h₀ | g] rows: what the feature MLP and the glue read.
     pub density_packed: &'a wgpu::Buffer,
-    /// Packed colour-input rows [SH | g] (stride `color_stride`): the SH part is written here.
-    pub color_packed: &'a wgpu::Buffer,
+    /// Packed colour-input rows [SH | g], f32 or bf16 (the colour MLP's own input rows): the SH
+    /// part is written here.
+    pub color_packed: &'a RowView,
 }
 
 /// The shapes of the rows the keep pass reads and writes.
@@ -158,7 +160,6 @@ pub struct KeepShape {
     pub threshold: f32,
     pub density_stride: u32,
     pub sh_width: u32,
-    pub color_stride: u32,
     pub target_stride: u32,
 }
 
@@ -168,8 +169,12 @@ async fn kernel(
     entry: &'static str,
     all: &[(&str, wgpu::BindingResource<'_>)],
     groups: [u32; 3],
+    constants: &[(&str, f64)],
 ) -> Result<Dispatch, GpuError> {
-    let spec = KernelSpec::new(entry, shaders::KEEP, entry);
+    let spec = KernelSpec {
+        constants,
+        ..KernelSpec::new(entry, shaders::KEEP, entry)
+    };
     let used = bindings_used(&spec, 0)?;
     let mine: Vec<_> = all
         .iter()
@@ -206,13 +211,25 @@ impl KeepPass {
                 format!("{samples} samples per batch, head rows for {}", rows.capacity),
             ));
         }
+        let color = b.color_packed;
+        color.check("keep pass: colour input rows", rows.capacity, shape.sh_width)?;
+        if color.offset != 0 || (color.is_bf16() && !shape.sh_width.is_multiple_of(2)) {
+            return Err(GpuError::invalid_argument(
+                "keep pass",
+                format!(
+                    "the SH part of the colour input rows must start them (offset {}) and fill whole words \
+                     of bf16 rows ({} values)",
+                    color.offset, shape.sh_width
+                ),
+            ));
+        }
         let gather_args = rows.dispatch(1, WORKGROUP_SIZE, 1)?;
         let shapes = rows.shapes();
         let uniforms = KeepUniforms {
             threshold: shape.threshold,
             density_stride: shape.density_stride,
             sh_width: shape.sh_width,
-            color_stride: shape.color_stride,
+            color_stride: color.stride,
             arg_count: shapes.len() as u32,
             max_groups_per_dimension: ctx.limits.max_compute_workgroups_per_dimension,
             target_stride: shape.target_stride,
@@ -240,13 +257,14 @@ impl KeepPass {
             ("slot", &rows.slot),
             ("sh_rows", b.sh_rows),
             ("density_packed", b.density_packed),
-            ("color_packed", b.color_packed),
+            ("color_packed", &color.buffer),
             ("kept_tally", &rows.kept_tally),
         ]);
-        let count = kernel(ctx, "count_kept", &bindings, per_ray.into()).await?;
-        let scan = kernel(ctx, "scan_kept", &bindings, [1, 1, 1]).await?;
-        let compact = kernel(ctx, "compact_kept", &bindings, per_ray.into()).await?;
-        let gather = kernel(ctx, "gather_rows", &bindings, most_rows.into())
+        let count = kernel(ctx, "count_kept", &bindings, per_ray.into(), &[]).await?;
+        let scan = kernel(ctx, "scan_kept", &bindings, [1, 1, 1], &[]).await?;
+        let compact = kernel(ctx, "compact_kept", &bindings, per_ray.into(), &[]).await?;
+        let color_bf16 = [("COLOR_BF16", f64::from(u8::from(color.is_bf16())))];
+        let gather = kernel(ctx, "gather_rows", &bindings, most_rows.into(), &color_bf16)
             .await?
             .with_indirect(Some(gather_args));
         Ok(KeepPass {

@@ -71,19 +71,13 @@ struct SampleBuffers {
     encoding_grad: wgpu::Buffer,
     density_out: wgpu::Buffer,
     density_out_grad: wgpu::Buffer,
-    /// The view's SH coefficients per sample, gathered into `color_in`'s packed rows.
-    sh: wgpu::Buffer,
     density_packed: wgpu::Buffer,
-    feature_in_grad: wgpu::Buffer,
-    color_in: wgpu::Buffer,
-    color_in_grad: wgpu::Buffer,
 }
 
 impl SampleBuffers {
     fn new(ctx: &GpuContext, cfg: &FieldConfig) -> Result<Self, GpuError> {
         let n = cfg.batch_rays as usize * cfg.samples_per_ray();
         let (e, g) = (cfg.encoding_dim(), cfg.geometry_dim as usize);
-        let sh = SH as usize;
         let make = |label: &str, width: usize| {
             ctx.ensure_storage_binding_fits(label, (n * width * 4) as u64)?;
             storage_buffer_zeroed::<f32>(ctx, label, n * width)
@@ -93,11 +87,7 @@ impl SampleBuffers {
             encoding_grad: make("encoding gradient", e)?,
             density_out: make("density output", 1 + g)?,
             density_out_grad: make("density output gradient", 1 + g)?,
-            sh: make("view SH", sh)?,
             density_packed: make("kept density output", 1 + g)?,
-            feature_in_grad: make("feature input gradient", g)?,
-            color_in: make("colour input", sh + g)?,
-            color_in_grad: make("colour input gradient", sh + g)?,
         })
     }
 }
@@ -195,6 +185,11 @@ impl Trainer {
             },
         )
         .await?;
+        let mut pipelines = DensePipelines::with_family(DenseFamily::for_device(ctx));
+        // The SH in the colour MLP's row format: it owns its input rows, and the keep pass
+        // copies the SH into them.
+        let sh_format = mlp_row_format(ctx, &pipelines, &layout.color, n, true, true)?;
+        let sh_rows = RowView::zeroed(ctx, "view SH", sh_format, n, SH)?;
         let sh = DirectionShPass::with_directions(
             ctx,
             n as usize,
@@ -202,11 +197,12 @@ impl Trainer {
                 samples_per_ray: cfg.samples_per_ray(),
                 row_stride: SH as usize,
                 column_offset: 0,
+                format: sh_format,
             },
             DirectionLayout::RAY_GEOMETRY,
             DirectionShBuffers {
                 directions: &ray_batch.rays,
-                output: &samples.sh,
+                output: &sh_rows.buffer,
             },
         )
         .await?;
@@ -217,7 +213,6 @@ impl Trainer {
         let head_rows = HeadRows::new(ctx, n)?;
         let composite_layout = CompositeLayout::new(cfg);
         let grad_stride = composite_layout.grad_stride() as u32;
-        let mut pipelines = DensePipelines::with_family(DenseFamily::for_device(ctx));
         // f, in the feature MLP's row format: its last layer writes it, the composite and the
         // glue read it.
         let format = mlp_row_format(ctx, &pipelines, &layout.feature, n, true, true)?;
@@ -276,7 +271,7 @@ impl Trainer {
                 gradients: Some(MlpGradients {
                     grads: grads.clone(),
                     output_grad: grad_view(composite_layout.grad_feature_offset()),
-                    input_grad: Some(InputRows::Given(RowView::packed(&samples.feature_in_grad, g))),
+                    input_grad: Some(InputRows::Owned),
                 }),
                 kept: Some(&head_rows),
             },
@@ -290,12 +285,14 @@ impl Trainer {
                 layout: &layout.color,
                 rows: n,
                 params: &optimizer.params,
-                input: InputRows::Given(RowView::packed(&samples.color_in, SH + g)),
+                // Its own rows, bf16 where it stores its hidden rows so: the keep pass and the
+                // glue write them.
+                input: InputRows::Owned,
                 output: Some(RowView::packed(&color_out, 3)),
                 gradients: Some(MlpGradients {
                     grads: grads.clone(),
                     output_grad: grad_view(CompositeLayout::GRAD_COLOR),
-                    input_grad: Some(InputRows::Given(RowView::packed(&samples.color_in_grad, SH + g))),
+                    input_grad: Some(InputRows::Owned),
                 }),
                 kept: Some(&head_rows),
             },
@@ -339,7 +336,7 @@ impl Trainer {
             &GlueBuffers {
                 density_out: &samples.density_packed,
                 feature_out: &feature_out,
-                color_in: &samples.color_in,
+                color_in: color.input(),
                 semantic_in: semantic.input(),
                 semantic_in_grad: semantic
                     .input_gradient()
@@ -347,8 +344,12 @@ impl Trainer {
                 grad_heads: &composite.head_grads,
                 grad_h0_source: &composite.grad_heads,
                 density_out_grad: &samples.density_out_grad,
-                color_in_grad: &samples.color_in_grad,
-                feature_in_grad: &samples.feature_in_grad,
+                color_in_grad: color
+                    .input_gradient()
+                    .ok_or_else(|| GpuError::invalid_argument("colour", "no input gradient"))?,
+                feature_in_grad: feature
+                    .input_gradient()
+                    .ok_or_else(|| GpuError::invalid_argument("feature", "no input gradient"))?,
             },
             &GlueRows {
                 row_count: &head_rows.row_count,
@@ -366,7 +367,6 @@ impl Trainer {
                 threshold: cfg.head_weight_threshold,
                 density_stride: 1 + g,
                 sh_width: SH,
-                color_stride: SH + g,
                 target_stride: TARGET_HEADER_WORDS as u32 + d,
             },
             &head_rows,
@@ -375,9 +375,9 @@ impl Trainer {
                 density_out: &samples.density_out,
                 intervals: &sample_points.intervals,
                 targets: &ray_batch.targets,
-                sh_rows: &samples.sh,
+                sh_rows: &sh_rows.buffer,
                 density_packed: &samples.density_packed,
-                color_packed: &samples.color_in,
+                color_packed: color.input(),
             },
         )
         .await?;

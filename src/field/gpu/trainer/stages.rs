@@ -4,7 +4,7 @@
 use super::Trainer;
 use crate::field::config::FieldConfig;
 use crate::field::gpu::composite::CompositeLayout;
-use crate::field::gpu::dense::{RowFormat, RowView};
+use crate::field::gpu::dense::{MlpPass, RowFormat, RowView};
 use crate::field::gpu::encoding::AtomicAdd;
 use crate::field::gpu::rays::TARGET_HEADER_WORDS;
 use crate::field::params::ParamLayout;
@@ -92,12 +92,15 @@ impl StepStage {
 /// Bytes per `f32`/`u32` element.
 const WORD: u64 = 4;
 
-/// How the rows between the heads are stored (f32 or bf16), for the composite's and the
-/// glue's traffic: f as the feature MLP writes it, the semantic MLP's own input rows and their
-/// gradient (`dense::MlpPass::input`).
+/// How the rows between the heads are stored (f32 or bf16), for the traffic of the keep pass,
+/// the composite and the glue: f as the feature MLP writes it, the colour and semantic MLPs'
+/// own input rows and their gradients (`dense::MlpPass::input`).
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct HeadRowFormats {
     pub feature: RowFormat,
+    pub color_input: RowFormat,
+    pub color_gradient: RowFormat,
+    pub feature_gradient: RowFormat,
     pub semantic_input: RowFormat,
     pub semantic_gradient: RowFormat,
 }
@@ -121,14 +124,14 @@ impl StepStage {
     /// | rays | the pixel's targets, R·(8 + f) words | R ray geometries (48 B) and targets |
     /// | samples | R ray geometries | N positions and intervals (24 B) |
     /// | encoding | N positions, 8 corners × levels × features of the hash table per sample | N·E |
-    /// | sh | R ray geometries | N·16 |
+    /// | sh | R ray geometries | N·16 (in the colour input's format) |
     /// | density mlp, the heads' MLPs (N rows, K rows) | see `DenseForward::global_bytes` | |
-    /// | keep | N h₀ and intervals twice, R flags and counts, K·(1 + g + 16) gathered | R counts, N slots, K rows, K·(1 + g + 16) |
-    /// | glue | density (K·(1+g)) and feature (K·f, in its format) rows | colour input's g, semantic input (K·(f + sg), in its format) |
+    /// | keep | N h₀ and intervals twice, R flags and counts, K·(1 + g + 16) gathered | R counts, N slots, K rows, K·(1 + g + 16) (the SH in the colour input's format) |
+    /// | glue | density (K·(1+g)) and feature (K·f, in its format) rows | colour input's g, semantic input (K·(f + sg)), each in its format |
     /// | composite | N h₀, intervals and slots, K head values (f in its format), R targets | N·3 (∂L/∂h₀ and scratch), K head gradients, R ray outputs |
     /// | an MLP backward (K rows for the heads, N for density) | see `DenseBackward::global_bytes` | |
     /// | glue backward (feature) | K·f semantic-input (in its format) and K·f feature-loss gradients | K·f |
-    /// | glue backward (geometry) | N slots and ∂L/∂h₀, K·(g + g) gradients and K·sg of the semantic input's | N·(1 + g) |
+    /// | glue backward (geometry) | N slots and ∂L/∂h₀, K·g of the feature input's, K·g of the colour input's and K·sg of the semantic input's gradients (each in its format) | N·(1 + g) |
     /// | encoding backward | N hash-grid gradients and positions (fixed point: the gradients twice; one invocation per level: the positions once per level; `Trainer::stage_bytes`) | an atomic add (read and write) per corner, level and feature (fixed point: and an exponent per level) |
     /// | adam | parameters, gradients, both moments: 4·P | parameters, gradients (zeroed), both moments: 4·P |
     ///
@@ -157,10 +160,13 @@ impl StepStage {
             StepStage::Rays => 2 * targets + r * RAY_GEOMETRY_BYTES,
             StepStage::Samples => r * RAY_GEOMETRY_BYTES + n * SAMPLE_BYTES,
             StepStage::Encoding => n * 16 + n * corners * WORD + n * cfg.encoding_dim() as u64 * WORD,
-            StepStage::Sh => r * RAY_GEOMETRY_BYTES + n * 16 * WORD,
-            StepStage::Keep => WORD * (2 * 3 * n + 3 * r + n + k + 2 * k * (1 + g + 16)),
+            StepStage::Sh => r * RAY_GEOMETRY_BYTES + n * words(heads.color_input, 16) * WORD,
+            StepStage::Keep => {
+                WORD * (2 * 3 * n + 3 * r + n + k + 2 * k * (1 + g) + 2 * k * words(heads.color_input, 16))
+            }
             StepStage::GlueAssemble => {
-                WORD * k * ((1 + g) + words(heads.feature, f) + g + words(heads.semantic_input, f + sg))
+                let color_g = words(heads.color_input, 16 + g) - words(heads.color_input, 16);
+                WORD * k * ((1 + g) + words(heads.feature, f) + color_g + words(heads.semantic_input, f + sg))
             }
             StepStage::Composite => {
                 n * (2 * WORD + 8)
@@ -174,7 +180,9 @@ impl StepStage {
                 WORD * k * (words(heads.feature, f) + f + words(heads.semantic_gradient, f))
             }
             StepStage::GlueGatherGeometry => {
-                WORD * (2 * n + k * (g + g + words(heads.semantic_gradient, sg)) + n * (1 + g))
+                let color_g = words(heads.color_gradient, 16 + g) - words(heads.color_gradient, 16);
+                let feature_g = words(heads.feature_gradient, g);
+                WORD * (2 * n + k * (color_g + feature_g + words(heads.semantic_gradient, sg)) + n * (1 + g))
             }
             StepStage::EncodingBackward if hash => {
                 n * 16 + n * cfg.hash_encoding_dim() as u64 * WORD + 2 * n * corners * WORD
@@ -275,13 +283,14 @@ impl Trainer {
     }
 
     fn head_row_formats(&self) -> HeadRowFormats {
+        let gradient = |mlp: &MlpPass| mlp.input_gradient().map_or(RowFormat::F32, |view| view.format);
         HeadRowFormats {
             feature: self.feature.output().format,
+            color_input: self.color.input().format,
+            color_gradient: gradient(&self.color),
+            feature_gradient: gradient(&self.feature),
             semantic_input: self.semantic.input().format,
-            semantic_gradient: self
-                .semantic
-                .input_gradient()
-                .map_or(RowFormat::F32, |view| view.format),
+            semantic_gradient: gradient(&self.semantic),
         }
     }
 
