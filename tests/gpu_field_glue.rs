@@ -111,7 +111,10 @@ fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
         &storage_buffer_from(&ctx, "color in grad", &color_grad_words).unwrap(),
         sh + g,
     );
-    let feature_in_grad_b = rows_of(&storage_buffer_from(&ctx, "feature in grad", &feature_grad_words).unwrap(), g);
+    let feature_in_grad_b = rows_of(
+        &storage_buffer_from(&ctx, "feature in grad", &feature_grad_words).unwrap(),
+        g,
+    );
     let grad_h0_b = buf("grad h0", &grad_h0);
     let rows = HeadRows::new(&ctx, n as u32).unwrap();
     let dispatch = rows.dispatch(1, WORKGROUP_SIZE, 1).unwrap();
