@@ -64,6 +64,13 @@ fn row_value(words: &[u32], p: usize, j: usize, width: usize, format: RowFormat)
     }
 }
 
+/// Row `p` of bf16 rows of an odd `width` ends in a padding value: it must be 0.
+fn assert_padding_is_zero(words: &[u32], p: usize, width: usize, format: RowFormat) {
+    if format == RowFormat::Bf16 && width % 2 == 1 {
+        assert_eq!(row_value(words, p, width, width, format), 0.0, "padding of row {p}");
+    }
+}
+
 fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
     let Some(ctx) = gpu_for_tests(name) else {
         return;
@@ -95,10 +102,7 @@ fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
 
     let buf = |label: &str, v: &[f32]| storage_buffer_from(&ctx, label, v).unwrap();
     let density_out_b = buf("density out", &density_out);
-    let rows_of = |buffer: &wgpu::Buffer, width: usize| match format {
-        RowFormat::F32 => RowView::packed(buffer, width as u32),
-        RowFormat::Bf16 => RowView::packed_bf16(buffer, width as u32),
-    };
+    let rows_of = |buffer: &wgpu::Buffer, width: usize| RowView::packed_as(buffer, width as u32, format);
     let feature_out_b = rows_of(&storage_buffer_from(&ctx, "feature out", &feature_words).unwrap(), d);
     let color_in_b = rows_of(&storage_buffer_from(&ctx, "color in", &color_words).unwrap(), sh + g);
     let view = |buffer: &wgpu::Buffer| rows_of(buffer, d + sg);
@@ -204,13 +208,7 @@ fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
             .collect();
         let want: Vec<f32> = geo.iter().copied().map(stored).collect();
         assert_eq!(got, want, "g in the colour input of row {p}");
-        if format == RowFormat::Bf16 && (sh + g) % 2 == 1 {
-            assert_eq!(
-                row_value(&color_in, p, sh + g, sh + g, format),
-                0.0,
-                "padding of row {p}"
-            );
-        }
+        assert_padding_is_zero(&color_in, p, sh + g, format);
         let want: Vec<f32> = f
             .iter()
             .map(|v| v.max(0.0))
@@ -221,13 +219,7 @@ fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
             .map(|j| row_value(&semantic_in, p, j, d + sg, format))
             .collect();
         assert_eq!(got, want, "semantic input of row {p}");
-        if format == RowFormat::Bf16 && (d + sg) % 2 == 1 {
-            assert_eq!(
-                row_value(&semantic_in, p, d + sg, d + sg, format),
-                0.0,
-                "padding of row {p}"
-            );
-        }
+        assert_padding_is_zero(&semantic_in, p, d + sg, format);
         for k in 0..d {
             let at = p * stride + f_at + k;
             let via_semantic = if f[k] > 0.0 {

@@ -147,10 +147,7 @@ fn check_batch_with(ctx: &GpuContext, batch: &Batch, color: RowFormat) -> usize 
     let density_packed = storage_buffer_garbage::<f32>(ctx, "density packed", n * (1 + GEOMETRY)).unwrap();
     let color_words = RowView::words(color, n as u32, (SH + GEOMETRY) as u32) as usize;
     let color_buffer = storage_buffer_garbage::<u32>(ctx, "colour packed", color_words).unwrap();
-    let color_packed = match color {
-        RowFormat::F32 => RowView::packed(&color_buffer, (SH + GEOMETRY) as u32),
-        RowFormat::Bf16 => RowView::packed_bf16(&color_buffer, (SH + GEOMETRY) as u32),
-    };
+    let color_packed = RowView::packed_as(&color_buffer, (SH + GEOMETRY) as u32, color);
     let rows = HeadRows::new(ctx, n as u32).unwrap();
     // Shapes the head kernels would ask for: a tiled layer's row tiles, a uniform layer's rows,
     // a mask over rows × outputs (one asked twice shares its slot).

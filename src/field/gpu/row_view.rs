@@ -62,10 +62,16 @@ impl RowView {
         let words = RowView::words(format, rows, width);
         ctx.ensure_storage_binding_fits(label, words * 4)?;
         let buffer = storage_buffer_zeroed::<f32>(ctx, label, words as usize)?;
-        Ok(match format {
-            RowFormat::F32 => RowView::packed(&buffer, width),
-            RowFormat::Bf16 => RowView::packed_bf16(&buffer, width),
-        })
+        Ok(RowView::packed_as(&buffer, width, format))
+    }
+
+    /// Rows of `width` values in `format`, back to back from the start of `buffer`
+    /// ([`RowView::packed`] or [`RowView::packed_bf16`]).
+    pub fn packed_as(buffer: &wgpu::Buffer, width: u32, format: RowFormat) -> RowView {
+        match format {
+            RowFormat::F32 => RowView::packed(buffer, width),
+            RowFormat::Bf16 => RowView::packed_bf16(buffer, width),
+        }
     }
 
     /// Words a buffer needs for `rows` such rows of `width` values, and their format.

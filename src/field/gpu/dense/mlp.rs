@@ -149,10 +149,7 @@ impl MlpPass {
                 let hidden_views: Vec<RowView> = hidden_grads
                     .iter()
                     .zip(&specs[1..])
-                    .map(|(b, spec)| match hidden {
-                        RowFormat::F32 => RowView::packed(b, spec.in_dim),
-                        RowFormat::Bf16 => RowView::packed_bf16(b, spec.in_dim),
-                    })
+                    .map(|(b, spec)| RowView::packed_as(b, spec.in_dim, hidden))
                     .collect();
                 let mut backward = Vec::with_capacity(layers);
                 for (k, spec) in specs.iter().enumerate() {
