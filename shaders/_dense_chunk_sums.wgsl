@@ -2,8 +2,11 @@
 // (dense_backward_weight_uniform.wgsl, dZ through 64 KiB uniform windows;
 // dense_backward_weight_packed_storage.wgsl, dZ from one storage binding): the bindings of X and
 // of the partial matrices, a chunk's window of rows, and writing a lane's sums. Workgroup x picks
-// COLUMNS input columns (one per lane), y a block of BLOCK outputs, z a chunk of dims.chunk_rows
-// rows, whose partial dW[o][i] = Σ_n dZ[n][o] · X[n][i] goes to partials[chunk].
+// COLUMNS input columns (one per lane), y a block of BLOCK outputs, z a span of SPAN consecutive
+// chunks of dims.chunk_rows rows each, whose partial dW[o][i] = Σ_n dZ[n][o] · X[n][i] (rows in
+// order) goes to partials[first chunk / SPAN]: a partial matrix is written and read back once,
+// so the fewer the better, while enough workgroups remain to keep a CPU device's threads busy
+// (uniform.rs, `WeightGradientShape`).
 //!include _dense_tile.wgsl
 //!include _dense_acc.wgsl
 //!include _bf16.wgsl
@@ -13,6 +16,9 @@ override BLOCK: u32 = 16u;
 // Lanes (input columns) per workgroup: uniform.rs picks the smallest of 8..64 covering the
 // layer's inputs, so a 15- or 32-input layer leaves few lanes idle.
 override COLUMNS: u32 = 64u;
+// Chunks one workgroup sums into one partial matrix: 1, 2, 4 or 8 (a divisor of the 8 windows
+// a dispatch of the windowed kernel binds).
+override SPAN: u32 = 1u;
 
 @group(0) @binding(0) var<uniform> dims: DenseDims;
 // Y: what `output_gradient` (`_dense_tile.wgsl`) masks with, where the windowed stage forms dZ.
@@ -25,8 +31,8 @@ override Y_BF16: bool = false;
 // [chunk][out][in]
 @group(0) @binding(4) var<storage, read_write> partials: array<f32>;
 
-// Mirrors `ChunkInfo` in uniform.rs: the first of the chunks one dispatch sums; workgroup z is
-// the slot of one of them.
+// Mirrors `ChunkInfo` in uniform.rs: the first of the chunks one dispatch sums (a multiple of
+// SPAN); workgroup z is the span of SPAN of them from slot z · SPAN.
 struct ChunkInfo {
     first: u32,
 }

@@ -27,7 +27,8 @@ struct DenseDims {
     dx_offset: u32,
     // Start of the layer's [out][in] matrix in the bound params (or grads) range.
     weight_offset: u32,
-    // Backward weight only: rows summed by one workgroup, and how many such chunks.
+    // Backward weight only: rows of one chunk, and how many partial matrices the reduction
+    // sums (one per chunk, or per span of chunks in `_dense_chunk_sums.wgsl`).
     chunk_rows: u32,
     chunks: u32,
     _pad: u32,

@@ -1,8 +1,8 @@
 // The weight gradient of dense_backward_weight_uniform.wgsl (`chunk_partial_sums`) with dZ read
 // from one storage binding instead of 64 KiB uniform windows: what the page runs on a CPU device
 // (`_dense_uniform.wgsl` says why). dZ is the same buffer, in the same bf16 rows, so one dispatch
-// sums every chunk (workgroup z = chunk, `chunk.first` = 0) and each chunk adds its rows in the
-// same order as the windowed kernel: the partial matrices are the same, bit for bit.
+// sums every chunk (workgroup z = span of SPAN chunks, `chunk.first` = 0) and each span adds its
+// rows in the same order as the windowed kernel: the partial matrices are the same, bit for bit.
 //!include _dense_chunk_sums.wgsl
 
 // dZ in bf16 rows (`_bf16.wgsl`), 8 values per vec4<u32>.
@@ -76,11 +76,13 @@ fn chunk_partial_sums(
 ) {
     let i = workgroup_id.x * COLUMNS + local_index;
     let o0 = workgroup_id.y * BLOCK;
-    let index = chunk.first + workgroup_id.z;
-    let w = chunk_window(index, i, o0);
+    let first = chunk.first + workgroup_id.z * SPAN;
     var acc: Acc;
-    for (var r = 0u; r < w.count; r++) {
-        accumulate_bf16(&acc, x_at(w, r), (w.first_row + r) * w.row_octs + w.o0_oct);
+    for (var s = 0u; s < SPAN; s++) {
+        let w = chunk_window(first + s, i, o0);
+        for (var r = 0u; r < w.count; r++) {
+            accumulate_bf16(&acc, x_at(w, r), (w.first_row + r) * w.row_octs + w.o0_oct);
+        }
     }
-    store_partials(&acc, index, i, o0);
+    store_partials(&acc, first / SPAN, i, o0);
 }

@@ -7,9 +7,9 @@
 // `mask_output_gradient` (or, in a layer with an input gradient, that kernel with WRITE_DZ)
 // writes dZ as bf16 rows (`_bf16.wgsl`: `padded_to_vec8(out_dim)` values per row, two per word,
 // so that the windows are read as whole vec4<u32>s of 8 values; zeros in the padding; rows past
-// N stay 0) into `dz_out`; then one `chunk_partial_sums` workgroup slot per chunk of
-// dims.chunk_rows rows reads that chunk's dZ through a 64 KiB uniform window (`dz0` .. `dz7`,
-// bound at the chunk's offset) and writes partials[chunk].
+// N stay 0) into `dz_out`; then one `chunk_partial_sums` workgroup per span of SPAN chunks of
+// dims.chunk_rows rows reads each chunk's dZ through its 64 KiB uniform window (`dz0` .. `dz7`,
+// bound at the chunk's offset) and writes the span's partial matrix.
 //
 // dense_backward_weight_packed_storage.wgsl is the same sum reading dZ from one storage binding
 // (what the page runs on a CPU device, `_dense_uniform.wgsl` says why).
@@ -106,19 +106,21 @@ fn chunk_partial_sums(
 ) {
     let i = workgroup_id.x * COLUMNS + local_index;
     let o0 = workgroup_id.y * BLOCK;
-    let slot = workgroup_id.z;
-    let index = chunk.first + slot;
-    let w = chunk_window(index, i, o0);
+    let first_slot = workgroup_id.z * SPAN;
+    let first = chunk.first + first_slot;
     var acc: Acc;
-    switch slot {
-        case 0u: { window_0(&acc, w); }
-        case 1u: { window_1(&acc, w); }
-        case 2u: { window_2(&acc, w); }
-        case 3u: { window_3(&acc, w); }
-        case 4u: { window_4(&acc, w); }
-        case 5u: { window_5(&acc, w); }
-        case 6u: { window_6(&acc, w); }
-        default: { window_7(&acc, w); }
+    for (var s = 0u; s < SPAN; s++) {
+        let w = chunk_window(first + s, i, o0);
+        switch first_slot + s {
+            case 0u: { window_0(&acc, w); }
+            case 1u: { window_1(&acc, w); }
+            case 2u: { window_2(&acc, w); }
+            case 3u: { window_3(&acc, w); }
+            case 4u: { window_4(&acc, w); }
+            case 5u: { window_5(&acc, w); }
+            case 6u: { window_6(&acc, w); }
+            default: { window_7(&acc, w); }
+        }
     }
-    store_partials(&acc, index, i, o0);
+    store_partials(&acc, first / SPAN, i, o0);
 }

@@ -363,10 +363,26 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
     };
     let mut worst_input_grad = 0.0f64;
     let mut worst_hidden_grad = 0.0f64;
-    // Each hidden layer's dX as the GPU stored it, decoded into packed f32 rows.
+    // Each hidden layer's dX as the GPU stored it, decoded into packed f32 rows: in its own
+    // rows, or fused (bf16 hidden rows without a chain), masked by the ReLU of its input as the
+    // layer below's dZ.
     let hidden_grads_bf16 = mlp.hidden_gradient_rows() == RowFormat::Bf16;
+    let fused = hidden_grads_bf16 && (1..layers).all(|k| mlp.hidden_gradient(k).is_none());
+    if fused {
+        assert!(!mlp.chains_input_gradients() && gpu_dz.iter().all(Option::is_some));
+    }
     let gpu_hidden_grads: Vec<Option<Vec<f32>>> = (0..layers)
         .map(|k| {
+            if fused && k > 0 {
+                let words = gpu_dz[k - 1].as_ref()?;
+                let row_words = bf16::row_words(dims[k] as u32) as usize;
+                return Some(
+                    (0..active)
+                        .flat_map(|n| (0..dims[k]).map(move |i| (n, i)))
+                        .map(|(n, i)| bf16::row_value(&words[n * row_words..(n + 1) * row_words], i))
+                        .collect(),
+                );
+            }
             let buffer = mlp.hidden_gradient(k)?;
             let words: Vec<u32> = read_buffer_blocking(ctx, buffer).unwrap();
             let width = dims[k];
@@ -470,6 +486,15 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
                 None => dx,
                 Some(stored) => {
                     let gpu = &stored[n * n_in..(n + 1) * n_in];
+                    // Fused, what is stored is dX masked by the ReLU of this layer's input.
+                    let dx: Vec<f64> = if fused {
+                        dx.iter()
+                            .zip(&trace.activations[k])
+                            .map(|(g, x)| if *x > 0.0 { *g } else { 0.0 })
+                            .collect()
+                    } else {
+                        dx
+                    };
                     let rounding = if hidden_grads_bf16 { BF16_TOLERANCE } else { 0.0 };
                     let allowed: Vec<f64> = dx
                         .iter()
@@ -783,6 +808,7 @@ fn uniform_mlps_chain_their_input_gradients_where_they_fit() {
             [false; 4],
         ),
     ];
+    let mut fused_mlps = 0;
     for (name, mut pipelines, expected) in cases {
         let layout = ParamLayout::new(&config(name));
         let params = trainer_params(&ctx, &layout.init(3));
@@ -807,8 +833,23 @@ fn uniform_mlps_chain_their_input_gradients_where_they_fit() {
             };
             let pass = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc)).unwrap();
             assert_eq!(pass.chains_input_gradients(), chains, "{name} {mlp_name}");
+            // Unchained with bf16 hidden rows, each input gradient stores the layer below's dZ
+            // in its windows: no rows of its own.
+            let layers = pass.layers().count();
+            let fused = !chains && pass.hidden_rows() == RowFormat::Bf16;
+            assert_eq!(
+                (1..layers).all(|k| pass.hidden_gradient(k).is_none()),
+                chains || fused,
+                "{name} {mlp_name}: hidden gradient rows"
+            );
+            if fused {
+                fused_mlps += 1;
+                assert!((0..layers).all(|k| pass.layer_dz(k).is_some()), "{name} {mlp_name}");
+                assert_eq!(pass.hidden_gradient_rows(), RowFormat::Bf16, "{name} {mlp_name}");
+            }
         }
     }
+    assert!(fused_mlps >= 4, "only {fused_mlps} MLPs fused");
 }
 
 fn check_every_mlp(ctx: &GpuContext, mut pipelines: DensePipelines) {

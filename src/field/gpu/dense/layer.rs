@@ -5,7 +5,9 @@ use std::ops::Range;
 
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind, ProductWeights};
 use super::tiled::{REDUCE_SHAPE, REDUCE_WORKGROUP, TileShape, weight_chunks};
-use super::uniform::{UniformWeightPartials, WindowedLayer, dz_windows_buffer, padded_to_vec4, uniform_weight_chunks};
+use super::uniform::{
+    UniformWeightPartials, WeightGradientShape, WindowedLayer, dz_windows_buffer, padded_to_vec4, uniform_weight_chunks,
+};
 use super::{Activation, DenseFamily, RowFormat, RowView, bf16_rows};
 use crate::field::gpu::keep::HeadRows;
 use crate::gpu::buffers::{storage_buffer_from, storage_buffer_zeroed, uniform_buffer_from};
@@ -283,20 +285,32 @@ impl DenseForward {
     }
 }
 
+/// Where a layer's backward gets dZ, the gradient of its output before the activation.
+#[derive(Debug, Clone, Copy)]
+pub enum OutputGradient<'a> {
+    /// dL/dY rows (`out_dim` values per row), masked here by the activation's derivative.
+    Rows(&'a RowView),
+    /// dZ itself, written into this layer's weight-gradient windows
+    /// ([`DenseBackward::dz_rows`]) by a kernel recorded before this layer's: the MLP's
+    /// input-gradient chain (`chain.rs`; the layer then records its weight gradient alone) or
+    /// the next layer's input gradient ([`DenseGradients::mask_input_grad`]). Only the
+    /// uniform-window weight gradient has windows.
+    InWindows,
+}
+
 /// Buffers of one layer's backward.
 #[derive(Debug, Clone)]
 pub struct DenseGradients<'a> {
     /// The flat gradient buffer (same layout as the parameters); dW is added at `spec.weights`.
     pub grads: &'a wgpu::Buffer,
-    /// dL/dY, `out_dim` values per row.
-    pub output_grad: &'a RowView,
+    pub output_grad: OutputGradient<'a>,
     /// Where dL/dX goes (`in_dim` values per row, overwritten); `None` skips it.
     pub input_grad: Option<&'a RowView>,
+    /// Store dX masked by the ReLU of X (the previous layer's output): that layer's dZ, where
+    /// `input_grad` is that layer's windows and it reads them as [`OutputGradient::InWindows`].
+    pub mask_input_grad: bool,
     /// As the forward's `kept`: the rows present are the kept samples (see [`HeadRows`]).
     pub kept: Option<&'a HeadRows>,
-    /// The MLP's input-gradient chain writes this layer's dZ (`input_grad` must be `None`;
-    /// see `chain.rs`): the layer records its weight gradient alone.
-    pub dz_from_chain: bool,
 }
 
 /// The backward of one layer, bound to its buffers; owns the per-chunk partial sums of dW.
@@ -306,13 +320,18 @@ pub struct DenseBackward {
     input_grad: Option<(bool, Vec<Dispatch>)>,
     partial_sums: WeightPartials,
     reduce: Dispatch,
-    chunks: u32,
+    /// Partial matrices of dW the reduction sums.
+    partials: u32,
     /// The padded dZ rows the uniform-window weight gradient reads (`None`: tiled).
     dz: Option<wgpu::Buffer>,
     /// The row-count word its kernels read.
     row_count: wgpu::Buffer,
     /// How X, Y, dY and dX are stored.
     formats: [RowFormat; 4],
+    /// dY arrives as dZ, written by an earlier kernel ([`OutputGradient::InWindows`]).
+    dz_given: bool,
+    /// dX is stored masked by X's ReLU ([`DenseGradients::mask_input_grad`]).
+    masks_input_grad: bool,
 }
 
 /// The first half of dW: every chunk of rows' partial matrix.
@@ -350,20 +369,6 @@ impl DenseBackward {
         let label = format!("{} backward", spec.label);
         input.check(&format!("{label} input"), spec.rows, spec.in_dim)?;
         output.check(&format!("{label} output"), spec.rows, spec.out_dim)?;
-        let output_grad = gradients.output_grad;
-        output_grad.check(&format!("{label} output gradient"), spec.rows, spec.out_dim)?;
-        for buffer in [&input.buffer, &output.buffer, &output_grad.buffer] {
-            check_binding(ctx, &label, buffer)?;
-        }
-        let base = DenseDims {
-            x_stride: input.stride,
-            x_offset: input.offset,
-            y_stride: output.stride,
-            y_offset: output.offset,
-            dy_stride: output_grad.stride,
-            dy_offset: output_grad.offset,
-            ..spec.base_dims()
-        };
         let rows = row_count(ctx, spec, kept)?;
 
         let label_dw = format!("{label} weight gradient");
@@ -375,26 +380,49 @@ impl DenseBackward {
         let dz = uniform_plan
             .map(|(chunk_rows, chunks)| dz_windows_buffer(ctx, &label_dw, spec, chunk_rows, chunks))
             .transpose()?;
-        if gradients.dz_from_chain && (dz.is_none() || gradients.input_grad.is_some()) {
-            return Err(GpuError::invalid_argument(
-                &label,
-                "a chain writes dZ only for a uniform-window weight gradient without its own dX",
-            ));
+        // dZ written by an earlier kernel is dY needing no mask, read from the windows.
+        let dz_given = matches!(gradients.output_grad, OutputGradient::InWindows);
+        let output_grad = match (gradients.output_grad, &dz) {
+            (OutputGradient::Rows(view), _) => view.clone(),
+            (OutputGradient::InWindows, Some(dz)) => dz_rows(dz, spec.out_dim),
+            (OutputGradient::InWindows, None) => {
+                return Err(GpuError::invalid_argument(
+                    &label,
+                    "dZ can be written for this layer only into a uniform-window weight gradient's windows",
+                ));
+            }
+        };
+        let output_grad = &output_grad;
+        output_grad.check(&format!("{label} output gradient"), spec.rows, spec.out_dim)?;
+        for buffer in [&input.buffer, &output.buffer, &output_grad.buffer] {
+            check_binding(ctx, &label, buffer)?;
         }
+        let base = DenseDims {
+            x_stride: input.stride,
+            x_offset: input.offset,
+            y_stride: output.stride,
+            y_offset: output.offset,
+            dy_stride: output_grad.stride,
+            dy_offset: output_grad.offset,
+            relu: if dz_given { 0 } else { spec.base_dims().relu },
+            ..spec.base_dims()
+        };
 
-        let mut dz_written = gradients.dz_from_chain;
+        let mut dz_written = dz_given;
         let input_grad = match gradients.input_grad {
             None => None,
             Some(input_grad) => {
                 let label = format!("{label} input gradient");
                 input_grad.check(&label, spec.rows, spec.in_dim)?;
                 check_binding(ctx, &label, &input_grad.buffer)?;
-                let writes_dz = dz.is_some();
+                let writes_dz = dz.is_some() && !dz_given;
                 let constants = [
                     ("WRITE_DZ", f64::from(u8::from(writes_dz))),
                     bf16_rows("Y_BF16", output),
                     bf16_rows("DY_BF16", output_grad),
                     bf16_rows("DX_BF16", input_grad),
+                    ("MASK_DX", f64::from(u8::from(gradients.mask_input_grad))),
+                    bf16_rows("X_BF16", input),
                 ];
                 let (kernel, product_weights, workgroups, family, rows_per_workgroup) = pipelines
                     .product_kernel(
@@ -422,19 +450,26 @@ impl DenseBackward {
                     ("dx", input_grad.buffer.as_entire_binding()),
                     ("row_count", rows.as_entire_binding()),
                 ];
-                // The uniform-weight kernel always names `dz_out`; without windows to fill it
-                // writes nothing there (WRITE_DZ off), so any buffer does.
+                // The uniform-weight kernel always names `dz_out`; without windows to fill (or
+                // with windows an earlier kernel filled, which it reads as dY) it writes nothing
+                // there (WRITE_DZ off), so any other buffer does.
                 let unused;
                 if family == DenseFamily::UniformWeights {
                     let target = match &dz {
-                        Some(dz) => dz,
-                        None => {
+                        Some(dz) if writes_dz => dz,
+                        _ => {
                             unused = storage_buffer_zeroed::<f32>(ctx, &format!("{label} (no dZ)"), 4)?;
                             &unused
                         }
                     };
                     resources.push(("dz_out", target.as_entire_binding()));
+                    resources.push(("x", input.buffer.as_entire_binding()));
                     dz_written = dz.is_some();
+                } else if gradients.mask_input_grad {
+                    return Err(GpuError::invalid_argument(
+                        &label,
+                        "only the uniform-weight input gradient stores dX masked by X's ReLU",
+                    ));
                 }
                 let dispatches = bound_product(ctx, kernel, &resources, workgroups, (kept, rows_per_workgroup))?;
                 Some((matches!(product_weights, ProductWeights::Packed(_)), dispatches))
@@ -447,12 +482,19 @@ impl DenseBackward {
             Some(plan) => plan,
             None => weight_chunks(ctx, spec, shape)?,
         };
+        // Uniform windows: each workgroup sums a span of chunks into one partial matrix.
+        let windowed = WeightGradientShape::new(spec, pipelines.uniform_block_limit(ctx));
+        let partial_count = match uniform_plan {
+            Some(_) => windowed.partials(chunks),
+            None => chunks,
+        };
         let matrix = spec.in_dim as usize * spec.out_dim as usize;
-        let partials = storage_buffer_zeroed::<f32>(ctx, &format!("{label} partials"), chunks as usize * matrix)?;
+        let partials =
+            storage_buffer_zeroed::<f32>(ctx, &format!("{label} partials"), partial_count as usize * matrix)?;
         let (grads, grad_offset) = range_binding(ctx, &label, gradients.grads, &spec.weights)?;
         let dims = DenseDims {
             chunk_rows,
-            chunks,
+            chunks: partial_count,
             weight_offset: grad_offset,
             ..base
         };
@@ -472,6 +514,7 @@ impl DenseBackward {
                         output,
                         output_grad,
                         partials: &partials,
+                        shape: windowed,
                         dz,
                         dz_written,
                         chunk_rows,
@@ -533,7 +576,7 @@ impl DenseBackward {
             input_grad,
             partial_sums,
             reduce,
-            chunks,
+            partials: partial_count,
             dz: dz_kept,
             row_count: rows,
             formats: [
@@ -542,6 +585,8 @@ impl DenseBackward {
                 output_grad.format,
                 gradients.input_grad.map_or(RowFormat::F32, |view| view.format),
             ],
+            dz_given,
+            masks_input_grad: gradients.mask_input_grad,
         })
     }
 
@@ -551,6 +596,11 @@ impl DenseBackward {
         self.dz.as_ref()
     }
 
+    /// Those rows as a view, for the kernel that writes them ([`OutputGradient::InWindows`]).
+    pub fn dz_rows(&self) -> Option<RowView> {
+        self.dz.as_ref().map(|dz| dz_rows(dz, self.spec.out_dim))
+    }
+
     /// The row-count word its kernels read.
     pub(super) fn row_count(&self) -> &wgpu::Buffer {
         &self.row_count
@@ -558,16 +608,17 @@ impl DenseBackward {
 
     /// Bytes its dispatches move through global memory over `rows` rows (every element a
     /// dispatch reads or writes counted once, bf16 rows as their words; dZ = dY masked by the
-    /// ReLU reads Y as well):
-    /// - dX: dY (and Y) and the weights (or their packed copy) read, dX written, and dZ in padded
-    ///   rows where the uniform-window weight gradient reads it;
+    /// ReLU reads Y as well, unless dY arrives as dZ):
+    /// - dX: dY (and Y) and the weights (or their packed copy) read, dX written (X read to mask
+    ///   it where it is stored as the previous layer's dZ), and dZ in padded rows where the
+    ///   uniform-window weight gradient reads it and no earlier kernel wrote it;
     /// - uniform weight gradient: dZ formed by its own kernel where dX's does not, then X and dZ
     ///   read and every chunk's partial matrix written;
     /// - tiled weight gradient: dY (and Y) and X read, the partial matrices written;
     /// - the reduction: the partial matrices read, the gradient read and written.
     pub fn global_bytes(&self, rows: u64) -> u64 {
         let (i, o) = (u64::from(self.spec.in_dim), u64::from(self.spec.out_dim));
-        let relu = u64::from(self.spec.activation == Activation::Relu);
+        let relu = u64::from(self.spec.activation == Activation::Relu && !self.dz_given);
         // dZ's bf16 rows, in words.
         let dz_row = u64::from(crate::field::bf16::row_words(self.spec.out_dim));
         let [x_row, y_row, dy_row, dx_row] = [
@@ -578,8 +629,11 @@ impl DenseBackward {
         ]
         .map(|(format, width)| row_words(format, width));
         let dz_from_dy = rows * (dy_row + relu * y_row);
-        // dX's kernel forms the dZ the uniform windows read unless the layer masks it itself.
+        // dX's kernel forms the dZ the uniform windows read unless the layer masks it itself
+        // or an earlier kernel wrote it.
         let dz_written = matches!(&self.partial_sums, WeightPartials::Uniform(p) if !p.masks());
+        let dz_by_input_grad = dz_written && !self.dz_given;
+        let mask_reads = if self.masks_input_grad { rows * x_row } else { 0 };
         let input_grad = match &self.input_grad {
             None => 0,
             Some((packed, _)) => {
@@ -588,11 +642,11 @@ impl DenseBackward {
                 } else {
                     i * o
                 };
-                let dz = if dz_written { rows * dz_row } else { 0 };
-                dz_from_dy + weights + rows * dx_row + dz
+                let dz = if dz_by_input_grad { rows * dz_row } else { 0 };
+                dz_from_dy + weights + rows * dx_row + mask_reads + dz
             }
         };
-        let partials = u64::from(self.chunks) * i * o;
+        let partials = u64::from(self.partials) * i * o;
         let weight_grad = match &self.partial_sums {
             WeightPartials::Uniform(_) => {
                 let mask = if dz_written { 0 } else { dz_from_dy + rows * dz_row };
@@ -603,9 +657,10 @@ impl DenseBackward {
         WORD * (input_grad + weight_grad + partials + 2 * i * o)
     }
 
-    /// Chunks of rows whose partial dW are summed by the second kernel.
-    pub fn chunks(&self) -> u32 {
-        self.chunks
+    /// Partial matrices of dW the second kernel sums (one per chunk of rows, or on the
+    /// uniform-window path one per span of chunks).
+    pub fn partials(&self) -> u32 {
+        self.partials
     }
 
     /// Records dX (if wanted; on the uniform-window path it also writes the dZ that dW reads),
@@ -621,6 +676,17 @@ impl DenseBackward {
     /// Whether dW reads dZ through uniform windows (the CPU-device kernels).
     pub fn uses_uniform_windows(&self) -> bool {
         matches!(self.partial_sums, WeightPartials::Uniform(_))
+    }
+}
+
+/// The uniform-window weight gradient's dZ rows of `width` values in `dz` (bf16, each padded to
+/// whole vec4<u32>s of 8 values: `dz_windows_buffer`).
+fn dz_rows(dz: &wgpu::Buffer, width: u32) -> RowView {
+    RowView {
+        buffer: dz.clone(),
+        stride: 2 * crate::field::bf16::row_words(width),
+        offset: 0,
+        format: RowFormat::Bf16,
     }
 }
 

@@ -1,6 +1,6 @@
 //! Whole MLPs on the dense layers: the twin of `reference::mlp`.
 use super::chain::{BackwardChain, ChainDesc, chain_block};
-use super::layer::{DenseBackward, DenseForward, DenseGradients, DenseLayerSpec};
+use super::layer::{DenseBackward, DenseForward, DenseGradients, DenseLayerSpec, OutputGradient};
 use super::pipelines::ProductKind;
 use super::uniform::MlpPacking;
 use super::uniform::uniform_weight_chunks;
@@ -60,8 +60,11 @@ pub struct MlpPass {
     chain: Option<BackwardChain>,
     /// Output of layer k (the input of layer k + 1; the last is the MLP's output).
     outputs: Vec<RowView>,
-    /// dL/d(input of layer k) for k ≥ 1, packed, owned (none in a chain: registers).
+    /// dL/d(input of layer k) for k ≥ 1, packed, owned (none in a chain: registers; none
+    /// fused: the layer below's dZ windows).
     hidden_grads: Vec<wgpu::Buffer>,
+    /// How those gradients are stored, wherever they are.
+    hidden_gradient_rows: RowFormat,
     input: RowView,
     input_grad: Option<RowView>,
 }
@@ -119,6 +122,7 @@ impl MlpPass {
         }
 
         let mut hidden_grads = Vec::new();
+        let mut hidden_gradient_rows = RowFormat::F32;
         let mut chain = None;
         let mut input_grad = None;
         let backward = match gradients {
@@ -137,8 +141,18 @@ impl MlpPass {
                         dims[0],
                     )?),
                 };
-                // The input gradients between hidden layers are stored like the hidden outputs.
-                for spec in specs[1..].iter().filter(|_| !chained) {
+                // Without a chain, where every layer's weight gradient reads dZ through windows
+                // and the hidden rows are bf16 (so are its windows), a layer's input gradient
+                // stores the layer below's dZ straight into that layer's windows: one write of
+                // dX masked by the ReLU, where dX and then dZ were written and dX and Y read
+                // back (docs/architecture.md, "Hidden activations in bf16").
+                let fused = !chained && hidden == RowFormat::Bf16;
+                if !chained && layers > 1 {
+                    hidden_gradient_rows = hidden;
+                }
+                // Otherwise the input gradients between hidden layers are stored like the hidden
+                // outputs.
+                for spec in specs[1..].iter().filter(|_| !chained && !fused) {
                     let words = RowView::words(hidden, rows, spec.in_dim) as usize;
                     hidden_grads.push(storage_buffer_zeroed::<f32>(
                         ctx,
@@ -151,22 +165,30 @@ impl MlpPass {
                     .zip(&specs[1..])
                     .map(|(b, spec)| RowView::packed_as(b, spec.in_dim, hidden))
                     .collect();
-                let mut backward = Vec::with_capacity(layers);
+                let mut backward: Vec<DenseBackward> = Vec::with_capacity(layers);
                 for (k, spec) in specs.iter().enumerate() {
                     let layer_input = if k == 0 { &input } else { &outputs[k - 1] };
-                    // In a chain a hidden layer's dY never leaves the registers: its backward
-                    // gets its own output as a view of the right shape, which it does not read.
-                    let output_grad = if k + 1 == layers {
-                        &gradients.output_grad
-                    } else if chained {
-                        &outputs[k]
+                    // A chain writes every layer's dZ (dY never leaves its registers); fused,
+                    // the next layer's input gradient writes it.
+                    let output_grad = if chained || (fused && k + 1 < layers) {
+                        OutputGradient::InWindows
+                    } else if k + 1 == layers {
+                        OutputGradient::Rows(&gradients.output_grad)
                     } else {
-                        &hidden_views[k]
+                        OutputGradient::Rows(&hidden_views[k])
+                    };
+                    let below = match k.checked_sub(1) {
+                        Some(below) if fused => Some(backward[below].dz_rows().ok_or_else(|| {
+                            GpuError::invalid_argument(&specs[below].label, "a fused layer has no dZ windows")
+                        })?),
+                        _ => None,
                     };
                     let layer_input_grad = if chained {
                         None
                     } else if k == 0 {
                         input_grad.as_ref()
+                    } else if fused {
+                        below.as_ref()
                     } else {
                         Some(&hidden_views[k - 1])
                     };
@@ -174,8 +196,8 @@ impl MlpPass {
                         grads: &gradients.grads,
                         output_grad,
                         input_grad: layer_input_grad,
+                        mask_input_grad: below.is_some(),
                         kept,
-                        dz_from_chain: chained,
                     };
                     let window = packing.window(k, ProductKind::BackwardInput);
                     backward.push(
@@ -220,6 +242,7 @@ impl MlpPass {
             chain,
             outputs,
             hidden_grads,
+            hidden_gradient_rows,
             input,
             input_grad,
         })
@@ -301,7 +324,8 @@ impl MlpPass {
         self.outputs.get(k)
     }
 
-    /// dL/d(input of layer k) for k ≥ 1, as written by the backward (`None` in a chain).
+    /// dL/d(input of layer k) for k ≥ 1, as written by the backward (`None` in a chain, and
+    /// fused, where it is stored masked as layer k - 1's dZ).
     pub fn hidden_gradient(&self, k: usize) -> Option<&wgpu::Buffer> {
         k.checked_sub(1).and_then(|i| self.hidden_grads.get(i))
     }
@@ -325,15 +349,12 @@ impl MlpPass {
         self.outputs[..last].first().map_or(RowFormat::F32, |view| view.format)
     }
 
-    /// How the input gradients between hidden layers are stored ([`MlpPass::hidden_gradient`]:
-    /// as the hidden outputs; f32 where there are none, e.g. in a chain, which keeps them in
+    /// How the input gradients between hidden layers are stored (as the hidden outputs, in
+    /// [`MlpPass::hidden_gradient`] or, fused, masked as the layer below's dZ in
+    /// [`MlpPass::layer_dz`]; f32 where there are none, e.g. in a chain, which keeps them in
     /// registers).
     pub fn hidden_gradient_rows(&self) -> RowFormat {
-        if self.hidden_grads.is_empty() {
-            RowFormat::F32
-        } else {
-            self.hidden_rows()
-        }
+        self.hidden_gradient_rows
     }
 
     /// The kernel family each layer's forward (and input gradient) runs.

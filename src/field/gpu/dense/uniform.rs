@@ -99,6 +99,50 @@ pub(super) fn uniform_dispatch(ctx: &GpuContext, rows: u32, width: u32, block: u
 /// the chunk slot that is 10 uniform bindings, within WebGPU's default 12 per stage.
 pub(super) const WINDOWS_PER_DISPATCH: u32 = 8;
 
+/// Workgroups a full weight-gradient dispatch keeps at least, where summing several chunks per
+/// workgroup would leave fewer: a CPU device runs a workgroup on one thread, so fewer would idle
+/// its cores.
+const MIN_WORKGROUPS_PER_DISPATCH: u32 = 4;
+
+/// How the uniform-window weight gradient of a layer splits its work: lanes (input columns) per
+/// workgroup, outputs per workgroup, the workgroup counts over columns and outputs, and how
+/// many consecutive chunks one workgroup sums into one partial matrix (SPAN in
+/// `shaders/_dense_chunk_sums.wgsl`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct WeightGradientShape {
+    pub columns: u32,
+    pub block: u32,
+    pub workgroups: [u32; 2],
+    pub span: u32,
+}
+
+impl WeightGradientShape {
+    /// Every partial matrix is written once and read once by the reduction, so a workgroup
+    /// sums as many chunks as it can (up to the [`WINDOWS_PER_DISPATCH`] a dispatch binds)
+    /// while a full dispatch keeps [`MIN_WORKGROUPS_PER_DISPATCH`] workgroups.
+    pub(super) fn new(spec: &DenseLayerSpec, block_limit: u32) -> WeightGradientShape {
+        let block = weight_gradient_block(spec.out_dim, block_limit);
+        let columns = spec.in_dim.next_power_of_two().clamp(8, UNIFORM_WORKGROUP);
+        let workgroups = [spec.in_dim.div_ceil(columns), spec.out_dim.div_ceil(block)];
+        let per_slot = workgroups[0] * workgroups[1];
+        let mut span = WINDOWS_PER_DISPATCH;
+        while span > 1 && WINDOWS_PER_DISPATCH / span * per_slot < MIN_WORKGROUPS_PER_DISPATCH {
+            span /= 2;
+        }
+        WeightGradientShape {
+            columns,
+            block,
+            workgroups,
+            span,
+        }
+    }
+
+    /// Partial matrices the reduction sums for `chunks` chunks.
+    pub(super) fn partials(&self, chunks: u32) -> u32 {
+        chunks.div_ceil(self.span)
+    }
+}
+
 /// Mirrors `ChunkInfo` in `shaders/dense_backward_weight_uniform.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -117,8 +161,9 @@ pub(super) struct WindowedLayer<'a> {
     pub input: &'a RowView,
     pub output: &'a RowView,
     pub output_grad: &'a RowView,
-    /// Where each chunk's partial dW goes.
+    /// Where each span of chunks' partial dW goes.
     pub partials: &'a wgpu::Buffer,
+    pub shape: WeightGradientShape,
     /// dZ in padded rows (from [`dz_windows_buffer`]), and whether the input gradient's kernel
     /// writes it (then this layer records no masking kernel).
     pub dz: wgpu::Buffer,
@@ -138,7 +183,7 @@ pub(super) struct UniformWeightPartials {
     pipeline: wgpu::ComputePipeline,
     common: wgpu::BindGroup,
     /// One bind group per dispatch: its first chunk's slot and its chunks' dZ windows, with the
-    /// number of chunks it sums.
+    /// number of partial matrices it writes (its workgroups' z).
     windows: Vec<(wgpu::BindGroup, u32)>,
     workgroups: [u32; 2],
     /// Owned so the bind groups' buffers live as long as the pass.
@@ -159,6 +204,7 @@ impl UniformWeightPartials {
             output,
             output_grad,
             partials,
+            shape,
             dz,
             dz_written,
             chunk_rows,
@@ -166,14 +212,15 @@ impl UniformWeightPartials {
             row_count,
             mask_dispatch,
         } = layer;
+        let span = shape.span;
         let window_words = chunk_rows as usize * bf16::row_words(spec.out_dim) as usize;
         let reads = pipelines.packed_reads();
         let info_stride = ctx.limits.min_uniform_buffer_offset_alignment.max(16);
-        // Windows bind one chunk each; from storage one dispatch sums as many chunks as its z
-        // dimension allows.
+        // Windows bind one chunk each; from storage one dispatch sums as many spans of chunks
+        // as its z dimension allows. Either way a dispatch starts at a whole span.
         let per_dispatch = match reads {
             PackedReads::Uniform => WINDOWS_PER_DISPATCH,
-            PackedReads::Storage => ctx.limits.max_compute_workgroups_per_dimension.max(1),
+            PackedReads::Storage => ctx.limits.max_compute_workgroups_per_dimension.max(1) * span,
         };
         let dispatches = chunks.div_ceil(per_dispatch);
         let mut infos = vec![0u8; dispatches as usize * info_stride as usize];
@@ -225,11 +272,7 @@ impl UniformWeightPartials {
             Some(mask)
         };
 
-        let block = weight_gradient_block(spec.out_dim, pipelines.uniform_block_limit(ctx));
-        let columns = spec.in_dim.next_power_of_two().clamp(8, UNIFORM_WORKGROUP);
-        let (pipeline, layouts) = pipelines
-            .chunk_sums_pipeline(ctx, block, columns, (input, output))
-            .await?;
+        let (pipeline, layouts) = pipelines.chunk_sums_pipeline(ctx, &shape, (input, output)).await?;
         let sums = pipelines.chunk_sums_kernel().spec();
         let common = bind_named(
             ctx,
@@ -259,7 +302,7 @@ impl UniformWeightPartials {
             )];
             if reads == PackedReads::Storage {
                 entries.push(("dz", dz.as_entire_binding()));
-                windows.push((bind_named(ctx, &sums, &layouts[1], 1, &entries)?, count));
+                windows.push((bind_named(ctx, &sums, &layouts[1], 1, &entries)?, count.div_ceil(span)));
                 continue;
             }
             // Slots past the last chunk are never read; they bind the first chunk's window.
@@ -278,14 +321,14 @@ impl UniformWeightPartials {
                     }),
                 ));
             }
-            windows.push((bind_named(ctx, &sums, &layouts[1], 1, &entries)?, count));
+            windows.push((bind_named(ctx, &sums, &layouts[1], 1, &entries)?, count.div_ceil(span)));
         }
         Ok(UniformWeightPartials {
             mask,
             pipeline,
             common,
             windows,
-            workgroups: [spec.in_dim.div_ceil(columns), spec.out_dim.div_ceil(block)],
+            workgroups: shape.workgroups,
             _buffers: [dz, info],
         })
     }
@@ -387,8 +430,7 @@ impl DensePipelines {
     pub(super) async fn chunk_sums_pipeline(
         &self,
         ctx: &GpuContext,
-        block: u32,
-        columns: u32,
+        shape: &WeightGradientShape,
         (x, y): (&RowView, &RowView),
     ) -> Result<(wgpu::ComputePipeline, [wgpu::BindGroupLayout; 2]), GpuError> {
         let entry = |binding, ty, min: Option<u64>| wgpu::BindGroupLayoutEntry {
@@ -428,8 +470,9 @@ impl DensePipelines {
             entry_point,
             layout: Some(&[&common, &windows]),
             constants: &[
-                ("BLOCK", f64::from(block)),
-                ("COLUMNS", f64::from(columns)),
+                ("BLOCK", f64::from(shape.block)),
+                ("COLUMNS", f64::from(shape.columns)),
+                ("SPAN", f64::from(shape.span)),
                 bf16_rows("X_BF16", x),
                 bf16_rows("Y_BF16", y),
             ],
@@ -621,7 +664,39 @@ impl MlpPacking {
 
 #[cfg(test)]
 mod tests {
-    use super::{uniform_block, weight_gradient_block};
+    use super::{WeightGradientShape, uniform_block, weight_gradient_block};
+    use crate::field::gpu::dense::{Activation, DenseLayerSpec};
+
+    #[test]
+    fn weight_gradient_spans_keep_four_workgroups_per_dispatch() {
+        // (in, out, block limit) -> workgroups over columns and outputs, span.
+        for (in_dim, out_dim, limit, workgroups, span) in [
+            (128, 128, 64, [2, 2], 8),
+            (44, 128, 64, [1, 2], 4),
+            (64, 64, 64, [1, 1], 2),
+            (15, 64, 64, [1, 1], 2),
+            (64, 64, 16, [1, 4], 8),
+            (128, 3, 64, [2, 1], 4),
+        ] {
+            let spec = DenseLayerSpec {
+                label: "layer".into(),
+                rows: 1000,
+                in_dim,
+                out_dim,
+                activation: Activation::Relu,
+                weights: 0..(in_dim * out_dim) as usize,
+            };
+            let shape = WeightGradientShape::new(&spec, limit);
+            assert_eq!(
+                (shape.workgroups, shape.span),
+                (workgroups, span),
+                "{in_dim} x {out_dim}, limit {limit}"
+            );
+            let per_slot = workgroups[0] * workgroups[1];
+            assert!(8 / span * per_slot >= 4 || span == 1);
+            assert_eq!(shape.partials(17), 17u32.div_ceil(span));
+        }
+    }
 
     #[test]
     fn blocks_split_a_layer_evenly_in_multiples_of_four() {
