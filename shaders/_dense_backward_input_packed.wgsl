@@ -4,6 +4,7 @@
 //!include _dense_uniform.wgsl
 //!include _bf16.wgsl
 //!include _dense_output_gradient.wgsl
+//!include _dense_relu_mask.wgsl
 
 // Whether block 0 also stores dZ for the layer's uniform-window weight gradient, as bf16 rows
 // (`_bf16.wgsl`).
@@ -14,9 +15,11 @@ override DX_BF16: bool = false;
 // Whether dX is stored masked by the ReLU of X (0 where X ≤ 0): X is the previous layer's
 // output, so what is stored is that layer's dZ, written straight into its weight gradient's
 // windows; that layer then reads it as a dY needing no mask (dims.relu off) and writes no dZ of
-// its own (`dense::MlpPass`, docs/architecture.md).
+// its own (`dense::MlpPass`, docs/architecture.md). Which X are positive comes from the bits the
+// previous layer's forward wrote (`_dense_relu_mask.wgsl`, in blocks of MASK_BLOCK), 1/16 of the
+// bf16 row.
 override MASK_DX: bool = false;
-override X_BF16: bool = false;
+override MASK_BLOCK: u32 = 64u;
 
 @group(0) @binding(0) var<uniform> dims: DenseDims;
 // dY and dX in f32 or bf16 rows (DY_BF16, DX_BF16: the input gradients between hidden layers
@@ -25,8 +28,7 @@ override X_BF16: bool = false;
 // Y in f32 or bf16 rows (Y_BF16: a hidden layer of an MLP whose kernels all read bf16 rows).
 @group(0) @binding(2) var<storage, read> y: array<u32>;
 @group(0) @binding(4) var<storage, read_write> dx: array<u32>;
-// X in f32 or bf16 rows (X_BF16), read where MASK_DX.
-@group(0) @binding(5) var<storage, read> x: array<u32>;
+@group(0) @binding(5) var<storage, read> relu_mask: array<u32>;
 @group(0) @binding(6) var<storage, read_write> dz_out: array<u32>;
 
 // Where one row's steps read and write (UNROLL); `dz` is the row's first word.
@@ -55,9 +57,12 @@ fn y_value(row: u32, j: u32) -> f32 {
 }
 
 // dX[n][i] as stored: masked by X's ReLU where MASK_DX (0 at 0, as `output_gradient`).
-fn stored_input_gradient(value: f32, x_row: u32, i: u32) -> f32 {
-    if MASK_DX && !(row_value(x[row_word(x_row, i, X_BF16)], i, X_BF16) > 0.0) {
-        return 0.0;
+fn stored_input_gradient(value: f32, n: u32, i: u32) -> f32 {
+    if MASK_DX {
+        let word = relu_mask[relu_mask_word(n, dims.in_dim, MASK_BLOCK, i)];
+        if ((word >> relu_mask_bit(MASK_BLOCK, i)) & 1u) == 0u {
+            return 0.0;
+        }
     }
     return value;
 }
@@ -155,16 +160,15 @@ fn backward_input(
         }
     }
     let dx_row = n * dims.dx_stride + dims.dx_offset;
-    let x_row = n * dims.x_stride + dims.x_offset;
     // Pairs of inputs (BLOCK and i0 are multiples of 4): a bf16 pair is one word, the second 0
     // past an odd width (the row's padding).
     for (var j = 0u; j < BLOCK; j += 2u) {
         let i = i0 + j;
         if i < dims.in_dim {
-            let first = stored_input_gradient(acc_value(&acc, j), x_row, i);
+            let first = stored_input_gradient(acc_value(&acc, j), n, i);
             var second = 0.0;
             if i + 1u < dims.in_dim {
-                second = stored_input_gradient(acc_value(&acc, j + 1u), x_row, i + 1u);
+                second = stored_input_gradient(acc_value(&acc, j + 1u), n, i + 1u);
             }
             if DX_BF16 {
                 dx[row_word(dx_row, i, true)] = bf16_pair(first, second);

@@ -3,6 +3,7 @@
 // declares in its own address space (`_dense_uniform.wgsl` says why there are two).
 //!include _dense_uniform.wgsl
 //!include _bf16.wgsl
+//!include _dense_relu_mask.wgsl
 
 @group(0) @binding(0) var<uniform> dims: DenseDims;
 // X and Y in f32 or bf16 rows (X_BF16, Y_BF16: hidden layers of an MLP whose kernels all read
@@ -11,9 +12,23 @@
 @group(0) @binding(3) var<storage, read_write> y: array<u32>;
 override X_BF16: bool = false;
 override Y_BF16: bool = false;
+// Whether a hidden layer also writes which of its stored outputs are positive, one bit each
+// (`_dense_relu_mask.wgsl`), for the next layer's input gradient to mask with in place of
+// reading Y back (`dense::MlpPass`, docs/architecture.md).
+override WRITE_MASK: bool = false;
+@group(0) @binding(5) var<storage, read_write> relu_mask: array<u32>;
 
 fn x_value(row: u32, i: u32) -> f32 {
     return row_value(x[row_word(row, i, X_BF16)], i, X_BF16);
+}
+
+// Whether Y[n][o] as stored is positive (a bf16 row's value rounds to 0 only from 0 itself or
+// below bf16's range).
+fn stored_positive(value: f32) -> bool {
+    if Y_BF16 {
+        return value > 0.0 && bf16_bits(value) != 0u;
+    }
+    return value > 0.0;
 }
 
 // Y[n][o] after the activation, 0 past the layer's outputs.
@@ -94,6 +109,8 @@ fn forward(
         return;
     }
     let y_row = n * dims.y_stride + dims.y_offset;
+    // The block's mask words (BLOCK is at most 64), bits set as the pairs are stored.
+    var mask = vec2<u32>(0u, 0u);
     // Pairs of outputs (BLOCK and o0 are multiples of 4): a bf16 pair is one word, the second
     // 0 past an odd width (the row's padding).
     for (var j = 0u; j < BLOCK; j += 2u) {
@@ -109,6 +126,17 @@ fn forward(
                     y[y_row + o + 1u] = bitcast<u32>(second);
                 }
             }
+            if WRITE_MASK {
+                let bits = u32(stored_positive(first)) | (u32(stored_positive(second)) << 1u);
+                mask[j >> 5u] |= bits << (j & 31u);
+            }
+        }
+    }
+    if WRITE_MASK {
+        let first_word = relu_mask_word(n, dims.out_dim, BLOCK, o0);
+        relu_mask[first_word] = mask.x;
+        if relu_mask_block_words(BLOCK) > 1u {
+            relu_mask[first_word + 1u] = mask.y;
         }
     }
 }

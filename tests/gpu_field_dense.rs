@@ -277,6 +277,9 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
     let layers = layout.layers.len();
     for k in 0..layers {
         fill_with_garbage(ctx, &mlp.layer_output(k).unwrap().buffer);
+        if let Some(mask) = mlp.layer_relu_mask(k) {
+            fill_with_garbage(ctx, &mask.buffer);
+        }
         if let Some(buffer) = mlp.hidden_gradient(k) {
             fill_with_garbage(ctx, buffer);
         }
@@ -322,6 +325,26 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
                     .collect()
             }
         });
+    }
+    // Where a hidden layer stores its ReLU's bits, each is whether its output as stored is
+    // positive.
+    for k in 0..layers {
+        let Some(mask) = mlp.layer_relu_mask(k) else {
+            continue;
+        };
+        assert!(k + 1 < layers, "{name}: the output layer stores a ReLU mask");
+        let words: Vec<u32> = read_buffer_blocking(ctx, &mask.buffer).unwrap();
+        let width = dims[k + 1];
+        for n in 0..active {
+            for o in 0..width {
+                let positive = gpu_outputs[k][n * width + o] > 0.0;
+                assert_eq!(
+                    mask.is_set(&words, n, o as u32),
+                    positive,
+                    "{name} row {n} layer {k} ReLU mask bit {o}"
+                );
+            }
+        }
     }
     let bf16_hidden = formats[..layers - 1].iter().all(|f| *f == RowFormat::Bf16);
     assert!(
@@ -845,6 +868,10 @@ fn uniform_mlps_chain_their_input_gradients_where_they_fit() {
             if fused {
                 fused_mlps += 1;
                 assert!((0..layers).all(|k| pass.layer_dz(k).is_some()), "{name} {mlp_name}");
+                assert!(
+                    (0..layers).all(|k| pass.layer_relu_mask(k).is_some() == (k + 1 < layers)),
+                    "{name} {mlp_name}: the hidden layers store their ReLU's bits"
+                );
                 assert_eq!(pass.hidden_gradient_rows(), RowFormat::Bf16, "{name} {mlp_name}");
             }
         }

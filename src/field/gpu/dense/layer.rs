@@ -4,6 +4,7 @@ use std::num::NonZeroU64;
 use std::ops::Range;
 
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind, ProductWeights};
+use super::relu_mask::ReluMask;
 use super::tiled::{REDUCE_SHAPE, REDUCE_WORKGROUP, TileShape, weight_chunks};
 use super::uniform::{
     UniformWeightPartials, WeightGradientShape, WindowedLayer, dz_windows_buffer, padded_to_vec4, uniform_weight_chunks,
@@ -189,6 +190,8 @@ pub struct DenseForward {
     family: DenseFamily,
     /// How X and Y are stored.
     formats: (RowFormat, RowFormat),
+    /// The bits of Y > 0 it also stores, where asked.
+    relu_mask: Option<ReluMask>,
 }
 
 impl DenseForward {
@@ -196,6 +199,9 @@ impl DenseForward {
     /// is overwritten. With `kept`, only the first kept rows are computed (see [`HeadRows`]).
     /// `packed`: the window of the MLP's packed weights for this layer's forward (then the
     /// uniform-weight kernel runs; the MLP refreshes the copy), or `None` (tiled).
+    /// `relu_mask`: also store which outputs are positive ([`DenseForward::relu_mask`]; a ReLU
+    /// layer on the uniform-weight kernel only).
+    #[allow(clippy::too_many_arguments)]
     pub(super) async fn new(
         ctx: &GpuContext,
         pipelines: &mut DensePipelines,
@@ -204,9 +210,16 @@ impl DenseForward {
         (input, output): (&RowView, &RowView),
         kept: Option<&HeadRows>,
         packed: Option<wgpu::BindingResource<'_>>,
+        relu_mask: bool,
     ) -> Result<DenseForward, GpuError> {
         spec.check()?;
         let label = format!("{} forward", spec.label);
+        if relu_mask && (packed.is_none() || spec.activation != Activation::Relu) {
+            return Err(GpuError::invalid_argument(
+                &label,
+                "only a ReLU layer on the uniform-weight kernel stores its mask bits",
+            ));
+        }
         input.check(&format!("{label} input"), spec.rows, spec.in_dim)?;
         output.check(&format!("{label} output"), spec.rows, spec.out_dim)?;
         check_binding(ctx, &label, &input.buffer)?;
@@ -218,7 +231,11 @@ impl DenseForward {
                 (params, packed),
                 spec,
                 ProductKind::Forward,
-                &[bf16_rows("X_BF16", input), bf16_rows("Y_BF16", output)],
+                &[
+                    bf16_rows("X_BF16", input),
+                    bf16_rows("Y_BF16", output),
+                    ("WRITE_MASK", f64::from(u8::from(relu_mask))),
+                ],
             )
             .await?;
         let packed = matches!(product_weights, ProductWeights::Packed(_));
@@ -233,26 +250,55 @@ impl DenseForward {
             ..spec.base_dims()
         };
         let uniform = uniform_buffer_from(ctx, &label, &dims);
-        let dispatches = bound_product(
-            ctx,
-            kernel,
-            &[
-                ("dims", uniform.as_entire_binding()),
-                ("x", input.buffer.as_entire_binding()),
-                ("weights", weights),
-                ("y", output.buffer.as_entire_binding()),
-                ("row_count", rows.as_entire_binding()),
-            ],
-            workgroups,
-            (kept, rows_per_workgroup),
-        )?;
+        let mut resources = vec![
+            ("dims", uniform.as_entire_binding()),
+            ("x", input.buffer.as_entire_binding()),
+            ("weights", weights),
+            ("y", output.buffer.as_entire_binding()),
+            ("row_count", rows.as_entire_binding()),
+        ];
+        // The uniform-weight kernel always names `relu_mask`; without WRITE_MASK any buffer does.
+        let mask = match (relu_mask, family) {
+            (true, DenseFamily::UniformWeights) => Some(ReluMask::zeroed(
+                ctx,
+                &format!("{label} ReLU mask"),
+                spec.rows,
+                spec.out_dim,
+                pipelines.uniform_product_block(ctx, spec.out_dim),
+            )?),
+            (true, DenseFamily::Tiled) => {
+                return Err(GpuError::invalid_argument(
+                    &label,
+                    "the tiled forward stores no mask bits",
+                ));
+            }
+            (false, _) => None,
+        };
+        let unused;
+        if family == DenseFamily::UniformWeights {
+            let target = match &mask {
+                Some(mask) => &mask.buffer,
+                None => {
+                    unused = storage_buffer_zeroed::<u32>(ctx, &format!("{label} (no mask)"), 4)?;
+                    &unused
+                }
+            };
+            resources.push(("relu_mask", target.as_entire_binding()));
+        }
+        let dispatches = bound_product(ctx, kernel, &resources, workgroups, (kept, rows_per_workgroup))?;
         Ok(DenseForward {
             spec: spec.clone(),
             packed,
             dispatches,
             family,
             formats: (input.format, output.format),
+            relu_mask: mask,
         })
+    }
+
+    /// The bits of which outputs are positive, where it stores them.
+    pub fn relu_mask(&self) -> Option<&ReluMask> {
+        self.relu_mask.as_ref()
     }
 
     pub fn spec(&self) -> &DenseLayerSpec {
@@ -260,8 +306,8 @@ impl DenseForward {
     }
 
     /// Bytes its dispatch moves through global memory over `rows` rows (every element read or
-    /// written counted once, bf16 rows as their words): X read, Y written, the weights (or their
-    /// packed copy) read. The MLP counts the packing.
+    /// written counted once, bf16 rows as their words): X read, Y (and its mask bits) written,
+    /// the weights (or their packed copy) read. The MLP counts the packing.
     pub fn global_bytes(&self, rows: u64) -> u64 {
         let (i, o) = (u64::from(self.spec.in_dim), u64::from(self.spec.out_dim));
         let weights = if self.packed {
@@ -270,7 +316,8 @@ impl DenseForward {
             i * o
         };
         let (x, y) = self.formats;
-        WORD * (rows * (row_words(x, self.spec.in_dim) + row_words(y, self.spec.out_dim)) + weights)
+        let mask = self.relu_mask.as_ref().map_or(0, |mask| u64::from(mask.row_words()));
+        WORD * (rows * (row_words(x, self.spec.in_dim) + row_words(y, self.spec.out_dim) + mask) + weights)
     }
 
     /// The kernels this layer's forward runs (uniform weights only where the layer fits).
@@ -293,7 +340,7 @@ pub enum OutputGradient<'a> {
     /// dZ itself, written into this layer's weight-gradient windows
     /// ([`DenseBackward::dz_rows`]) by a kernel recorded before this layer's: the MLP's
     /// input-gradient chain (`chain.rs`; the layer then records its weight gradient alone) or
-    /// the next layer's input gradient ([`DenseGradients::mask_input_grad`]). Only the
+    /// the next layer's input gradient ([`DenseGradients::input_mask`]). Only the
     /// uniform-window weight gradient has windows.
     InWindows,
 }
@@ -306,9 +353,10 @@ pub struct DenseGradients<'a> {
     pub output_grad: OutputGradient<'a>,
     /// Where dL/dX goes (`in_dim` values per row, overwritten); `None` skips it.
     pub input_grad: Option<&'a RowView>,
-    /// Store dX masked by the ReLU of X (the previous layer's output): that layer's dZ, where
-    /// `input_grad` is that layer's windows and it reads them as [`OutputGradient::InWindows`].
-    pub mask_input_grad: bool,
+    /// Store dX masked by the ReLU of X (the previous layer's output), whose bits its forward
+    /// stored ([`DenseForward::relu_mask`]): that layer's dZ, where `input_grad` is that layer's
+    /// windows and it reads them as [`OutputGradient::InWindows`].
+    pub input_mask: Option<&'a ReluMask>,
     /// As the forward's `kept`: the rows present are the kept samples (see [`HeadRows`]).
     pub kept: Option<&'a HeadRows>,
 }
@@ -330,8 +378,8 @@ pub struct DenseBackward {
     formats: [RowFormat; 4],
     /// dY arrives as dZ, written by an earlier kernel ([`OutputGradient::InWindows`]).
     dz_given: bool,
-    /// dX is stored masked by X's ReLU ([`DenseGradients::mask_input_grad`]).
-    masks_input_grad: bool,
+    /// Words per row of the mask bits dX is stored masked by ([`DenseGradients::input_mask`]).
+    input_mask_words: Option<u32>,
 }
 
 /// The first half of dW: every chunk of rows' partial matrix.
@@ -421,9 +469,20 @@ impl DenseBackward {
                     bf16_rows("Y_BF16", output),
                     bf16_rows("DY_BF16", output_grad),
                     bf16_rows("DX_BF16", input_grad),
-                    ("MASK_DX", f64::from(u8::from(gradients.mask_input_grad))),
-                    bf16_rows("X_BF16", input),
+                    ("MASK_DX", f64::from(u8::from(gradients.input_mask.is_some()))),
+                    (
+                        "MASK_BLOCK",
+                        f64::from(gradients.input_mask.map_or(1, |mask| mask.block)),
+                    ),
                 ];
+                if let Some(mask) = gradients.input_mask
+                    && mask.width != spec.in_dim
+                {
+                    return Err(GpuError::invalid_argument(
+                        &label,
+                        format!("a ReLU mask of {} outputs for {} inputs", mask.width, spec.in_dim),
+                    ));
+                }
                 let (kernel, product_weights, workgroups, family, rows_per_workgroup) = pipelines
                     .product_kernel(
                         ctx,
@@ -453,7 +512,7 @@ impl DenseBackward {
                 // The uniform-weight kernel always names `dz_out`; without windows to fill (or
                 // with windows an earlier kernel filled, which it reads as dY) it writes nothing
                 // there (WRITE_DZ off), so any other buffer does.
-                let unused;
+                let (unused, unused_mask);
                 if family == DenseFamily::UniformWeights {
                     let target = match &dz {
                         Some(dz) if writes_dz => dz,
@@ -463,9 +522,16 @@ impl DenseBackward {
                         }
                     };
                     resources.push(("dz_out", target.as_entire_binding()));
-                    resources.push(("x", input.buffer.as_entire_binding()));
+                    let mask = match gradients.input_mask {
+                        Some(mask) => &mask.buffer,
+                        None => {
+                            unused_mask = storage_buffer_zeroed::<u32>(ctx, &format!("{label} (no mask)"), 4)?;
+                            &unused_mask
+                        }
+                    };
+                    resources.push(("relu_mask", mask.as_entire_binding()));
                     dz_written = dz.is_some();
-                } else if gradients.mask_input_grad {
+                } else if gradients.input_mask.is_some() {
                     return Err(GpuError::invalid_argument(
                         &label,
                         "only the uniform-weight input gradient stores dX masked by X's ReLU",
@@ -586,7 +652,7 @@ impl DenseBackward {
                 gradients.input_grad.map_or(RowFormat::F32, |view| view.format),
             ],
             dz_given,
-            masks_input_grad: gradients.mask_input_grad,
+            input_mask_words: gradients.input_mask.map(ReluMask::row_words),
         })
     }
 
@@ -609,8 +675,9 @@ impl DenseBackward {
     /// Bytes its dispatches move through global memory over `rows` rows (every element a
     /// dispatch reads or writes counted once, bf16 rows as their words; dZ = dY masked by the
     /// ReLU reads Y as well, unless dY arrives as dZ):
-    /// - dX: dY (and Y) and the weights (or their packed copy) read, dX written (X read to mask
-    ///   it where it is stored as the previous layer's dZ), and dZ in padded rows where the
+    /// - dX: dY (and Y) and the weights (or their packed copy) read, dX written (and X's ReLU
+    ///   mask bits read where it is stored as the previous layer's dZ), and dZ in padded rows
+    ///   where the
     ///   uniform-window weight gradient reads it and no earlier kernel wrote it;
     /// - uniform weight gradient: dZ formed by its own kernel where dX's does not, then X and dZ
     ///   read and every chunk's partial matrix written;
@@ -633,7 +700,7 @@ impl DenseBackward {
         // or an earlier kernel wrote it.
         let dz_written = matches!(&self.partial_sums, WeightPartials::Uniform(p) if !p.masks());
         let dz_by_input_grad = dz_written && !self.dz_given;
-        let mask_reads = if self.masks_input_grad { rows * x_row } else { 0 };
+        let mask_reads = rows * u64::from(self.input_mask_words.unwrap_or(0));
         let input_grad = match &self.input_grad {
             None => 0,
             Some((packed, _)) => {

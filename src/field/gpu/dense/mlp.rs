@@ -4,7 +4,7 @@ use super::layer::{DenseBackward, DenseForward, DenseGradients, DenseLayerSpec, 
 use super::pipelines::ProductKind;
 use super::uniform::MlpPacking;
 use super::uniform::uniform_weight_chunks;
-use super::{Activation, DenseFamily, DensePipelines, RowFormat, RowView};
+use super::{Activation, DenseFamily, DensePipelines, ReluMask, RowFormat, RowView};
 use crate::field::gpu::keep::HeadRows;
 use crate::field::params::MlpLayout;
 use crate::gpu::buffers::storage_buffer_zeroed;
@@ -113,12 +113,34 @@ impl MlpPass {
             };
             outputs.push(view);
         }
-        let mut forward = Vec::with_capacity(layers);
+        // Without a chain, where every layer's weight gradient reads dZ through windows and the
+        // hidden rows are bf16 (so are its windows), a layer's input gradient stores the layer
+        // below's dZ straight into that layer's windows: dX masked by the ReLU, from the bits
+        // the forward stored, where dX and then dZ were written and dX and Y read back
+        // (docs/architecture.md, "Hidden activations in bf16").
+        let chain_block = match &gradients {
+            Some(gradients) => chain_block(ctx, pipelines, &specs, &packing, gradients.input_grad.is_some()),
+            None => None,
+        };
+        let fused = gradients.is_some() && chain_block.is_none() && hidden == RowFormat::Bf16;
+        let mut forward: Vec<DenseForward> = Vec::with_capacity(layers);
         for (k, spec) in specs.iter().enumerate() {
             let layer_input = if k == 0 { &input } else { &outputs[k - 1] };
             let window = packing.window(k, ProductKind::Forward);
-            forward
-                .push(DenseForward::new(ctx, pipelines, spec, params, (layer_input, &outputs[k]), kept, window).await?);
+            let mask = fused && k + 1 < layers;
+            forward.push(
+                DenseForward::new(
+                    ctx,
+                    pipelines,
+                    spec,
+                    params,
+                    (layer_input, &outputs[k]),
+                    kept,
+                    window,
+                    mask,
+                )
+                .await?,
+            );
         }
 
         let mut hidden_grads = Vec::new();
@@ -128,7 +150,6 @@ impl MlpPass {
         let backward = match gradients {
             None => None,
             Some(gradients) => {
-                let chain_block = chain_block(ctx, pipelines, &specs, &packing, gradients.input_grad.is_some());
                 let chained = chain_block.is_some();
                 input_grad = match &gradients.input_grad {
                     None => None,
@@ -141,12 +162,6 @@ impl MlpPass {
                         dims[0],
                     )?),
                 };
-                // Without a chain, where every layer's weight gradient reads dZ through windows
-                // and the hidden rows are bf16 (so are its windows), a layer's input gradient
-                // stores the layer below's dZ straight into that layer's windows: one write of
-                // dX masked by the ReLU, where dX and then dZ were written and dX and Y read
-                // back (docs/architecture.md, "Hidden activations in bf16").
-                let fused = !chained && hidden == RowFormat::Bf16;
                 if !chained && layers > 1 {
                     hidden_gradient_rows = hidden;
                 }
@@ -196,7 +211,12 @@ impl MlpPass {
                         grads: &gradients.grads,
                         output_grad,
                         input_grad: layer_input_grad,
-                        mask_input_grad: below.is_some(),
+                        input_mask: match below {
+                            Some(_) => Some(forward[k - 1].relu_mask().ok_or_else(|| {
+                                GpuError::invalid_argument(&specs[k - 1].label, "a fused layer stores no ReLU mask")
+                            })?),
+                            None => None,
+                        },
                         kept,
                     };
                     let window = packing.window(k, ProductKind::BackwardInput);
@@ -317,6 +337,12 @@ impl MlpPass {
     /// The MLP's (linear) output.
     pub fn output(&self) -> &RowView {
         &self.outputs[self.outputs.len() - 1]
+    }
+
+    /// The bits of which of layer `k`'s outputs are positive, where its forward stores them
+    /// (a hidden layer whose next layer's input gradient masks with them).
+    pub fn layer_relu_mask(&self, k: usize) -> Option<&ReluMask> {
+        self.forward.get(k)?.relu_mask()
     }
 
     /// Output of layer `k` (ReLU-activated for hidden layers).

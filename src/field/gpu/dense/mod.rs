@@ -44,22 +44,28 @@
 //! tiled kernels touch.
 //!
 //! On lavapipe an MLP of 2 or 3 such layers whose hidden widths fit one invocation runs all its
-//! input gradients as one kernel ([`chain`]), each hidden layer's dX kept in registers.
+//! input gradients as one kernel ([`chain`]), each hidden layer's dX kept in registers. Other
+//! such MLPs store each hidden layer's dX masked by the ReLU, as the layer below's dZ, straight
+//! into that layer's weight-gradient windows, with the mask from bits its forward stored
+//! ([`relu_mask`]).
 //!
 //! Where things live: [`tiled`] (tile shapes and the tiled weight-gradient chunking),
-//! [`uniform`] (the uniform-weight family), [`chain`] (the input-gradient chain), [`pipelines`] (the pipeline cache and the choice of
+//! [`uniform`] (the uniform-weight family), [`chain`] (the input-gradient chain), [`relu_mask`] (the
+//! ReLU's bits between layers), [`pipelines`] (the pipeline cache and the choice of
 //! kernel per product), [`layer`] (layer specs, one layer's forward and backward) and [`mlp`]
 //! (whole MLPs). Everything a caller needs is re-exported here.
 mod chain;
 mod layer;
 mod mlp;
 mod pipelines;
+mod relu_mask;
 mod tiled;
 mod uniform;
 
 pub use layer::{DenseBackward, DenseDims, DenseForward, DenseGradients, DenseLayerSpec};
 pub use mlp::{InputRows, MlpGradients, MlpPass, MlpPassDesc, mlp_row_format};
 pub use pipelines::DensePipelines;
+pub use relu_mask::ReluMask;
 pub use tiled::TileShape;
 pub use uniform::{PackedReads, UNIFORM_WEIGHT_FLOATS};
 

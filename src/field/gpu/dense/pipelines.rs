@@ -260,6 +260,12 @@ impl DensePipelines {
         self.uniform_block_limit.unwrap_or_else(|| widest_uniform_block(ctx))
     }
 
+    /// The columns one invocation of a uniform-weight product of `columns` columns computes
+    /// (`BLOCK`): a forward's outputs, an input gradient's inputs.
+    pub(super) fn uniform_product_block(&self, ctx: &GpuContext, columns: u32) -> u32 {
+        uniform_block(columns, self.uniform_block_limit(ctx))
+    }
+
     pub fn family(&self) -> DenseFamily {
         self.family
     }
@@ -366,7 +372,7 @@ impl DensePipelines {
         };
         let uniform_kernel = self.packed_kernel(kind);
         if let Some(packed) = packed {
-            let block = uniform_block(columns, self.uniform_block_limit(ctx));
+            let block = self.uniform_product_block(ctx, columns);
             let mut workgroups = uniform_dispatch(ctx, spec.rows, columns, block)?;
             let (unrolled, unroll_constants) = self.unrolled_constants(ctx, reduced, columns, block);
             let fixed = DensePipelines::fixed_blocks(unrolled, columns, block);
