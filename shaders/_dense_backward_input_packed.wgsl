@@ -20,6 +20,10 @@ override DX_BF16: bool = false;
 // bf16 row.
 override MASK_DX: bool = false;
 override MASK_BLOCK: u32 = 64u;
+// The columns of dX the caller reads ([DX_FIRST, DX_END), DX_FIRST even where dX is bf16): the
+// others are not written (the SH part of the colour input, the frequency part of the encoding).
+override DX_FIRST: u32 = 0u;
+override DX_END: u32 = 0xffffffffu;
 
 @group(0) @binding(0) var<uniform> dims: DenseDims;
 // dY and dX in f32 or bf16 rows (DY_BF16, DX_BF16: the input gradients between hidden layers
@@ -164,7 +168,7 @@ fn backward_input(
     // past an odd width (the row's padding).
     for (var j = 0u; j < BLOCK; j += 2u) {
         let i = i0 + j;
-        if i < dims.in_dim {
+        if i < min(dims.in_dim, DX_END) && i + 1u >= DX_FIRST {
             let first = stored_input_gradient(acc_value(&acc, j), n, i);
             var second = 0.0;
             if i + 1u < dims.in_dim {
@@ -173,8 +177,10 @@ fn backward_input(
             if DX_BF16 {
                 dx[row_word(dx_row, i, true)] = bf16_pair(first, second);
             } else {
-                dx[dx_row + i] = bitcast<u32>(first);
-                if i + 1u < dims.in_dim {
+                if i >= DX_FIRST {
+                    dx[dx_row + i] = bitcast<u32>(first);
+                }
+                if i + 1u < min(dims.in_dim, DX_END) {
                     dx[dx_row + i + 1u] = bitcast<u32>(second);
                 }
             }

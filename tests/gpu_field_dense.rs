@@ -250,6 +250,7 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
             grads: grads_buffer.clone(),
             output_grad: output_grad_layout.view(&output_grad_buffer),
             input_grad: input_grad.then(|| InputRows::Given(input_grad_layout.view(&input_grad_buffer))),
+            input_grad_columns: None,
         }),
         kept: head_rows.as_ref(),
     };
@@ -851,6 +852,7 @@ fn uniform_mlps_chain_their_input_gradients_where_they_fit() {
                     grads: storage_buffer_zeroed::<f32>(&ctx, "grads", layout.total).unwrap(),
                     output_grad: RowView::packed(&output_grad, out_dim),
                     input_grad: (mlp_name != "color").then(|| InputRows::Given(RowView::packed(&input_grad, in_dim))),
+                    input_grad_columns: None,
                 }),
                 kept: None,
             };
@@ -1050,6 +1052,7 @@ fn owned_input_rows_take_the_hidden_rows_format() {
                 grads: grads.clone(),
                 output_grad: RowView::packed(&output_grad, out_dim),
                 input_grad: Some(InputRows::Owned),
+                input_grad_columns: None,
             }),
             kept: None,
         };
@@ -1109,6 +1112,7 @@ fn owned_bf16_input_gradient_is_the_f32_one_rounded() {
                     grads,
                     output_grad: RowView::packed(&output_grad, out_dim as u32),
                     input_grad: Some(input_grad),
+                    input_grad_columns: None,
                 }),
                 kept: None,
             };
@@ -1153,6 +1157,89 @@ fn owned_bf16_input_gradient_is_the_f32_one_rounded() {
                 assert_eq!(bf16::row_value(row, j), expected, "chain {chain}: row {n}, value {j}");
             }
             assert_eq!(bf16::row_value(row, in_dim), 0.0, "chain {chain}: row {n}'s padding");
+        }
+    }
+}
+
+/// An MLP asked for some columns of its input gradient (the trainer's colour MLP: g's, not the
+/// SH's) writes those as it writes them when asked for all, bit for bit, and leaves the others
+/// as they were; in f32 rows and in bf16 rows (whose range starts at an even column), run per
+/// layer as the trainer's 128-wide MLPs are.
+#[test]
+fn input_gradient_columns_outside_the_range_are_left_alone() {
+    let Some(ctx) = gpu_for_tests("input_gradient_columns_outside_the_range_are_left_alone") else {
+        return;
+    };
+    let layout = ParamLayout::new(&FieldConfig::small());
+    let params = trainer_params(&ctx, &layout.init(9));
+    let mlp = &layout.color;
+    let (in_dim, out_dim) = (mlp.input_dim(), mlp.output_dim());
+    let rows = 200usize;
+    let mut rng = SplitMix64::new(11);
+    let input = storage_buffer_from(&ctx, "input", &random_values(&mut rng, rows * in_dim, 1.0)).unwrap();
+    let output_grad = storage_buffer_from(&ctx, "output grad", &random_values(&mut rng, rows * out_dim, 1.0)).unwrap();
+    let width = in_dim as u32;
+    for (format, columns) in [
+        (RowFormat::F32, 15..width),
+        (RowFormat::Bf16, 16..width),
+        (RowFormat::F32, 0..3),
+    ] {
+        let mut pipelines = DensePipelines::with_family(DenseFamily::UniformWeights).with_input_gradient_chain(false);
+        let words = RowView::words(format, rows as u32, width) as usize;
+        let mut run = |columns: Option<std::ops::Range<u32>>| -> Vec<u32> {
+            let grad = storage_buffer_garbage::<f32>(&ctx, "input grad", words).unwrap();
+            let desc = MlpPassDesc {
+                label: "colour",
+                layout: mlp,
+                rows: rows as u32,
+                params: &params,
+                input: InputRows::Given(RowView::packed(&input, width)),
+                output: None,
+                gradients: Some(MlpGradients {
+                    grads: storage_buffer_zeroed::<f32>(&ctx, "grads", layout.total).unwrap(),
+                    output_grad: RowView::packed(&output_grad, out_dim as u32),
+                    input_grad: Some(InputRows::Given(RowView::packed_as(&grad, width, format))),
+                    input_grad_columns: columns,
+                }),
+                kept: None,
+            };
+            let pass = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc)).unwrap();
+            assert!(!pass.chains_input_gradients());
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            {
+                let mut compute = encoder.begin_compute_pass(&Default::default());
+                pass.record_forward(&mut compute);
+                pass.record_backward(&mut compute).unwrap();
+            }
+            ctx.queue.submit([encoder.finish()]);
+            read_buffer_blocking(&ctx, &grad).unwrap()
+        };
+        let all = run(None);
+        let some = run(Some(columns.clone()));
+        let stride = RowView::packed_as(&input, width, format).stride as usize;
+        for n in 0..rows {
+            for j in 0..width as usize {
+                let (word, shift) = match format {
+                    RowFormat::F32 => (n * stride + j, 0),
+                    RowFormat::Bf16 => ((n * stride + j) / 2, 16 * (j % 2)),
+                };
+                let value = |words: &[u32]| match format {
+                    RowFormat::F32 => words[word],
+                    RowFormat::Bf16 => (words[word] >> shift) & 0xffff,
+                };
+                if columns.contains(&(j as u32)) {
+                    assert_eq!(value(&some), value(&all), "{format:?} {columns:?}: row {n} column {j}");
+                } else {
+                    let garbage = GARBAGE_WORDS[word % GARBAGE_WORDS.len()];
+                    let untouched = match format {
+                        RowFormat::F32 => some[word] == garbage,
+                        // A bf16 pair is written whole: past an odd range's end its second
+                        // value is the column after, which the caller does not read.
+                        RowFormat::Bf16 => some[word] == garbage || j as u32 == columns.end,
+                    };
+                    assert!(untouched, "{format:?} {columns:?}: row {n} column {j} was written");
+                }
+            }
         }
     }
 }
@@ -1223,6 +1310,7 @@ fn density_mlp_throughput_report() {
             grads: grads.clone(),
             output_grad: RowView::packed(&output_grad, out_dim as u32),
             input_grad: Some(InputRows::Given(RowView::packed(&input_grad, in_dim as u32))),
+            input_grad_columns: None,
         }),
         kept: None,
     };

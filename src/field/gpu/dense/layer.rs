@@ -359,6 +359,9 @@ pub struct DenseGradients<'a> {
     pub input_mask: Option<&'a ReluMask>,
     /// As the forward's `kept`: the rows present are the kept samples (see [`HeadRows`]).
     pub kept: Option<&'a HeadRows>,
+    /// The columns of dX the caller reads (`None`: all); the uniform-weight input gradient
+    /// writes no others (`DX_FIRST`, `DX_END`), the tiled one writes them all.
+    pub input_grad_columns: Option<Range<u32>>,
 }
 
 /// The backward of one layer, bound to its buffers; owns the per-chunk partial sums of dW.
@@ -380,6 +383,8 @@ pub struct DenseBackward {
     dz_given: bool,
     /// Words per row of the mask bits dX is stored masked by ([`DenseGradients::input_mask`]).
     input_mask_words: Option<u32>,
+    /// The columns of dX written.
+    input_grad_columns: Range<u32>,
 }
 
 /// The first half of dW: every chunk of rows' partial matrix.
@@ -463,6 +468,19 @@ impl DenseBackward {
                 let label = format!("{label} input gradient");
                 input_grad.check(&label, spec.rows, spec.in_dim)?;
                 check_binding(ctx, &label, &input_grad.buffer)?;
+                let columns = gradients.input_grad_columns.clone().unwrap_or(0..spec.in_dim);
+                if columns.is_empty()
+                    || columns.end > spec.in_dim
+                    || input_grad.is_bf16() && !columns.start.is_multiple_of(2)
+                {
+                    return Err(GpuError::invalid_argument(
+                        &label,
+                        format!(
+                            "input gradient columns {columns:?} of {} inputs: a non-empty range inside them, starting at an even column where dX is bf16",
+                            spec.in_dim
+                        ),
+                    ));
+                }
                 let writes_dz = dz.is_some() && !dz_given;
                 let constants = [
                     ("WRITE_DZ", f64::from(u8::from(writes_dz))),
@@ -474,6 +492,8 @@ impl DenseBackward {
                         "MASK_BLOCK",
                         f64::from(gradients.input_mask.map_or(1, |mask| mask.block)),
                     ),
+                    ("DX_FIRST", f64::from(columns.start)),
+                    ("DX_END", f64::from(columns.end)),
                 ];
                 if let Some(mask) = gradients.input_mask
                     && mask.width != spec.in_dim
@@ -637,6 +657,10 @@ impl DenseBackward {
             ],
             reduce_groups,
         )?;
+        let input_grad_columns = match (&input_grad, &gradients.input_grad_columns) {
+            (Some((true, _)), Some(columns)) => columns.clone(),
+            _ => 0..spec.in_dim,
+        };
         Ok(DenseBackward {
             spec: spec.clone(),
             input_grad,
@@ -653,6 +677,7 @@ impl DenseBackward {
             ],
             dz_given,
             input_mask_words: gradients.input_mask.map(ReluMask::row_words),
+            input_grad_columns,
         })
     }
 
@@ -692,7 +717,7 @@ impl DenseBackward {
             (self.formats[0], self.spec.in_dim),
             (self.formats[1], self.spec.out_dim),
             (self.formats[2], self.spec.out_dim),
-            (self.formats[3], self.spec.in_dim),
+            (self.formats[3], self.input_grad_columns.len() as u32),
         ]
         .map(|(format, width)| row_words(format, width));
         let dz_from_dy = rows * (dy_row + relu * y_row);

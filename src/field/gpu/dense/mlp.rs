@@ -28,6 +28,10 @@ pub struct MlpGradients {
     pub output_grad: RowView,
     /// Where dL/d(input) goes (overwritten); `None` when the input needs no gradient.
     pub input_grad: Option<InputRows>,
+    /// The columns of dL/d(input) the caller reads (`None`: all). The others may be left
+    /// unwritten: the uniform-weight input gradient writes none of them; the tiled kernels
+    /// and the chain write every column.
+    pub input_grad_columns: Option<std::ops::Range<u32>>,
 }
 
 /// What an MLP reads and writes.
@@ -218,6 +222,11 @@ impl MlpPass {
                             None => None,
                         },
                         kept,
+                        input_grad_columns: if k == 0 {
+                            gradients.input_grad_columns.clone()
+                        } else {
+                            None
+                        },
                     };
                     let window = packing.window(k, ProductKind::BackwardInput);
                     backward.push(

@@ -253,6 +253,8 @@ impl Trainer {
                         .encoding
                         .uses_hash_grid()
                         .then(|| InputRows::Given(RowView::packed(&samples.encoding_grad, cfg.encoding_dim() as u32))),
+                    // The hash grid's part: the frequency encoding has no parameters.
+                    input_grad_columns: Some(0..cfg.hash_encoding_dim() as u32),
                 }),
                 kept: None,
             },
@@ -272,6 +274,7 @@ impl Trainer {
                     grads: grads.clone(),
                     output_grad: grad_view(composite_layout.grad_feature_offset()),
                     input_grad: Some(InputRows::Owned),
+                    input_grad_columns: None,
                 }),
                 kept: Some(&head_rows),
             },
@@ -293,6 +296,8 @@ impl Trainer {
                     grads: grads.clone(),
                     output_grad: grad_view(CompositeLayout::GRAD_COLOR),
                     input_grad: Some(InputRows::Owned),
+                    // g's part: the SH are the view direction's, with no parameters.
+                    input_grad_columns: Some(SH..SH + g),
                 }),
                 kept: Some(&head_rows),
             },
@@ -313,6 +318,7 @@ impl Trainer {
                     grads: grads.clone(),
                     output_grad: grad_view(composite_layout.grad_logits_offset()),
                     input_grad: Some(InputRows::Owned),
+                    input_grad_columns: None,
                 }),
                 kept: Some(&head_rows),
             },
