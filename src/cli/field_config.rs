@@ -129,30 +129,9 @@ fn config_text(arg: &str) -> Result<(String, String), String> {
     Ok((text, path.display().to_string()))
 }
 
-/// `base` with the fields of the JSON object `changes` replaced: nested objects (`adam`, `loss`,
-/// `scribble_propagation`) field by field, `encoding` (a tagged choice) as a whole. Unknown fields are an error.
+/// `base` with the fields of the JSON object `changes` replaced (`FieldConfig::with_changes`).
 pub fn apply_config_changes(base: &FieldConfig, changes: &serde_json::Value) -> Result<FieldConfig, String> {
-    use serde_json::Value;
-    let Value::Object(changes) = changes else {
-        return Err("must be a JSON object of FieldConfig fields".into());
-    };
-    let mut merged = serde_json::to_value(base).expect("configs serialize");
-    let Value::Object(fields) = &mut merged else {
-        unreachable!("a config serializes to an object")
-    };
-    for (key, value) in changes {
-        match (fields.get_mut(key), value) {
-            (Some(Value::Object(inner)), Value::Object(new)) if key != "encoding" => {
-                for (k, v) in new {
-                    inner.insert(k.clone(), v.clone());
-                }
-            }
-            _ => {
-                fields.insert(key.clone(), value.clone());
-            }
-        }
-    }
-    serde_json::from_value(merged).map_err(|e| e.to_string())
+    base.with_changes(changes)
 }
 
 #[cfg(test)]

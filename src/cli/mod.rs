@@ -12,6 +12,7 @@ mod progress;
 mod scribble;
 mod segment;
 mod simulate;
+mod suite;
 
 use std::path::PathBuf;
 
@@ -53,6 +54,8 @@ enum Command {
     Ablate(ablate::AblateArgs),
     /// Measure the training step (steps/s, rays/s, samples/s) against a plain matmul on the same adapter.
     Bench(bench::BenchArgs),
+    /// The quality suite: every capture with ground truth, scribbled from it over sets and seeds, trained at the budget preset and scored; the one way defaults are decided (docs/quality.md).
+    Suite(suite::SuiteArgs),
     /// Score masks against the archive's ground truth: per-class IoU, mean IoU, pixel accuracy.
     Eval(eval::EvalArgs),
     /// Serve a directory (the web app) over HTTP on localhost.
@@ -79,6 +82,7 @@ pub fn run(cli: Cli) -> CliResult {
         Command::Simulate(args) => simulate::run(args),
         Command::Ablate(args) => ablate::run(args),
         Command::Bench(args) => bench::run(args),
+        Command::Suite(args) => suite::run(args),
         Command::Serve { dir, port, bind } => {
             if !dir.is_dir() {
                 return Err(format!("{}: not a directory to serve", dir.display()).into());

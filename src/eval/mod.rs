@@ -11,5 +11,7 @@ pub mod plot;
 pub mod simulate;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod source_size;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod suite;
 
 pub use metrics::{Confusion, EvalReport};

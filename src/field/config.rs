@@ -346,6 +346,33 @@ impl FieldConfig {
         )
     }
 
+    /// This config with the fields of the JSON object `changes` replaced: nested objects (`adam`,
+    /// `loss`, `scribble_propagation`) field by field, `encoding` (a tagged choice) as a whole.
+    /// Unknown fields are an error. Not validated: callers may change more fields first.
+    pub fn with_changes(&self, changes: &serde_json::Value) -> Result<FieldConfig, String> {
+        use serde_json::Value;
+        let Value::Object(changes) = changes else {
+            return Err("must be a JSON object of FieldConfig fields".into());
+        };
+        let mut merged = serde_json::to_value(self).map_err(|e| e.to_string())?;
+        let Value::Object(fields) = &mut merged else {
+            return Err("a config serializes to an object".into());
+        };
+        for (key, value) in changes {
+            match (fields.get_mut(key), value) {
+                (Some(Value::Object(inner)), Value::Object(new)) if key != "encoding" => {
+                    for (k, v) in new {
+                        inner.insert(k.clone(), v.clone());
+                    }
+                }
+                _ => {
+                    fields.insert(key.clone(), value.clone());
+                }
+            }
+        }
+        serde_json::from_value(merged).map_err(|e| e.to_string())
+    }
+
     /// Checks every value; the error names the first bad field and its value.
     pub fn validate(&self) -> Result<(), ConfigError> {
         let c = self;

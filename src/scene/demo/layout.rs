@@ -206,6 +206,14 @@ impl DemoWorld {
         }
     }
 
+    /// The same objects and table with no room around them: rays that miss them meet nothing,
+    /// as in a NeRF-synthetic render of an object on a plain backdrop.
+    pub fn without_room(mut self) -> DemoWorld {
+        self.parts.remove(0);
+        self.part_spheres.remove(0);
+        self
+    }
+
     pub fn parts(&self) -> &[Part] {
         &self.parts
     }

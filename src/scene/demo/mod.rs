@@ -17,7 +17,9 @@ use super::decoded::{Frame, Scene};
 use super::error::{Result, SceneError};
 use super::manifest::Provenance;
 use crate::rng::SplitMix64;
+use crate::scene::GT_VOID;
 use crate::scene::label_set::ClassInfo;
+use glam::DVec3;
 use render::{DEPTH_SCALE, Orbit, render_frame};
 
 /// Frame counts accepted; 24 to 60 make a good orbit (enough overlap between neighbouring
@@ -99,8 +101,42 @@ pub fn demo_classes() -> Vec<ClassInfo> {
 
 /// Renders the demo scene: `DemoWorld::generate(opts.seed)` seen from `opts.frames` cameras.
 pub fn demo_scene(opts: &DemoOptions) -> Result<Scene> {
+    render_demo(opts, DemoWorld::generate(opts.seed), DVec3::ZERO)
+}
+
+/// The demo's table and objects with no room, on a plain `backdrop` colour and without depth,
+/// as a NeRF-synthetic capture is: two ground-truth classes, the backdrop (`background`) and
+/// everything else (`object`). The cameras and the scene box are the demo's.
+pub fn demo_scene_on_backdrop(opts: &DemoOptions, backdrop: [u8; 3]) -> Result<Scene> {
+    let colour = DVec3::from_array(backdrop.map(|c| f64::from(c) / 255.0));
+    let mut scene = render_demo(opts, DemoWorld::generate(opts.seed).without_room(), colour)?;
+    for frame in &mut scene.frames {
+        frame.depth = None;
+        if let Some(gt) = &mut frame.gt {
+            for p in gt.pixels_mut() {
+                p.0[0] = u8::from(p.0[0] != GT_VOID);
+            }
+        }
+    }
+    scene.classes = vec![
+        ClassInfo {
+            name: "background".into(),
+            color: DEMO_CLASS_COLOURS[0],
+        },
+        ClassInfo {
+            name: "object".into(),
+            color: DEMO_CLASS_COLOURS[2],
+        },
+    ];
+    scene.provenance.source = format!(
+        "demo scene seed {} on a plain backdrop {backdrop:?}, no depth",
+        opts.seed
+    );
+    Ok(scene)
+}
+
+fn render_demo(opts: &DemoOptions, world: DemoWorld, backdrop: DVec3) -> Result<Scene> {
     opts.check()?;
-    let world = DemoWorld::generate(opts.seed);
     // The orbit draws from its own stream, so layout changes never move the cameras.
     let orbit = Orbit::new(
         world.look_target(),
@@ -109,7 +145,7 @@ pub fn demo_scene(opts: &DemoOptions) -> Result<Scene> {
     let intrinsics = demo_intrinsics(opts.width, opts.height);
     let render_view = |i: u32| {
         let pose = orbit.pose(i, opts.frames);
-        let r = render_frame(&world, &intrinsics, &pose, opts.width, opts.height);
+        let r = render_frame(&world, &intrinsics, &pose, (opts.width, opts.height), backdrop);
         Frame {
             pose,
             rgb: r.rgb,

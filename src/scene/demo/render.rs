@@ -90,7 +90,15 @@ const EDGE_SAMPLES: [(f64, f64); 4] = [(-0.125, -0.375), (0.375, -0.125), (0.125
 /// Traces one ray through each pixel centre for depth, class and colour; pixels on a
 /// silhouette get their colour from four sub-pixel rays instead, as a camera would blur them.
 /// Depth and class always come from the centre ray, so they match the geometry exactly.
-pub fn render_frame(world: &DemoWorld, k: &Intrinsics, pose: &Pose, width: u32, height: u32) -> RenderedFrame {
+/// A ray that meets nothing (only possible in a world without its room,
+/// `DemoWorld::without_room`) shows `backdrop` and has no depth and no class.
+pub fn render_frame(
+    world: &DemoWorld,
+    k: &Intrinsics,
+    pose: &Pose,
+    (width, height): (u32, u32),
+    backdrop: DVec3,
+) -> RenderedFrame {
     let rotation = pose.rotation();
     let eye = pose.position();
     let cast = |u: f64, v: f64| world.cast(eye, rotation * k.ray_dir(u, v));
@@ -107,7 +115,7 @@ pub fn render_frame(world: &DemoWorld, k: &Intrinsics, pose: &Pose, width: u32, 
             .iter()
             .any(|&(nx, ny)| nx < width && ny < height && part_at(nx, ny) != here)
     };
-    let colour_of = |hit: Option<WorldHit>| hit.map_or(DVec3::ZERO, |h| world.shade(&h));
+    let colour_of = |hit: Option<WorldHit>| hit.map_or(backdrop, |h| world.shade(&h));
 
     let mut rgb = RgbImage::new(width, height);
     let mut depth = DepthImage::new(width, height);
@@ -211,7 +219,7 @@ mod tests {
         let (w, h) = (64, 48);
         let k = demo_intrinsics(w, h);
         let pose = look_at(DVec3::new(1.2, 0.3, 1.4), world.look_target());
-        let frame = render_frame(&world, &k, &pose, w, h);
+        let frame = render_frame(&world, &k, &pose, (w, h), DVec3::ZERO);
         let to_camera = pose.inverse();
         for (x, y) in [(0, 0), (63, 0), (0, 47), (63, 47), (31, 24), (10, 40)] {
             let hit = world

@@ -135,6 +135,8 @@ pub struct Trainer {
     labelled_pixels: usize,
     /// Frames with at least one of those pixels.
     labelled_frames: usize,
+    /// The label maps of `labelled_pixels`, by frame.
+    label_maps: Vec<(u32, Vec<u16>)>,
     propagation: PropagationCache,
     pending_losses: Option<(u32, PendingRead<f32>)>,
     last_losses: Option<StepLosses>,
@@ -445,6 +447,7 @@ impl Trainer {
             seed,
             labelled_pixels: 0,
             labelled_frames: 0,
+            label_maps: Vec::new(),
             propagation: PropagationCache::default(),
             pending_losses: None,
             last_losses: None,
@@ -482,13 +485,6 @@ impl Trainer {
             }
             None => Vec::new(),
         };
-        let index = LabelIndex::from_maps(
-            &maps,
-            scene.frames.len() as u32,
-            scene.width,
-            scene.height,
-            self.cfg.num_classes,
-        );
         // What the strokes say lies beyond the scene box: labelled rays that end in an opaque
         // sample pass through the box with that class and stop in it with any other
         // (`LossWeights::opacity`).
@@ -496,15 +492,44 @@ impl Trainer {
             Some(_) => self.propagation.far_class().map(u32::from),
             None => None,
         };
+        self.use_label_maps(maps, far_class, scene)
+    }
+
+    /// Trains on `maps` (per frame, a class per pixel or `UNLABELLED`) exactly as given, with no
+    /// spreading and no class beyond the scene box: for measurements that train on known
+    /// labels (the quality suite's ceiling, the true masks of every frame).
+    pub fn set_label_maps(&mut self, maps: Vec<(u32, Vec<u16>)>, scene: &Scene) -> Result<(), GpuError> {
+        self.use_label_maps(maps, None, scene)
+    }
+
+    fn use_label_maps(
+        &mut self,
+        maps: Vec<(u32, Vec<u16>)>,
+        far_class: Option<u32>,
+        scene: &Scene,
+    ) -> Result<(), GpuError> {
+        let index = LabelIndex::from_maps(
+            &maps,
+            scene.frames.len() as u32,
+            scene.width,
+            scene.height,
+            self.cfg.num_classes,
+        );
         self.composite.set_far_class(&self.ctx, far_class);
         self.labelled_pixels = index.labelled_pixel_count();
         self.labelled_frames = maps
             .iter()
             .filter(|(_, map)| map.iter().any(|&c| c != crate::labels::UNLABELLED))
             .count();
+        self.label_maps = maps;
         self.scene.upload_labels(&self.ctx, &index)?;
         self.ray_batch.follow_labels(&self.ctx, &self.scene);
         Ok(())
+    }
+
+    /// The label maps training draws from, by frame: the strokes and what they spread to.
+    pub fn label_maps(&self) -> &[(u32, Vec<u16>)] {
+        &self.label_maps
     }
 
     /// The class whose labelled rays the opacity term pulls through the scene box (what lies
