@@ -184,16 +184,28 @@ fn spread_only(runs: &[suite::RunSpec], data: &std::path::Path, options: &SuiteO
     let results = suite::in_parallel(jobs, options.jobs, |(i, set)| {
         let (capture, scene) = &scenes[i];
         let cfg = suite::run_config(scene, suite::Mode::Spread, options.config.as_ref())?;
-        let (figures, seconds) = suite::spread_alone(capture, scene, set, &cfg);
-        Ok::<_, String>((capture.name, set, figures, seconds))
+        let (figures, check, seconds) = suite::spread_alone(capture, scene, set, &cfg);
+        Ok::<_, String>((capture.name, set, figures, check, seconds))
     });
-    println!("| capture | set | drawn px | spread px | frames | right | seconds |");
-    println!("|---|---|---|---|---|---|---|");
+    println!(
+        "| capture | set | drawn px | spread px | frames | right | check across views | check within frames | seconds |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
+    let fold = |f: Option<scribblefield::field::spread_check::FoldAgreement>| {
+        f.map_or("-".to_string(), |f| {
+            format!("{:.3} of {}/{}", f.agreement(), f.labelled, f.held)
+        })
+    };
     for r in results {
-        let (name, set, f, seconds) = r?;
+        let (name, set, f, check, seconds) = r?;
         println!(
-            "| {name} | {set} | {} | {} | {} | {:.3} | {seconds:.1} |",
-            f.drawn, f.written, f.frames, f.right
+            "| {name} | {set} | {} | {} | {} | {:.3} | {} | {} | {seconds:.1} |",
+            f.drawn,
+            f.written,
+            f.frames,
+            f.right,
+            fold(check.across_views),
+            fold(check.within_frames)
         );
     }
     Ok(())

@@ -22,6 +22,7 @@ pub mod propagate;
 pub mod reference;
 pub mod refine;
 pub mod sparse_solve;
+pub mod spread_check;
 pub mod support_plane;
 pub mod view_seeds;
 

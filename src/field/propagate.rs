@@ -79,6 +79,10 @@ pub struct PropagationOptions {
     /// the strokes on it agree on one class, the plane's pixels the walk leaves unlabelled take
     /// that class.
     pub support_plane: bool,
+    /// Share of a class's labelled rays that training draws from the strokes themselves, at
+    /// least, however far they spread (0: every labelled pixel alike): spread labels weigh less
+    /// than drawn ones. At most 0.9.
+    pub drawn_share: f32,
 }
 
 impl Default for PropagationOptions {
@@ -95,6 +99,7 @@ impl Default for PropagationOptions {
             inward_creases_only: true,
             across_views: true,
             support_plane: true,
+            drawn_share: 0.0,
         }
     }
 }
@@ -123,6 +128,12 @@ impl PropagationOptions {
             return Err(format!(
                 "scribble_propagation: `normal_sigma` = {}: must be 0 (off) or a positive number",
                 self.normal_sigma
+            ));
+        }
+        if !(self.drawn_share.is_finite() && (0.0..=0.9).contains(&self.drawn_share)) {
+            return Err(format!(
+                "scribble_propagation: `drawn_share` = {}: must be in [0, 0.9]",
+                self.drawn_share
             ));
         }
         for (name, v) in [

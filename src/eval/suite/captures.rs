@@ -176,7 +176,8 @@ impl Capture {
         };
         scene.provenance.notes.push(recipe);
         std::fs::create_dir_all(cache).map_err(|e| format!("{}: {e}", cache.display()))?;
-        let tmp = file.with_extension("zip.tmp");
+        // A name of this process's own: two suites may fill one cache at once.
+        let tmp = file.with_extension(format!("zip.{}.tmp", std::process::id()));
         write_archive_path(&scene, &tmp).map_err(|e| format!("{}: {e}", tmp.display()))?;
         std::fs::rename(&tmp, &file).map_err(|e| format!("{}: {e}", file.display()))?;
         Ok(Some(scene))

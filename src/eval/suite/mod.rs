@@ -21,7 +21,8 @@ use crate::eval::headless::{budget_config, render_and_score, train_schedule};
 use crate::field::FieldConfig;
 use crate::field::gpu::trainer::Trainer;
 use crate::field::propagate::propagate_labels;
-use crate::field::refine::RefineOptions;
+use crate::field::refine::{Guide, RefineOptions};
+use crate::field::spread_check::{SpreadCheck, check_spread_now};
 use crate::gpu::{GpuContext, GpuOptions};
 use crate::labels::synthetic::{ScribbleOptions, scribble_frames};
 use crate::labels::{LabelSet, UNLABELLED, rasterize_frame};
@@ -30,6 +31,9 @@ use crate::scene::{GT_VOID, Scene};
 pub use captures::{CAPTURES, Capture};
 pub use report::{RunResult, SuiteReport};
 use score::{SpreadFigures, add_boundary};
+
+/// Refinement round counts every run also scores its renders with.
+pub const ROUNDS_COMPARED: [u32; 4] = [0, 1, 3, 10];
 
 /// Warm-up steps (colour, depth and features) before the labels join.
 pub const WARMUP: u32 = 100;
@@ -261,12 +265,18 @@ pub fn strokes(capture: &Capture, scene: &Scene, set: u64) -> LabelSet {
 
 /// Where the strokes of scribble set `set` spread on `scene` with the spreading options of
 /// `cfg`, measured against the ground truth without training (seconds: the spreading's time).
-pub fn spread_alone(capture: &Capture, scene: &Scene, set: u64, cfg: &FieldConfig) -> (SpreadFigures, f64) {
+pub fn spread_alone(
+    capture: &Capture,
+    scene: &Scene,
+    set: u64,
+    cfg: &FieldConfig,
+) -> (SpreadFigures, SpreadCheck, f64) {
     let labels = strokes(capture, scene, set);
     let started = Instant::now();
     let maps = propagate_labels(scene, &labels, cfg.num_classes as usize, &cfg.scribble_propagation);
     let seconds = started.elapsed().as_secs_f64();
-    (measure_spread(scene, &labels, &maps), seconds)
+    let check = check_spread_now(scene, &labels, cfg.num_classes as usize, &cfg.scribble_propagation);
+    (measure_spread(scene, &labels, &maps), check, seconds)
 }
 
 fn measure_spread(scene: &Scene, labels: &LabelSet, maps: &[(u32, Vec<u16>)]) -> SpreadFigures {
@@ -336,6 +346,12 @@ pub fn run_one(
     let refine = RefineOptions::for_scene(scene);
     let mut refined = Confusion::new(names.len());
     let mut boundary = Confusion::new(names.len());
+    // The same renders refined with other round counts: the rounds' default is decided on the
+    // suite from these, at no extra training.
+    let mut by_rounds: Vec<(u32, Confusion)> = ROUNDS_COMPARED
+        .iter()
+        .map(|&r| (r, Confusion::new(names.len())))
+        .collect();
     let scored = capture.scored(scene.frames.len());
     let field = render_and_score(
         &mut trainer,
@@ -343,12 +359,22 @@ pub fn run_one(
         &names,
         scored,
         &RefineOptions::OFF,
-        |i, mut rendered| {
-            if let (Some(guide), Some(gt)) = (
-                crate::field::refine::Guide::of_frame(scene, i),
-                scene.frames[i].gt.as_ref(),
-            ) && rendered.refine(guide, &refine).is_ok()
-            {
+        |i, rendered| {
+            let (Some(guide), Some(gt)) = (Guide::of_frame(scene, i), scene.frames[i].gt.as_ref()) else {
+                return;
+            };
+            for (rounds, confusion) in &mut by_rounds {
+                let mut other = rendered.clone();
+                let options = RefineOptions {
+                    iterations: *rounds,
+                    ..refine
+                };
+                if other.refine(guide, &options).is_ok() {
+                    confusion.add(gt.as_raw(), &other.classes);
+                }
+            }
+            let mut rendered = rendered;
+            if rendered.refine(guide, &refine).is_ok() {
                 refined.add(gt.as_raw(), &rendered.classes);
                 add_boundary(&mut boundary, gt, &rendered.classes);
             }
@@ -357,6 +383,10 @@ pub fn run_one(
     .map_err(gpu)?;
     let refined = refined.report(&names, field.frames);
     let boundary = boundary.report(&names, field.frames);
+    let by_rounds = by_rounds
+        .iter()
+        .map(|(r, c)| (*r, c.report(&names, field.frames).mean_iou))
+        .collect();
     Ok(RunResult {
         capture: capture.name.to_string(),
         mode: spec.mode,
@@ -370,6 +400,8 @@ pub fn run_one(
         spread: (spec.mode == Mode::Spread).then_some(spread),
         seconds: started.elapsed().as_secs_f64(),
         train_seconds: trained,
+        refine_rounds: refine.iterations,
+        by_rounds,
         device: ctx.describe(),
     })
 }

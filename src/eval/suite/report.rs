@@ -28,6 +28,12 @@ pub struct RunResult {
     /// Of `seconds`, spreading the strokes and training (the rest renders, refines and scores).
     #[serde(default)]
     pub train_seconds: f64,
+    /// Refinement rounds of `mean_iou` (`RefineOptions::for_scene`).
+    #[serde(default)]
+    pub refine_rounds: u32,
+    /// Mean IoU of the same renders refined with other round counts (rounds, mean IoU).
+    #[serde(default)]
+    pub by_rounds: Vec<(u32, f64)>,
     pub device: String,
 }
 
@@ -249,6 +255,8 @@ mod tests {
             spread: None,
             seconds: 1.0,
             train_seconds: 0.5,
+            refine_rounds: 3,
+            by_rounds: vec![],
             device: "test".into(),
         }
     }

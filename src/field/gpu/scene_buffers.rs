@@ -88,6 +88,29 @@ impl LabelIndex {
         LabelIndex { pixels_by_class }
     }
 
+    /// Repeats the pixels of `drawn` (the strokes themselves, a subset of this index) in their
+    /// class's list until they make up at least `share` of it, so that a labelled ray drawn
+    /// from a class lands on a stroke at least that often however far the strokes spread
+    /// (`PropagationOptions::drawn_share`). `share` 0 leaves the index as it is.
+    pub fn weight_drawn(&mut self, drawn: &LabelIndex, share: f32) {
+        if share <= 0.0 {
+            return;
+        }
+        let share = f64::from(share.min(0.9));
+        for (list, strokes) in self.pixels_by_class.iter_mut().zip(&drawn.pixels_by_class) {
+            let (d, total) = (strokes.len(), list.len());
+            if d == 0 || total <= d {
+                continue;
+            }
+            let spread = (total - d) as f64;
+            let copies = (share * spread / ((1.0 - share) * d as f64)).ceil() as usize;
+            for _ in 1..copies {
+                list.extend_from_slice(strokes);
+            }
+            list.sort_unstable();
+        }
+    }
+
     /// Class ids with at least one labelled pixel, ascending: the classes a labelled ray draws
     /// from (uniformly).
     pub fn present_classes(&self) -> Vec<u32> {
@@ -327,4 +350,28 @@ pub fn scene_uniforms(scene: &Scene, cfg: &FieldConfig) -> Result<SceneUniforms,
         bounds_max: b.max.map(|v| v as f32),
         has_features,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::labels::UNLABELLED;
+
+    #[test]
+    fn drawn_pixels_are_repeated_to_their_share_of_the_class() {
+        let u = UNLABELLED;
+        // Frame 0 of 8 pixels: class 0 drawn at 0, spread to 1..=6; class 1 drawn at 7 only.
+        let maps = vec![(0, vec![0, 0, 0, 0, 0, 0, 0, 1])];
+        let drawn_maps = vec![(0, vec![0, u, u, u, u, u, u, 1])];
+        let mut index = LabelIndex::from_maps(&maps, 1, 8, 1, 2);
+        let drawn = LabelIndex::from_maps(&drawn_maps, 1, 8, 1, 2);
+        index.weight_drawn(&drawn, 0.5);
+        // Six spread pixels: the stroke's pixel six times, in ascending order.
+        assert_eq!(index.pixels_by_class[0], vec![0, 0, 0, 0, 0, 0, 1, 2, 3, 4, 5, 6]);
+        assert_eq!(index.pixels_by_class[1], vec![7]);
+        let unweighted = LabelIndex::from_maps(&maps, 1, 8, 1, 2);
+        let mut same = unweighted.clone();
+        same.weight_drawn(&drawn, 0.0);
+        assert_eq!(same, unweighted);
+    }
 }

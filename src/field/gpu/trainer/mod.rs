@@ -492,23 +492,34 @@ impl Trainer {
             Some(_) => self.propagation.far_class().map(u32::from),
             None => None,
         };
-        self.use_label_maps(maps, far_class, scene)
+        let drawn = match labels {
+            Some(labels) if self.cfg.scribble_propagation.drawn_share > 0.0 => Some(LabelIndex::from_labels(
+                Some(labels),
+                scene.frames.len() as u32,
+                scene.width,
+                scene.height,
+                self.cfg.num_classes,
+            )),
+            _ => None,
+        };
+        self.use_label_maps(maps, far_class, drawn.as_ref(), scene)
     }
 
     /// Trains on `maps` (per frame, a class per pixel or `UNLABELLED`) exactly as given, with no
     /// spreading and no class beyond the scene box: for measurements that train on known
     /// labels (the quality suite's ceiling, the true masks of every frame).
     pub fn set_label_maps(&mut self, maps: Vec<(u32, Vec<u16>)>, scene: &Scene) -> Result<(), GpuError> {
-        self.use_label_maps(maps, None, scene)
+        self.use_label_maps(maps, None, None, scene)
     }
 
     fn use_label_maps(
         &mut self,
         maps: Vec<(u32, Vec<u16>)>,
         far_class: Option<u32>,
+        drawn: Option<&LabelIndex>,
         scene: &Scene,
     ) -> Result<(), GpuError> {
-        let index = LabelIndex::from_maps(
+        let mut index = LabelIndex::from_maps(
             &maps,
             scene.frames.len() as u32,
             scene.width,
@@ -517,6 +528,9 @@ impl Trainer {
         );
         self.composite.set_far_class(&self.ctx, far_class);
         self.labelled_pixels = index.labelled_pixel_count();
+        if let Some(drawn) = drawn {
+            index.weight_drawn(drawn, self.cfg.scribble_propagation.drawn_share);
+        }
         self.labelled_frames = maps
             .iter()
             .filter(|(_, map)| map.iter().any(|&c| c != crate::labels::UNLABELLED))

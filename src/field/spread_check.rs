@@ -1,0 +1,211 @@
+//! Propagation checks itself against the user's own strokes: part of the strokes is held back,
+//! the rest is spread as training would spread it, and the spread's labels are compared with the
+//! held-back strokes. No ground truth is needed, so the page runs the same check.
+//!
+//! Two kinds of fold:
+//! - **across views** (a capture whose strokes travel between frames, and at least two drawn
+//!   frames): each drawn frame's strokes are held back in turn, and the others' spread must label
+//!   them as drawn. This is the spread a user cannot see: labels carried to frames nobody drew on.
+//! - **within frames**: every other stroke of each class (or the second half of a class's only
+//!   stroke) is held back on every drawn frame at once.
+use crate::field::pause::{NoPause, Pause, run_to_end};
+use crate::field::point_walk::has_sparse_depth;
+use crate::field::propagate::{PropagationCache, PropagationOptions};
+use crate::labels::{FrameLabels, LabelSet, Stroke, UNLABELLED, rasterize_frame};
+use crate::scene::Scene;
+
+/// How well a spread from part of the strokes predicts the rest.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FoldAgreement {
+    /// Held-back stroke pixels (not also under a kept stroke).
+    pub held: u64,
+    /// Of those, the pixels the spread labelled...
+    pub labelled: u64,
+    /// ...and the pixels it labelled with the class drawn there.
+    pub agreeing: u64,
+}
+
+impl FoldAgreement {
+    /// Share of the labelled held-back pixels that agree (1 when none was labelled).
+    pub fn agreement(&self) -> f64 {
+        if self.labelled == 0 {
+            1.0
+        } else {
+            self.agreeing as f64 / self.labelled as f64
+        }
+    }
+
+    fn add(&mut self, other: FoldAgreement) {
+        self.held += other.held;
+        self.labelled += other.labelled;
+        self.agreeing += other.agreeing;
+    }
+}
+
+/// What the check found, per kind of fold (None: no fold of that kind was possible).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SpreadCheck {
+    pub across_views: Option<FoldAgreement>,
+    pub within_frames: Option<FoldAgreement>,
+}
+
+/// Runs the check's folds for `labels` on `scene` with `options` (spreading enabled), reusing
+/// `cache` (the trainer's: the points' graph is built once).
+pub async fn check_spread(
+    cache: &mut PropagationCache,
+    scene: &Scene,
+    labels: &LabelSet,
+    classes: usize,
+    options: &PropagationOptions,
+    pause: &mut impl Pause,
+) -> SpreadCheck {
+    let mut check = SpreadCheck::default();
+    if !options.enabled {
+        return check;
+    }
+    let drawn: Vec<u32> = labels
+        .frames
+        .iter()
+        .filter(|f| {
+            f.strokes
+                .iter()
+                .any(|s| s.class.is_some_and(|c| (c as usize) < classes))
+        })
+        .map(|f| f.frame)
+        .filter(|&f| (f as usize) < scene.frames.len())
+        .collect();
+    if options.across_views && has_sparse_depth(scene) && drawn.len() >= 2 {
+        let mut total = FoldAgreement::default();
+        for &frame in &drawn {
+            let kept = LabelSet {
+                frames: labels.frames.iter().filter(|f| f.frame != frame).cloned().collect(),
+                ..labels.clone()
+            };
+            let maps = cache.maps_pausing(scene, &kept, classes, options, pause).await;
+            let full = rasterize_frame(labels.frame(frame), scene.width, scene.height);
+            let none = vec![UNLABELLED; full.len()];
+            let spread = maps.iter().find(|(f, _)| *f == frame).map(|(_, m)| m.as_slice());
+            total.add(compare(&full, &none, spread.unwrap_or(&none), classes));
+        }
+        check.across_views = Some(total);
+    }
+    let kept = LabelSet {
+        frames: labels.frames.iter().map(every_other_stroke).collect(),
+        ..labels.clone()
+    };
+    if kept != *labels {
+        let maps = cache.maps_pausing(scene, &kept, classes, options, pause).await;
+        let mut total = FoldAgreement::default();
+        for &frame in &drawn {
+            let full = rasterize_frame(labels.frame(frame), scene.width, scene.height);
+            let kept_map = rasterize_frame(kept.frame(frame), scene.width, scene.height);
+            let none = vec![UNLABELLED; full.len()];
+            let spread = maps.iter().find(|(f, _)| *f == frame).map(|(_, m)| m.as_slice());
+            total.add(compare(&full, &kept_map, spread.unwrap_or(&none), classes));
+        }
+        check.within_frames = Some(total);
+    }
+    check
+}
+
+/// [`check_spread`] run to the end with a cache of its own.
+pub fn check_spread_now(scene: &Scene, labels: &LabelSet, classes: usize, options: &PropagationOptions) -> SpreadCheck {
+    let mut cache = PropagationCache::default();
+    run_to_end(check_spread(&mut cache, scene, labels, classes, options, &mut NoPause))
+}
+
+/// The held-back pixels of a frame (under a stroke in `full`, not in `kept`) against `spread`.
+fn compare(full: &[u16], kept: &[u16], spread: &[u16], classes: usize) -> FoldAgreement {
+    let mut fold = FoldAgreement::default();
+    for ((&drawn, &kept), &spread) in full.iter().zip(kept).zip(spread) {
+        if drawn == UNLABELLED || (drawn as usize) >= classes || kept != UNLABELLED {
+            continue;
+        }
+        fold.held += 1;
+        if spread != UNLABELLED {
+            fold.labelled += 1;
+            fold.agreeing += u64::from(spread == drawn);
+        }
+    }
+    fold
+}
+
+/// `frame` with every other painting stroke of each class held back (the 2nd, 4th, ...), or,
+/// for a class drawn with one stroke, the second half of its points; erasing strokes stay.
+fn every_other_stroke(frame: &FrameLabels) -> FrameLabels {
+    let mut seen: Vec<(u16, usize)> = Vec::new();
+    let count = |class: u16| frame.strokes.iter().filter(|s| s.class == Some(class)).count();
+    let mut strokes = Vec::with_capacity(frame.strokes.len());
+    for stroke in &frame.strokes {
+        let Some(class) = stroke.class else {
+            strokes.push(stroke.clone());
+            continue;
+        };
+        let index = match seen.iter_mut().find(|(c, _)| *c == class) {
+            Some((_, n)) => {
+                *n += 1;
+                *n - 1
+            }
+            None => {
+                seen.push((class, 1));
+                0
+            }
+        };
+        if count(class) == 1 {
+            if stroke.points.len() >= 4 {
+                strokes.push(Stroke {
+                    points: stroke.points[..stroke.points.len() / 2].to_vec(),
+                    ..stroke.clone()
+                });
+            } else {
+                strokes.push(stroke.clone());
+            }
+        } else if index % 2 == 0 {
+            strokes.push(stroke.clone());
+        }
+    }
+    FrameLabels {
+        frame: frame.frame,
+        strokes,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stroke(class: u16, points: usize) -> Stroke {
+        Stroke {
+            class: Some(class),
+            radius: 1.0,
+            points: (0..points).map(|i| [i as f32, 0.0]).collect(),
+        }
+    }
+
+    #[test]
+    fn every_other_stroke_holds_back_the_second_of_each_class_or_half_of_a_lone_stroke() {
+        let frame = FrameLabels {
+            frame: 3,
+            strokes: vec![stroke(0, 6), stroke(1, 2), stroke(0, 3), stroke(0, 2)],
+        };
+        let kept = every_other_stroke(&frame);
+        // Class 0: strokes 1 and 3 of three kept; class 1's only stroke is too short to split.
+        assert_eq!(kept.strokes, vec![stroke(0, 6), stroke(1, 2), stroke(0, 2)]);
+        let lone = FrameLabels {
+            frame: 0,
+            strokes: vec![stroke(2, 8)],
+        };
+        assert_eq!(every_other_stroke(&lone).strokes, vec![stroke(2, 4)]);
+    }
+
+    #[test]
+    fn comparison_counts_held_back_pixels_only() {
+        let u = UNLABELLED;
+        let full = [0, 0, 1, 1, u];
+        let kept = [0, u, u, u, u];
+        let spread = [0, 0, 0, u, 1];
+        let fold = compare(&full, &kept, &spread, 2);
+        assert_eq!((fold.held, fold.labelled, fold.agreeing), (3, 2, 1));
+        assert!((fold.agreement() - 0.5).abs() < 1e-12);
+    }
+}
