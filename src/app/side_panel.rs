@@ -94,6 +94,10 @@ pub fn show(
             row("steps", s.steps.to_string());
             if let Some(spread) = reports.spread {
                 row("trains on", format!("{} px in {} frames", spread.pixels, spread.frames));
+                if let Some(check) = spread.check {
+                    let verdict = if spread.withheld { " (too low: spread less)" } else { "" };
+                    row("spread check", format!("{}{verdict}", check.describe()));
+                }
             }
             row("steps/s", format!("{:.1}", s.steps_per_second));
             if let Some(l) = s.losses {

@@ -117,6 +117,14 @@ pub fn run(mut args: SegmentArgs) -> CliResult {
             trainer.labelled_frames()
         );
     }
+    if let Some(check) = trainer.spread_check() {
+        let verdict = if trainer.spread_withheld() {
+            " (below min_agreement: trained with less spreading, see docs/quality.md)"
+        } else {
+            ""
+        };
+        println!("labels: spread {}{verdict}", check.describe());
+    }
     if let Some(class) = trainer.opacity_far_class() {
         let name = labels.classes.get(class as usize).map_or("?", |c| c.name.as_str());
         println!(

@@ -83,6 +83,12 @@ pub struct PropagationOptions {
     /// least, however far they spread (0: every labelled pixel alike): spread labels weigh less
     /// than drawn ones. At most 0.9.
     pub drawn_share: f32,
+    /// Before training, hold back part of the strokes, spread from the rest and compare
+    /// (`field::spread_check`); where the spread agrees with the held-back strokes on less than
+    /// `min_agreement` of their pixels, train without that spread: without labels across views
+    /// when the across-view folds fail, on the strokes alone when the within-frame fold fails.
+    pub self_check: bool,
+    pub min_agreement: f32,
 }
 
 impl Default for PropagationOptions {
@@ -100,6 +106,8 @@ impl Default for PropagationOptions {
             across_views: true,
             support_plane: true,
             drawn_share: 0.0,
+            self_check: true,
+            min_agreement: 0.9,
         }
     }
 }
@@ -128,6 +136,12 @@ impl PropagationOptions {
             return Err(format!(
                 "scribble_propagation: `normal_sigma` = {}: must be 0 (off) or a positive number",
                 self.normal_sigma
+            ));
+        }
+        if !(self.min_agreement.is_finite() && (0.0..=1.0).contains(&self.min_agreement)) {
+            return Err(format!(
+                "scribble_propagation: `min_agreement` = {}: must be in [0, 1]",
+                self.min_agreement
             ));
         }
         if !(self.drawn_share.is_finite() && (0.0..=0.9).contains(&self.drawn_share)) {

@@ -75,6 +75,10 @@ pub enum Phase {
 pub struct Spread {
     pub pixels: usize,
     pub frames: usize,
+    /// What the spread's self-check found (`field::spread_check`), and whether it withheld
+    /// spreading.
+    pub check: Option<crate::field::spread_check::SpreadCheck>,
+    pub withheld: bool,
 }
 
 /// Numbers from the latest batch of steps.

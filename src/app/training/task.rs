@@ -318,6 +318,8 @@ impl TrainingTask {
             self.report(TrainEvent::Spread(Spread {
                 pixels: trainer.labelled_pixels(),
                 frames: trainer.labelled_frames(),
+                check: trainer.spread_check(),
+                withheld: trainer.spread_withheld(),
             }));
             self.trained_version = version;
             self.labels_refresh = true;

@@ -398,6 +398,8 @@ pub fn run_one(
         boundary_iou: boundary.mean_iou,
         pixel_accuracy: refined.pixel_accuracy,
         spread: (spec.mode == Mode::Spread).then_some(spread),
+        check: trainer.spread_check(),
+        withheld: trainer.spread_withheld(),
         seconds: started.elapsed().as_secs_f64(),
         train_seconds: trained,
         refine_rounds: refine.iterations,

@@ -24,6 +24,11 @@ pub struct RunResult {
     pub pixel_accuracy: f64,
     /// Where the strokes were spread (`Mode::Spread` only).
     pub spread: Option<SpreadFigures>,
+    /// What the spread's self-check found, and whether it withheld spreading.
+    #[serde(default)]
+    pub check: Option<crate::field::spread_check::SpreadCheck>,
+    #[serde(default)]
+    pub withheld: bool,
     pub seconds: f64,
     /// Of `seconds`, spreading the strokes and training (the rest renders, refines and scores).
     #[serde(default)]
@@ -253,6 +258,8 @@ mod tests {
             boundary_iou: iou / 2.0,
             pixel_accuracy: 0.9,
             spread: None,
+            check: None,
+            withheld: false,
             seconds: 1.0,
             train_seconds: 0.5,
             refine_rounds: 3,

@@ -15,6 +15,7 @@ use crate::field::params::ParamLayout;
 use crate::field::pause::{NoPause, Pause, run_to_end};
 use crate::field::propagate::PropagationCache;
 use crate::field::reference::LossTerms;
+use crate::field::spread_check::{SpreadCheck, check_spread};
 use crate::gpu::buffers::{
     PendingRead, read_buffer_async, read_elements_async, storage_buffer_from, storage_buffer_zeroed,
 };
@@ -137,6 +138,8 @@ pub struct Trainer {
     labelled_frames: usize,
     /// The label maps of `labelled_pixels`, by frame.
     label_maps: Vec<(u32, Vec<u16>)>,
+    /// What the spread's self-check found for the current labels.
+    spread_check: Option<SpreadCheck>,
     propagation: PropagationCache,
     pending_losses: Option<(u32, PendingRead<f32>)>,
     last_losses: Option<StepLosses>,
@@ -448,6 +451,7 @@ impl Trainer {
             labelled_pixels: 0,
             labelled_frames: 0,
             label_maps: Vec::new(),
+            spread_check: None,
             propagation: PropagationCache::default(),
             pending_losses: None,
             last_losses: None,
@@ -471,16 +475,20 @@ impl Trainer {
         scene: &Scene,
         pause: &mut impl Pause,
     ) -> Result<(), GpuError> {
+        let classes = self.cfg.num_classes as usize;
+        let asked = self.cfg.scribble_propagation;
+        self.spread_check = None;
         let maps = match labels {
             Some(labels) => {
+                let options = if asked.enabled && asked.self_check {
+                    let check = check_spread(&mut self.propagation, scene, labels, classes, &asked, pause).await;
+                    self.spread_check = Some(check);
+                    check.apply(&asked)
+                } else {
+                    asked
+                };
                 self.propagation
-                    .maps_pausing(
-                        scene,
-                        labels,
-                        self.cfg.num_classes as usize,
-                        &self.cfg.scribble_propagation,
-                        pause,
-                    )
+                    .maps_pausing(scene, labels, classes, &options, pause)
                     .await
             }
             None => Vec::new(),
@@ -539,6 +547,19 @@ impl Trainer {
         self.scene.upload_labels(&self.ctx, &index)?;
         self.ray_batch.follow_labels(&self.ctx, &self.scene);
         Ok(())
+    }
+
+    /// What the spread's self-check found for the current labels (`field::spread_check`);
+    /// None without labels, with spreading off or with the check off.
+    pub fn spread_check(&self) -> Option<SpreadCheck> {
+        self.spread_check
+    }
+
+    /// Whether the current labels train with less spreading than the config asks, because the
+    /// self-check failed.
+    pub fn spread_withheld(&self) -> bool {
+        self.spread_check
+            .is_some_and(|c| c.apply(&self.cfg.scribble_propagation) != self.cfg.scribble_propagation)
     }
 
     /// The label maps training draws from, by frame: the strokes and what they spread to.
