@@ -99,12 +99,21 @@ fn check_refine(ctx: &GpuContext, with_depth: bool) {
         depth: with_depth.then_some(&depth),
     };
     let pass = pollster::block_on(RefinePass::new(ctx)).unwrap();
-    for iterations in [0, 1, 3] {
+    for (iterations, votes) in [(0, false), (1, false), (3, false), (3, true)] {
+        let options = RefineOptions {
+            votes,
+            ..options(iterations)
+        };
         let mut gpu = probabilities.clone();
-        pollster::block_on(pass.refine(ctx, &mut gpu, CLASSES, guide, &options(iterations))).unwrap();
+        pollster::block_on(pass.refine(ctx, &mut gpu, CLASSES, guide, &options)).unwrap();
         let mut cpu = probabilities.clone();
-        refine_probabilities(&mut cpu, CLASSES, guide, &options(iterations)).unwrap();
-        assert_close(&format!("{iterations} rounds, depth {with_depth}"), &gpu, &cpu, 1e-4);
+        refine_probabilities(&mut cpu, CLASSES, guide, &options).unwrap();
+        assert_close(
+            &format!("{iterations} rounds, votes {votes}, depth {with_depth}"),
+            &gpu,
+            &cpu,
+            1e-4,
+        );
     }
     // Sizes that do not fit are refused before any GPU work, naming them.
     let mut short = probabilities[..10].to_vec();

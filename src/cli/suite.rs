@@ -13,14 +13,12 @@ pub struct SuiteArgs {
     /// Captures to run, by name (default: all; see docs/quality.md).
     #[arg(long, value_delimiter = ',')]
     captures: Vec<String>,
-    /// Scribble sets (`scribble-from-gt --seed` 0..N).
-    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=16))]
-    sets: u64,
-    /// Trainer seeds 0..N per scribble set.
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=16))]
-    seeds: u32,
-    /// The short variant CI runs: one scribble set, one seed.
-    #[arg(long, conflicts_with_all = ["sets", "seeds"])]
+    /// Runs per capture and mode: run i draws scribble set i (`scribble-from-gt --seed i`) and
+    /// trains with trainer seed i.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=16))]
+    runs: u32,
+    /// The short variant CI runs: one run per capture and mode.
+    #[arg(long, conflicts_with = "runs")]
     short: bool,
     /// Leave out the runs on the strokes alone (propagation off).
     #[arg(long)]
@@ -29,11 +27,11 @@ pub struct SuiteArgs {
     /// beyond the strokes and the share of them that is right. Seconds, not minutes.
     #[arg(long, conflicts_with = "ceilings")]
     spread_only: bool,
-    /// Measure each capture's ceiling instead (trained on the true masks of every frame) and
-    /// write them to --output; give that file to --ceilings-from afterwards.
+    /// Also measure each capture's ceiling (trained on the true masks of every frame, seed 0);
+    /// give the report to --ceilings-from afterwards.
     #[arg(long)]
     ceilings: bool,
-    /// Ceilings measured before (a report written with --ceilings).
+    /// Ceilings measured before (a report written with --ceilings), when this run has none.
     #[arg(long, value_name = "FILE", default_value = "docs/results/suite/ceilings.json")]
     ceilings_from: PathBuf,
     /// Field config changes (JSON, inline or a file) on top of the budget preset with feature
@@ -77,11 +75,10 @@ pub fn run(args: SuiteArgs) -> CliResult {
         None => None,
     };
     let before = args.compare.as_deref().map(read_report).transpose()?;
-    let (sets, seeds) = if args.short { (1, 1) } else { (args.sets, args.seeds) };
+    let runs_per_capture = if args.short { 1 } else { args.runs };
     let options = SuiteOptions {
         captures: args.captures.clone(),
-        sets,
-        seeds,
+        runs: runs_per_capture,
         strokes_only: !args.no_strokes_only,
         ceilings: args.ceilings,
         config,
@@ -104,10 +101,9 @@ pub fn run(args: SuiteArgs) -> CliResult {
         return Err(format!("--output {}: folder {} does not exist", out.display(), parent.display()).into());
     }
     eprintln!(
-        "suite: {} runs ({} scribble sets x {} seeds{}), {} at a time; loading the captures",
+        "suite: {} runs ({} per capture and mode{}), {} at a time; loading the captures",
         runs.len(),
-        sets,
-        seeds,
+        runs_per_capture,
         if options.strokes_only {
             ", spread and strokes only"
         } else {
@@ -179,7 +175,7 @@ fn spread_only(runs: &[suite::RunSpec], data: &std::path::Path, options: &SuiteO
         eprintln!("!!! {name}: its data is not under {}; left out", data.display());
     }
     let jobs: Vec<(usize, u64)> = (0..scenes.len())
-        .flat_map(|i| (0..options.sets).map(move |set| (i, set)))
+        .flat_map(|i| (0..u64::from(options.runs)).map(move |set| (i, set)))
         .collect();
     let results = suite::in_parallel(jobs, options.jobs, |(i, set)| {
         let (capture, scene) = &scenes[i];

@@ -77,7 +77,7 @@ pub enum LastSample {
     /// capture's room, which the box drawn around the reconstruction's points leaves out) is
     /// painted on the samples at the box's far side, without density that would stand in front
     /// of the box's contents in other views. With dense depth everything seen is in the box,
-    /// and it made the masks worse (docs/quality.md, "The room beyond the box").
+    /// and it made the masks worse (docs/results/quality-log.md, "The room beyond the box").
     Opaque,
     /// Nothing behind the last sample: a ray that meets nothing in the box renders 0.
     Clear,
@@ -94,7 +94,7 @@ pub struct LossWeights {
     /// Where rays end in an opaque sample and the labels name the class of what lies beyond
     /// the scene box (`PropagationCache::far_class`): a labelled ray's transmittance left for
     /// that sample is pulled to 1 when its label is that class and to 0 otherwise
-    /// (`reference::loss::opacity_loss`; docs/quality.md, "The labels say what is empty").
+    /// (`reference::loss::opacity_loss`; docs/results/quality-log.md, "The labels say what is empty").
     pub opacity: f32,
 }
 

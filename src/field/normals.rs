@@ -1,7 +1,7 @@
 //! Surface normals of a depth map: where two surfaces meet at a crease (a box's face and the
 //! table under it) colour and depth may both change smoothly, but the normal turns. Whether a
 //! crease folds inward (concave: where an object stands on a table) or outward (convex: a box's
-//! own edge) tells the two apart: objects meet their support at concave creases (docs/quality.md,
+//! own edge) tells the two apart: objects meet their support at concave creases (docs/results/quality-log.md,
 //! "Only inward creases stop the walk").
 use crate::scene::{DepthImage, Intrinsics};
 

@@ -24,7 +24,7 @@ const POINTS_PER_CELL: f64 = 4.0;
 /// How much each step of the walk fades when the strokes' points hold a single class (see
 /// [`PointLabeller::point_classes_pausing`]): a walk of about ten million steps, which crosses any
 /// surface the reconstruction joins but hardly ever a link of [`MIN_WEIGHT`], or a jump across
-/// a colour edge between clusters (docs/quality.md, "one class under the strokes").
+/// a colour edge between clusters (docs/results/quality-log.md, "one class under the strokes").
 const LONE_CLASS_FADE: f64 = 1e-7;
 /// Smallest edge weight: keeps the graph connected so each system has one solution.
 const MIN_WEIGHT: f64 = 1e-9;

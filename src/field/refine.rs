@@ -34,6 +34,12 @@ pub struct RefineOptions {
     /// Spatial reach as a fraction of the image diagonal (2 pixels at 80 x 60), so the same
     /// setting suits every resolution: the field's blur scales with the image.
     pub spatial_sigma: f32,
+    /// Filter each pixel's vote (1 for its most likely class, 0 for the others) instead of its
+    /// probabilities, so every pixel counts alike however confident the field is there: where
+    /// one class comes out confident and another barely above its rivals (a plain backdrop
+    /// behind an object, docs/quality.md), averaging probabilities lets the confident class
+    /// flood the other.
+    pub votes: bool,
 }
 
 impl Default for RefineOptions {
@@ -48,6 +54,7 @@ impl RefineOptions {
         colour_sigma: 0.1,
         depth_sigma: 0.05,
         spatial_sigma: 0.02,
+        votes: false,
     };
     /// Rounds on a capture without dense depth (`for_scene`).
     pub const ROUNDS_WITHOUT_DENSE_DEPTH: u32 = 10;
@@ -57,7 +64,7 @@ impl RefineOptions {
     /// capture: no depth, or a reconstruction's sparse points). Without depth to train on, the
     /// field's silhouettes are soft and its class runs several pixels past an object's outline;
     /// more rounds pull that ring back to the colour edge. With dense depth the ring is thin,
-    /// and more rounds only let regions of one colour leak into each other (docs/quality.md,
+    /// and more rounds only let regions of one colour leak into each other (docs/results/quality-log.md,
     /// "Refinement rounds without dense depth").
     pub fn for_scene(scene: &Scene) -> RefineOptions {
         let iterations = if lacks_dense_depth(scene) {
@@ -140,6 +147,9 @@ pub fn refine_probabilities(
     if options.is_off() || probabilities.is_empty() {
         return Ok(());
     }
+    if options.votes {
+        to_votes(probabilities, classes);
+    }
     let taps = TapWeights::new(guide, options);
     let mut next = vec![0f32; probabilities.len()];
     for _ in 0..options.iterations {
@@ -147,6 +157,24 @@ pub fn refine_probabilities(
         std::mem::swap(probabilities, &mut next);
     }
     Ok(())
+}
+
+/// Replaces each pixel's `classes` probabilities with its vote: 1 for the most likely class (the
+/// first of equals), 0 for the others (`RefineOptions::votes`; the GPU twin filters the same).
+pub(crate) fn to_votes(probabilities: &mut [f32], classes: usize) {
+    for pixel in probabilities.chunks_mut(classes.max(1)) {
+        let best = pixel
+            .iter()
+            .enumerate()
+            .fold(
+                (0, f32::NEG_INFINITY),
+                |(b, bv), (i, &v)| if v > bv { (i, v) } else { (b, bv) },
+            )
+            .0;
+        for (i, p) in pixel.iter_mut().enumerate() {
+            *p = if i == best { 1.0 } else { 0.0 };
+        }
+    }
 }
 
 /// Checks that `values` probabilities of `classes` classes fit `guide`, and the options.
@@ -299,6 +327,18 @@ pub fn argmax_and_confidence(probabilities: &[f32], classes: usize) -> (Vec<u8>,
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn votes_count_every_pixel_alike() {
+        // A barely-right pixel (0.55) beside a confident wrong one (0.95 for class 1): averaged
+        // probabilities side with the confident one, votes are even and keep each as it was.
+        let mut p = vec![0.55, 0.45, 0.05, 0.95];
+        to_votes(&mut p, 2);
+        assert_eq!(p, vec![1.0, 0.0, 0.0, 1.0]);
+        let mut tie = vec![0.5, 0.5];
+        to_votes(&mut tie, 2);
+        assert_eq!(tie, vec![1.0, 0.0], "the first of equals");
+    }
     use crate::scene::demo::{DemoOptions, demo_scene};
     use image::{ImageBuffer, Luma};
 

@@ -5,7 +5,7 @@
 //! Laplacian per class. Conjugate gradients stopped far from the solution there (the graph has
 //! edges of weight 1e-9 next to edges of weight 1, so the system is badly conditioned), and the
 //! labels depended on where they stopped; the factorization gives the solution itself, and one
-//! factorization serves every class (docs/quality.md, "The walk over the points solved exactly").
+//! factorization serves every class (docs/results/quality-log.md, "The walk over the points solved exactly").
 use thiserror::Error;
 
 /// Added to every diagonal entry, relative to the mean diagonal: it makes a system whose graph

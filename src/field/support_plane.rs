@@ -1,5 +1,5 @@
 //! The surface a scene's objects stand on, found in a frame's dense depth, with the class the
-//! strokes give it (docs/quality.md, "The surface the objects stand on").
+//! strokes give it (docs/results/quality-log.md, "The surface the objects stand on").
 //!
 //! The walk inside a frame fades with distance, so on a real capture much of the floor or desk
 //! under the objects is reached by no stroke and stays unlabelled; the field then fills it from

@@ -1,5 +1,5 @@
 //! Seeds for every frame of a capture with sparse depth, from its labelled points
-//! (docs/quality.md, "Labels in every view").
+//! (docs/results/quality-log.md, "Labels in every view").
 //!
 //! The points a walk over the reconstruction labels (`field::point_walk`) reach every frame that
 //! sees them, but they reach it only where the reconstruction has points. A photo capture's

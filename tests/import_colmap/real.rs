@@ -234,7 +234,7 @@ fn strokes_on_two_photos_reach_the_others_through_the_points() {
     assert_eq!(frames, FRAMES, "{frames} frames labelled");
     assert!(labelled > 20 * labelled_within, "{labelled} against {labelled_within}");
     // Far pixels inside the outline of the head's points are left to the walk, not given the
-    // room's class (docs/quality.md, "Holes in the object's reconstruction"); near the points
+    // room's class (docs/results/quality-log.md, "Holes in the object's reconstruction"); near the points
     // of the head the room's class is not taken from the walk (0.960 right without, 0.972 with;
     // 0.966 since the walk over the points is solved exactly and labels more of the head).
     assert!(right > 0.96 && right > right_within, "{right} against {right_within}");

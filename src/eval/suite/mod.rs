@@ -32,8 +32,18 @@ pub use captures::{CAPTURES, Capture};
 pub use report::{RunResult, SuiteReport};
 use score::{SpreadFigures, add_boundary};
 
-/// Refinement round counts every run also scores its renders with.
-pub const ROUNDS_COMPARED: [u32; 4] = [0, 1, 3, 10];
+/// Refinements every run also scores its renders with, (rounds, votes), on every
+/// [`VARIANT_EVERY`]th scored frame; 0 rounds is the field's own map.
+pub const REFINE_VARIANTS: [(u32, bool); 7] = [
+    (0, false),
+    (1, false),
+    (3, false),
+    (10, false),
+    (1, true),
+    (3, true),
+    (10, true),
+];
+pub const VARIANT_EVERY: usize = 4;
 
 /// Warm-up steps (colour, depth and features) before the labels join.
 pub const WARMUP: u32 = 100;
@@ -76,13 +86,12 @@ pub struct RunSpec {
 pub struct SuiteOptions {
     /// Captures by name (all of [`CAPTURES`] when empty).
     pub captures: Vec<String>,
-    /// Scribble sets 0..sets.
-    pub sets: u64,
-    /// Trainer seeds 0..seeds.
-    pub seeds: u32,
+    /// Runs per capture and mode: run i draws scribble set i and trains with trainer seed i, so
+    /// the runs' spread covers both what the strokes and what the seed move.
+    pub runs: u32,
     /// Also train each capture on the strokes alone.
     pub strokes_only: bool,
-    /// Measure the ceilings (one run per capture, seed 0) instead of the strokes.
+    /// Also measure the ceilings (one run per capture, seed 0).
     pub ceilings: bool,
     /// Replaces fields of the budget config for the runs (not the ceilings), as `--config`.
     pub config: Option<serde_json::Value>,
@@ -110,6 +119,20 @@ pub fn plan(options: &SuiteOptions) -> Result<Vec<RunSpec>, String> {
     };
     let mut runs = Vec::new();
     for capture in chosen.iter().rev() {
+        for i in 0..options.runs {
+            let mut modes = vec![Mode::Spread];
+            if options.strokes_only {
+                modes.push(Mode::StrokesOnly);
+            }
+            for mode in modes {
+                runs.push(RunSpec {
+                    capture,
+                    mode,
+                    set: u64::from(i),
+                    seed: i,
+                });
+            }
+        }
         if options.ceilings {
             runs.push(RunSpec {
                 capture,
@@ -117,25 +140,6 @@ pub fn plan(options: &SuiteOptions) -> Result<Vec<RunSpec>, String> {
                 set: 0,
                 seed: 0,
             });
-            continue;
-        }
-        for set in 0..options.sets {
-            for seed in 0..options.seeds {
-                runs.push(RunSpec {
-                    capture,
-                    mode: Mode::Spread,
-                    set,
-                    seed,
-                });
-                if options.strokes_only {
-                    runs.push(RunSpec {
-                        capture,
-                        mode: Mode::StrokesOnly,
-                        set,
-                        seed,
-                    });
-                }
-            }
         }
     }
     Ok(runs)
@@ -346,11 +350,19 @@ pub fn run_one(
     let refine = RefineOptions::for_scene(scene);
     let mut refined = Confusion::new(names.len());
     let mut boundary = Confusion::new(names.len());
-    // The same renders refined with other round counts: the rounds' default is decided on the
-    // suite from these, at no extra training.
-    let mut by_rounds: Vec<(u32, Confusion)> = ROUNDS_COMPARED
+    // The same renders refined otherwise, on every `VARIANT_EVERY`th scored frame: refinement's
+    // defaults are decided on identical fields, at no extra training.
+    let mut variants: Vec<(String, RefineOptions, Confusion)> = REFINE_VARIANTS
         .iter()
-        .map(|&r| (r, Confusion::new(names.len())))
+        .map(|&(rounds, votes)| {
+            let name = format!("{} {rounds}", if votes { "votes" } else { "probabilities" });
+            let options = RefineOptions {
+                iterations: rounds,
+                votes,
+                ..refine
+            };
+            (name, options, Confusion::new(names.len()))
+        })
         .collect();
     let scored = capture.scored(scene.frames.len());
     let field = render_and_score(
@@ -363,14 +375,12 @@ pub fn run_one(
             let (Some(guide), Some(gt)) = (Guide::of_frame(scene, i), scene.frames[i].gt.as_ref()) else {
                 return;
             };
-            for (rounds, confusion) in &mut by_rounds {
-                let mut other = rendered.clone();
-                let options = RefineOptions {
-                    iterations: *rounds,
-                    ..refine
-                };
-                if other.refine(guide, &options).is_ok() {
-                    confusion.add(gt.as_raw(), &other.classes);
+            if (i - capture.first_scored) % VARIANT_EVERY == 0 {
+                for (_, options, confusion) in &mut variants {
+                    let mut other = rendered.clone();
+                    if other.refine(guide, options).is_ok() {
+                        confusion.add(gt.as_raw(), &other.classes);
+                    }
                 }
             }
             let mut rendered = rendered;
@@ -383,9 +393,9 @@ pub fn run_one(
     .map_err(gpu)?;
     let refined = refined.report(&names, field.frames);
     let boundary = boundary.report(&names, field.frames);
-    let by_rounds = by_rounds
+    let refine_variants = variants
         .iter()
-        .map(|(r, c)| (*r, c.report(&names, field.frames).mean_iou))
+        .map(|(name, _, c)| (name.clone(), c.report(&names, field.frames).mean_iou))
         .collect();
     Ok(RunResult {
         capture: capture.name.to_string(),
@@ -400,10 +410,11 @@ pub fn run_one(
         spread: (spec.mode == Mode::Spread).then_some(spread),
         check: trainer.spread_check(),
         withheld: trainer.spread_withheld(),
+        opacity_far_class: trainer.opacity_far_class(),
         seconds: started.elapsed().as_secs_f64(),
         train_seconds: trained,
         refine_rounds: refine.iterations,
-        by_rounds,
+        refine_variants,
         device: ctx.describe(),
     })
 }

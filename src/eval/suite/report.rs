@@ -29,6 +29,9 @@ pub struct RunResult {
     pub check: Option<crate::field::spread_check::SpreadCheck>,
     #[serde(default)]
     pub withheld: bool,
+    /// The class the opacity term pulls through the scene box (`Trainer::opacity_far_class`).
+    #[serde(default)]
+    pub opacity_far_class: Option<u32>,
     pub seconds: f64,
     /// Of `seconds`, spreading the strokes and training (the rest renders, refines and scores).
     #[serde(default)]
@@ -36,9 +39,10 @@ pub struct RunResult {
     /// Refinement rounds of `mean_iou` (`RefineOptions::for_scene`).
     #[serde(default)]
     pub refine_rounds: u32,
-    /// Mean IoU of the same renders refined with other round counts (rounds, mean IoU).
+    /// Mean IoU of the same renders refined otherwise (`REFINE_VARIANTS`, named "votes 3",
+    /// "probabilities 10", ...), on every `VARIANT_EVERY`th scored frame.
     #[serde(default)]
-    pub by_rounds: Vec<(u32, f64)>,
+    pub refine_variants: Vec<(String, f64)>,
     pub device: String,
 }
 
@@ -46,8 +50,8 @@ pub struct RunResult {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SuiteReport {
     pub device: String,
-    pub sets: u64,
-    pub seeds: u32,
+    /// Runs per capture and mode (`SuiteOptions::runs`).
+    pub runs_per_capture: u32,
     /// The `--config` the runs trained with on top of the defaults.
     pub config: Option<serde_json::Value>,
     /// Captures whose data was absent.
@@ -84,8 +88,7 @@ impl SuiteReport {
         });
         SuiteReport {
             device,
-            sets: options.sets,
-            seeds: options.seeds,
+            runs_per_capture: options.runs,
             config: options.config.clone(),
             skipped,
             runs,
@@ -260,10 +263,11 @@ mod tests {
             spread: None,
             check: None,
             withheld: false,
+            opacity_far_class: None,
             seconds: 1.0,
             train_seconds: 0.5,
             refine_rounds: 3,
-            by_rounds: vec![],
+            refine_variants: vec![],
             device: "test".into(),
         }
     }
@@ -271,8 +275,7 @@ mod tests {
     fn report(runs: Vec<RunResult>) -> SuiteReport {
         let options = SuiteOptions {
             captures: vec![],
-            sets: 1,
-            seeds: 2,
+            runs: 2,
             strokes_only: true,
             ceilings: false,
             config: None,

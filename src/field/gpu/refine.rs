@@ -143,6 +143,9 @@ impl RefinePass {
         if options.is_off() || probabilities.is_empty() {
             return Ok(());
         }
+        if options.votes {
+            crate::field::refine::to_votes(probabilities, classes);
+        }
         let guide = GuideBuffers::new(ctx, guide, classes, options)?;
         let buffers = [
             storage_buffer_from(ctx, "refine probabilities a", probabilities)?,

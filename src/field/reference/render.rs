@@ -8,7 +8,7 @@
 //! A ray's last sample may be opaque (`FieldConfig::last_sample`, marked by an interval
 //! of [`OPAQUE_INTERVAL`]): it takes all the transmittance left, w = T_last, whatever its
 //! density, so what lies beyond the scene box (a photo capture's room) is painted on the
-//! samples at the box's far side instead of on density inside the box (docs/quality.md, "The
+//! samples at the box's far side instead of on density inside the box (docs/results/quality-log.md, "The
 //! room beyond the box"). Otherwise nothing is composited behind the last sample and an empty
 //! ray renders 0.
 //!
