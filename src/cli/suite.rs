@@ -112,7 +112,16 @@ pub fn run(args: SuiteArgs) -> CliResult {
         options.jobs
     );
     let started = std::time::Instant::now();
+    let mut finished: Vec<suite::RunResult> = Vec::new();
     let report = suite::run(runs, &args.data, &options, |r, done, total| {
+        // Every finished run goes to --output at once, so an interrupted suite keeps its runs.
+        finished.push(r.clone());
+        if let Some(out) = &args.output {
+            let partial = SuiteReport::new(finished.clone(), Vec::new(), &options, r.device.clone());
+            if let Ok(json) = serde_json::to_string_pretty(&partial) {
+                let _ = std::fs::write(out, json);
+            }
+        }
         eprintln!(
             "[{done}/{total}] {} {} set {} seed {}: mean IoU {:.3} (boundary {:.3}) in {:.0} s ({:.0} training), {:.0} s so far",
             r.capture,

@@ -167,7 +167,7 @@ impl Capture {
         let file = cache.join(format!("{}.scene.zip", self.name));
         let recipe = self.recipe();
         if let Ok(scene) = read_archive_path(&file)
-            && scene.provenance.notes.iter().any(|n| *n == recipe)
+            && scene.provenance.notes.contains(&recipe)
         {
             return Ok(Some(scene));
         }

@@ -231,13 +231,12 @@ pub fn run(
     Ok(SuiteReport::new(results, skipped, options, device))
 }
 
+/// Loaded captures with their scenes, and the names of those whose data is absent.
+pub type Loaded = (Vec<(&'static Capture, Scene)>, Vec<String>);
+
 /// The scenes of `captures` (through the cache when `options` has one), and the names of those
 /// whose data is absent.
-pub fn load(
-    captures: &[&'static Capture],
-    data: &Path,
-    options: &SuiteOptions,
-) -> Result<(Vec<(&'static Capture, Scene)>, Vec<String>), String> {
+pub fn load(captures: &[&'static Capture], data: &Path, options: &SuiteOptions) -> Result<Loaded, String> {
     let loaded = in_parallel(captures.to_vec(), options.jobs, |capture| {
         let scene = match &options.cache {
             Some(cache) => capture.load_cached(data, cache),
@@ -375,7 +374,7 @@ pub fn run_one(
             let (Some(guide), Some(gt)) = (Guide::of_frame(scene, i), scene.frames[i].gt.as_ref()) else {
                 return;
             };
-            if (i - capture.first_scored) % VARIANT_EVERY == 0 {
+            if (i - capture.first_scored).is_multiple_of(VARIANT_EVERY) {
                 for (_, options, confusion) in &mut variants {
                     let mut other = rendered.clone();
                     if other.refine(guide, options).is_ok() {
