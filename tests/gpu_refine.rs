@@ -60,6 +60,7 @@ fn options(iterations: u32) -> RefineOptions {
     RefineOptions {
         iterations,
         spatial_sigma: 0.09,
+        votes: false,
         ..RefineOptions::default()
     }
 }

@@ -320,15 +320,19 @@ mod tests {
     #[test]
     fn refining_follows_the_guide_and_names_a_guide_of_another_size() {
         // Two pixels, the first a confident class 1, the second a weak class 0 of the same
-        // colour and depth right next to it: refinement gives the second the first's class.
+        // colour and depth right next to it: refining probabilities gives the second the first's
+        // class (votes would keep each as it is).
         let mut a = FrameAssembler::new(2, 1, 2, 0);
         a.push(&[0.0, 0.0, 0.0, 1.0, 0.0, 3.0]);
         a.push(&[0.0, 0.0, 0.0, 1.0, 0.2, 0.0]);
         let mut f = a.finish(None);
         assert_eq!(f.classes, vec![1, 0]);
         let rgb = image::RgbImage::from_pixel(2, 1, image::Rgb([90, 90, 90]));
-        f.refine(Guide { rgb: &rgb, depth: None }, &RefineOptions::default())
-            .unwrap();
+        let probabilities = RefineOptions {
+            votes: false,
+            ..RefineOptions::default()
+        };
+        f.refine(Guide { rgb: &rgb, depth: None }, &probabilities).unwrap();
         assert_eq!(f.classes, vec![1, 1]);
         assert!(f.refined);
         let wrong = image::RgbImage::new(3, 1);
