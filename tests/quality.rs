@@ -2,8 +2,9 @@
 //! quality suite"): every capture trained once, headless on the GPU (lavapipe in CI), with
 //! scribble set 0 and trainer seed 0, the strokes spread as the defaults say, every scored frame
 //! rendered, refined and scored. Training on lavapipe gives the same bits run after run, so each
-//! floor sits a little under what this run measured (docs/results/suite/short.json); they guard
-//! against regressions, they are not the goals. The full suite (3 runs per capture, the strokes
+//! floor sits a little under what this run measured (demo 0.937, demo without depth 0.351, white
+//! backdrop 0.926, black backdrop 0.941, YCB 0.896, alexander 0.931, moldgoldcape 0.834); they
+//! guard against regressions, they are not the goals (docs/quality.md has those). The full suite (3 runs per capture, the strokes
 //! alone beside the spread, the ceilings) is what decides defaults.
 use std::path::{Path, PathBuf};
 
@@ -74,7 +75,7 @@ fn demo_without_depth() {
 #[test]
 fn objects_on_a_white_backdrop() {
     if let Some(r) = short_run("backdrop-white") {
-        assert_floor(&r, 0.24);
+        assert_floor(&r, 0.90);
     }
 }
 
@@ -108,6 +109,6 @@ fn alexander() {
 #[test]
 fn moldgoldcape() {
     if let Some(r) = short_run("moldgoldcape") {
-        assert_floor(&r, 0.78);
+        assert_floor(&r, 0.80);
     }
 }

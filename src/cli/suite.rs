@@ -32,7 +32,7 @@ pub struct SuiteArgs {
     #[arg(long)]
     ceilings: bool,
     /// Ceilings measured before (a report written with --ceilings), when this run has none.
-    #[arg(long, value_name = "FILE", default_value = "docs/results/suite/ceilings.json")]
+    #[arg(long, value_name = "FILE", default_value = "docs/results/suite/full.json")]
     ceilings_from: PathBuf,
     /// Field config changes (JSON, inline or a file) on top of the budget preset with feature
     /// supervision, for every run but the ceilings: a candidate default.
