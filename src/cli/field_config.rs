@@ -116,7 +116,7 @@ fn is_inline(arg: &str) -> bool {
 
 /// The JSON text of a `--config` argument and how to name it in errors: the argument itself when
 /// inline, else the file it names.
-fn config_text(arg: &str) -> Result<(String, String), String> {
+pub(super) fn config_text(arg: &str) -> Result<(String, String), String> {
     if is_inline(arg) {
         return Ok((arg.to_string(), "(inline JSON)".into()));
     }

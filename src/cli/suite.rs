@@ -64,12 +64,9 @@ fn read_report(path: &std::path::Path) -> Result<SuiteReport, String> {
 pub fn run(args: SuiteArgs) -> CliResult {
     let config = match &args.config {
         Some(arg) => {
-            let text = if arg.trim_start().starts_with('{') {
-                arg.clone()
-            } else {
-                std::fs::read_to_string(arg).map_err(|e| format!("--config {arg}: {e}"))?
-            };
-            let value: serde_json::Value = serde_json::from_str(&text).map_err(|e| format!("--config {arg}: {e}"))?;
+            let (text, source) = super::field_config::config_text(arg)?;
+            let value: serde_json::Value =
+                serde_json::from_str(&text).map_err(|e| format!("--config {source}: {e}"))?;
             Some(value)
         }
         None => None,
