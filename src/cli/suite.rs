@@ -190,9 +190,9 @@ fn spread_only(runs: &[suite::RunSpec], data: &std::path::Path, options: &SuiteO
         Ok::<_, String>((capture.name, set, figures, check, seconds))
     });
     println!(
-        "| capture | set | drawn px | spread px | frames | right | check across views | check within frames | seconds |"
+        "| capture | set | drawn px | spread px | frames | right | right on drawn frames | check across views | check within frames | seconds |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     let fold = |f: Option<scribblefield::field::spread_check::FoldAgreement>| {
         f.map_or("-".to_string(), |f| {
             format!("{:.3} of {}/{}", f.agreement(), f.labelled, f.held)
@@ -201,11 +201,12 @@ fn spread_only(runs: &[suite::RunSpec], data: &std::path::Path, options: &SuiteO
     for r in results {
         let (name, set, f, check, seconds) = r?;
         println!(
-            "| {name} | {set} | {} | {} | {} | {:.3} | {} | {} | {seconds:.1} |",
+            "| {name} | {set} | {} | {} | {} | {:.3} | {:.3} | {} | {} | {seconds:.1} |",
             f.drawn,
             f.written,
             f.frames,
             f.right,
+            f.right_on_drawn_frames,
             fold(check.across_views),
             fold(check.within_frames)
         );

@@ -74,6 +74,12 @@ pub struct PropagationOptions {
     /// reconstruction missed, from its pixels far from every point (`field::view_seeds`).
     /// Captures with dense depth are not affected.
     pub across_views: bool,
+    /// What a frame nobody drew on trains on, when labels go across views: `points` (the labels
+    /// of the points that land in it and its far pixels, as they are; the field decides the
+    /// pixels between) or `walk` (its own walk from those). Its walk has no stroke of its own to
+    /// stop it and carries a class wherever the colour lets it: onto what an object stands on,
+    /// where the object's points meet it (docs/quality.md).
+    pub undrawn_frames: UndrawnFrames,
     /// On a frame with dense depth and strokes of two or more classes, find the largest plane
     /// in its depth (the floor or table the objects stand on, `field::support_plane`); where
     /// the strokes on it agree on one class, the plane's pixels the walk leaves unlabelled take
@@ -91,6 +97,16 @@ pub struct PropagationOptions {
     pub min_agreement: f32,
 }
 
+/// What labels across views give a frame with no strokes (`PropagationOptions::undrawn_frames`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum UndrawnFrames {
+    /// Its points' labels and far pixels, then its own walk from them.
+    Walk,
+    /// Its points' labels and far pixels as they are.
+    Points,
+}
+
 impl Default for PropagationOptions {
     fn default() -> Self {
         PropagationOptions {
@@ -104,6 +120,7 @@ impl Default for PropagationOptions {
             normal_sigma: 0.15,
             inward_creases_only: true,
             across_views: true,
+            undrawn_frames: UndrawnFrames::Points,
             support_plane: true,
             drawn_share: 0.0,
             self_check: true,
@@ -530,7 +547,8 @@ enum Carried {
     /// Its own readings' labels, trained on as they are.
     AsIs(Vec<u16>),
     /// The labels of every point that lands in it, and its pixels far from every point in the
-    /// class the strokes give such pixels (`field::view_seeds`): a start for its own walk.
+    /// class the strokes give such pixels (`field::view_seeds`): a start for its own walk (a
+    /// drawn frame's; a frame nobody drew on walks only with `UndrawnFrames::Walk`).
     Walks(Vec<u16>),
 }
 
@@ -638,11 +656,17 @@ async fn frame_seeds(
         }
         match seeds.iter_mut().find(|s| s.frame == f as u32) {
             Some(own) => own.carried = Some(carried),
-            None => seeds.push(FrameSeeds {
-                frame: f as u32,
-                strokes: None,
-                carried: Some(carried),
-            }),
+            None => {
+                let carried = match (options.undrawn_frames, carried) {
+                    (UndrawnFrames::Points, Carried::Walks(map)) => Carried::AsIs(map),
+                    (_, carried) => carried,
+                };
+                seeds.push(FrameSeeds {
+                    frame: f as u32,
+                    strokes: None,
+                    carried: Some(carried),
+                })
+            }
         }
     }
     seeds.sort_by_key(|s| s.frame);

@@ -63,6 +63,10 @@ pub struct SpreadFigures {
     pub frames: u64,
     /// Share of the spread labels (on pixels with ground truth) that name the true class.
     pub right: f64,
+    /// The same share over the frames with strokes alone (what the walk inside a drawn frame
+    /// gives); 1 where they have no spread label.
+    #[serde(default)]
+    pub right_on_drawn_frames: f64,
 }
 
 impl SpreadFigures {
@@ -75,6 +79,7 @@ impl SpreadFigures {
     ) -> SpreadFigures {
         let mut figures = SpreadFigures::default();
         let (mut scored, mut right) = (0u64, 0u64);
+        let (mut scored_drawn, mut right_drawn) = (0u64, 0u64);
         for (frame, map) in maps {
             let strokes = drawn.iter().find(|(f, _)| f == frame).map(|(_, s)| s.as_slice());
             let gt = gt_of(*frame).map(|g| g.as_raw().as_slice());
@@ -92,13 +97,20 @@ impl SpreadFigures {
                 if let Some(&g) = gt.and_then(|g| g.get(i))
                     && g != GT_VOID
                 {
+                    let is_right = u64::from(u16::from(g) == label);
                     scored += 1;
-                    right += u64::from(u16::from(g) == label);
+                    right += is_right;
+                    if strokes.is_some() {
+                        scored_drawn += 1;
+                        right_drawn += is_right;
+                    }
                 }
             }
             figures.frames += u64::from(any);
         }
-        figures.right = if scored > 0 { right as f64 / scored as f64 } else { 1.0 };
+        let share = |right: u64, scored: u64| if scored > 0 { right as f64 / scored as f64 } else { 1.0 };
+        figures.right = share(right, scored);
+        figures.right_on_drawn_frames = share(right_drawn, scored_drawn);
         figures
     }
 }
@@ -123,10 +135,12 @@ mod tests {
     fn spread_figures_count_drawn_written_and_right() {
         let gt = GrayImage::from_raw(4, 1, vec![0, 0, 1, GT_VOID]).unwrap();
         let drawn = vec![(3, vec![0, UNLABELLED, UNLABELLED, UNLABELLED])];
-        let maps = vec![(3, vec![0, 0, 0, 1]), (4, vec![UNLABELLED; 4])];
-        let f = SpreadFigures::measure(&maps, &drawn, |frame| (frame == 3).then_some(&gt));
-        assert_eq!((f.drawn, f.written, f.frames), (1, 3, 1));
-        // Of the spread labels on scored pixels, one of two is right (the void one is not scored).
-        assert!((f.right - 0.5).abs() < 1e-12);
+        let maps = vec![(3, vec![0, 0, 0, 1]), (4, vec![UNLABELLED; 4]), (5, vec![1, 1, 1, 1])];
+        let f = SpreadFigures::measure(&maps, &drawn, |frame| (frame != 4).then_some(&gt));
+        assert_eq!((f.drawn, f.written, f.frames), (1, 7, 2));
+        // On the drawn frame one of two spread labels on scored pixels is right (the void one is
+        // not scored); on frame 5, nobody drew, one of three.
+        assert!((f.right_on_drawn_frames - 0.5).abs() < 1e-12);
+        assert!((f.right - 2.0 / 5.0).abs() < 1e-12);
     }
 }
