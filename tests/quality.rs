@@ -2,9 +2,9 @@
 //! quality suite"): every capture trained once, headless on the GPU (lavapipe in CI), with
 //! scribble set 0 and trainer seed 0, the strokes spread as the defaults say, every scored frame
 //! rendered, refined and scored. Training on lavapipe gives the same bits run after run, so each
-//! floor sits about 0.03 under what this run measured (docs/quality.md, "What the suite measures
-//! now"); they guard against regressions, they are not the goals (docs/quality.md has those). The full suite (3 runs per capture, the strokes
-//! alone beside the spread, the ceilings) is what decides defaults.
+//! floor sits about 0.03 under what this run measured (docs/quality.md, "The floors of
+//! tests/quality.rs"); they guard against regressions, they are not the goals. The full suite (3
+//! runs per capture, the strokes alone beside the spread, the ceilings) decides defaults.
 use std::path::{Path, PathBuf};
 
 use scribblefield::eval::suite::{Mode, RunResult, RunSpec, captures::capture, run_one};

@@ -240,8 +240,8 @@ fn strokes_on_two_photos_reach_the_others_through_the_points() {
     assert!(right > 0.96 && right > right_within, "{right} against {right_within}");
 
     // A photo nobody drew on trains on its projected points' labels and its far pixels as they
-    // are (`UndrawnFrames::Points`); its own walk from them (`Walk`) reaches three times further
-    // on the gold cape and puts the cape's class on its support (docs/quality.md).
+    // are (`UndrawnFrames::Points`); its own walk from them (`Walk`) labels more and less of it
+    // right (on the gold cape it puts the cape's class on its support, docs/quality.md).
     let walked = PropagationOptions {
         undrawn_frames: UndrawnFrames::Walk,
         ..PropagationOptions::default()
