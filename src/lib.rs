@@ -23,5 +23,6 @@ pub mod safetensors;
 pub mod scene;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod serve;
+pub mod spread;
 #[cfg(target_arch = "wasm32")]
 mod web;

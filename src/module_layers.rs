@@ -1,7 +1,7 @@
 //! The crate's dependency direction, checked: every top-level module (`src/<name>/` or
 //! `src/<name>.rs`) has a layer, and a module may only use modules of lower layers. So no module
 //! imports from a module that imports it, and the pipeline reads bottom-up:
-//! scene → labels → features / field → eval → app / cli (docs/architecture.md draws it).
+//! scene → labels → spread → features / field → eval → app / cli (docs/architecture.md draws it).
 //!
 //! The check reads the sources as text: every `crate::<module>` path (and `scribblefield::<module>`
 //! in the binary's `cli`), including `use crate::{a::.., b::..}` groups, outside `//` comments.
@@ -28,6 +28,8 @@ const LAYERS: &[&[&str]] = &[
     &["scene"],
     // Annotating: brush, history, share links, autosave, synthetic scribbles, canvas zoom.
     &["labels"],
+    // Spreading the strokes over more pixels and frames before training.
+    &["spread"],
     // What learns from labels: pretrained feature extractors, the neural field.
     &["features", "field"],
     // What uses a trained field: evaluation, mask export; the static file server. And the fuzz

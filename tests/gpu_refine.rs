@@ -8,12 +8,13 @@
 use image::{ImageBuffer, Luma, Rgb, RgbImage};
 use scribblefield::field::gpu::refine::{GuideBuffers, RefinePass, RefineUniforms};
 use scribblefield::field::gpu::view::FrameAssembler;
-use scribblefield::field::refine::{Guide, RefineOptions, refine_probabilities};
+use scribblefield::field::refine::{RefineOptions, refine_probabilities};
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{read_buffer_blocking, storage_buffer_from, storage_buffer_garbage};
 use scribblefield::gpu::test_support::gpu_for_tests;
 use scribblefield::rng::SplitMix64;
 use scribblefield::scene::DepthImage;
+use scribblefield::scene::Guide;
 
 const CLASSES: usize = 5;
 

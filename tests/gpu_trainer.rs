@@ -300,8 +300,8 @@ fn check_one_step_gradient(
 ) {
     use scribblefield::field::gpu::rays::{StepUniforms, pick_pixel, sample_jitter};
     use scribblefield::field::gpu::scene_buffers::LabelIndex;
-    use scribblefield::field::propagate::propagate_labels;
     use scribblefield::field::reference::{FieldModel, RayTarget, SampledRay, TrainingRay, sampling};
+    use scribblefield::spread::propagate::propagate_labels;
 
     let Some(ctx) = gpu_for_tests(name) else {
         return;

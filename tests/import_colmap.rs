@@ -386,17 +386,16 @@ mod errors;
 mod real;
 
 /// Spreading strokes over a capture with sparse depth gives its thread back between the
-/// iterations of its walks (the page draws on that thread: `field::pause`), gives the labels it
+/// iterations of its walks (the page draws on that thread: `pause`), gives the labels it
 /// gives without pauses, and does no walk again for labels it has already spread.
 #[test]
 fn spreading_over_sparse_depth_pauses_and_gives_the_same_labels() {
-    use scribblefield::field::pause::{CountPauses, run_to_end};
-    use scribblefield::field::point_walk::has_sparse_depth;
-    use scribblefield::field::propagate::{PropagationCache, PropagationOptions};
     use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
+    use scribblefield::pause::{CountPauses, run_to_end};
+    use scribblefield::spread::{PropagationCache, PropagationOptions};
     let tmp = capture(&pinhole(), Format::Text, true);
     let scene = run(tmp.path()).unwrap().scene;
-    assert!(has_sparse_depth(&scene));
+    assert!(scene.has_sparse_depth());
     let labels = scribble_frames(&scene, &[0], &ScribbleOptions::default());
     let options = PropagationOptions::default();
     let straight = PropagationCache::default().maps(&scene, &labels, 2, &options);

@@ -7,12 +7,13 @@
 //! the labels go wrong.
 use std::path::Path;
 
-use scribblefield::field::pause::run_to_end;
-use scribblefield::field::propagate::{PropagationOptions, propagate_labels};
 use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
+use scribblefield::pause::run_to_end;
 use scribblefield::scene::Scene;
 use scribblefield::scene::demo::{DemoOptions, demo_scene};
 use scribblefield::scene::import::{ImportOptions, import};
+use scribblefield::spread::PropagationOptions;
+use scribblefield::spread::propagate::propagate_labels;
 
 /// Labelled pixels, the share of them that are right, and per class: pixels labelled right over
 /// pixels labelled as it or truly it (an unlabelled pixel counts as missed), over the frames the
@@ -115,7 +116,7 @@ fn labels_before_training() {
 #[test]
 #[ignore]
 fn time_per_edit_on_a_sparse_capture() {
-    use scribblefield::field::propagate::PropagationCache;
+    use scribblefield::spread::propagate::PropagationCache;
     use std::time::Instant;
     let Some(scene) = real("alexander-colmap", 200) else {
         return;
@@ -159,7 +160,7 @@ impl LongestStretch {
     }
 }
 
-impl scribblefield::field::pause::Pause for LongestStretch {
+impl scribblefield::pause::Pause for LongestStretch {
     fn pause(&mut self) -> impl std::future::Future<Output = ()> {
         let now = std::time::Instant::now();
         self.longest = self.longest.max(now - self.last);

@@ -193,7 +193,7 @@ fn spread_only(runs: &[suite::RunSpec], data: &std::path::Path, options: &SuiteO
         "| capture | set | drawn px | spread px | frames | right | right on drawn frames | check across views | check within frames | seconds |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
-    let fold = |f: Option<scribblefield::field::spread_check::FoldAgreement>| {
+    let fold = |f: Option<scribblefield::spread::check::FoldAgreement>| {
         f.map_or("-".to_string(), |f| {
             format!("{:.3} of {}/{}", f.agreement(), f.labelled, f.held)
         })

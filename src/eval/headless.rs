@@ -4,10 +4,11 @@
 //! Schedule: `warmup` steps without labels (colour, depth and features only), then the labels
 //! join and `steps` more steps train with them.
 use crate::field::gpu::trainer::{RenderedFrame, Trainer};
-use crate::field::refine::{Guide, RefineOptions};
+use crate::field::refine::RefineOptions;
 use crate::field::{FieldConfig, Preset};
 use crate::gpu::GpuError;
 use crate::labels::LabelSet;
+use crate::scene::Guide;
 use crate::scene::Scene;
 
 use super::metrics::{Confusion, EvalReport};

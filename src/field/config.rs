@@ -6,7 +6,7 @@
 //! it changes and a typo fails loudly; `validate` then checks every value.
 use serde::{Deserialize, Serialize};
 
-use crate::field::propagate::PropagationOptions;
+use crate::spread::PropagationOptions;
 
 /// How a normalized position p ∈ [0,1]³ is encoded before the density MLP.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -192,7 +192,7 @@ pub struct FieldConfig {
     pub last_sample: LastSample,
     /// What the semantic head sees (see `SemanticInput`).
     pub semantic_input: SemanticInput,
-    /// How strokes spread inside their own frame before training (`field::propagate`).
+    /// How strokes spread inside their own frame before training (`spread::propagate`).
     pub scribble_propagation: PropagationOptions,
 }
 
@@ -317,7 +317,7 @@ impl FieldConfig {
     pub fn for_scene(&self, scene: &crate::scene::Scene) -> FieldConfig {
         let mut cfg = self.clone();
         if cfg.last_sample == LastSample::Auto {
-            cfg.last_sample = if crate::field::point_walk::lacks_dense_depth(scene) {
+            cfg.last_sample = if scene.lacks_dense_depth() {
                 LastSample::Opaque
             } else {
                 LastSample::Clear

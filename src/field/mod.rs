@@ -12,19 +12,10 @@ pub mod bf16;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod checkpoint;
 pub mod config;
-pub mod normals;
 pub mod params;
-pub mod pause;
-pub mod pixel_walk;
-pub mod point_walk;
 pub mod presets;
-pub mod propagate;
 pub mod reference;
 pub mod refine;
-pub mod sparse_solve;
-pub mod spread_check;
-pub mod support_plane;
-pub mod view_seeds;
 
 pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LastSample, LossWeights, SemanticInput};
 pub use params::{MlpLayout, ParamLayout};

@@ -13,10 +13,7 @@
 //! 7 x 7 taps per round (`tests::bench` times it); docs/results/measurements.md has the gains
 //! and timings measured. The page runs the GPU twin (`field::gpu::refine`,
 //! `shaders/refine.wgsl`); the CLI runs this one.
-use image::RgbImage;
-
-use crate::field::point_walk::lacks_dense_depth;
-use crate::scene::{DepthImage, Scene};
+use crate::scene::{Guide, Scene};
 use serde::{Deserialize, Serialize};
 
 /// How the class probabilities are refined. `iterations: 0` turns refinement off.
@@ -68,7 +65,7 @@ impl RefineOptions {
     /// and more rounds only let regions of one colour leak into each other (docs/results/quality-log.md,
     /// "Refinement rounds without dense depth").
     pub fn for_scene(scene: &Scene) -> RefineOptions {
-        let iterations = if lacks_dense_depth(scene) {
+        let iterations = if scene.lacks_dense_depth() {
             RefineOptions::ROUNDS_WITHOUT_DENSE_DEPTH
         } else {
             RefineOptions::DEFAULT.iterations
@@ -115,25 +112,6 @@ const MAX_ITERATIONS: u32 = 64;
 /// Taps on each side of the centre: a 7 x 7 window whatever the resolution; larger reaches
 /// space the taps out instead of adding more.
 pub(crate) const HALF_TAPS: i64 = 3;
-
-/// What the filter follows: the frame the class map was rendered for, at the same resolution.
-#[derive(Clone, Copy, Debug)]
-pub struct Guide<'a> {
-    pub rgb: &'a RgbImage,
-    /// Raw depth values (any unit; only ratios are used), 0 = no reading.
-    pub depth: Option<&'a DepthImage>,
-}
-
-impl<'a> Guide<'a> {
-    /// Frame `frame` of `scene`: its image and measured depth.
-    pub fn of_frame(scene: &'a Scene, frame: usize) -> Option<Guide<'a>> {
-        let f = scene.frames.get(frame)?;
-        Some(Guide {
-            rgb: &f.rgb,
-            depth: f.depth.as_ref(),
-        })
-    }
-}
 
 /// Refines per-pixel class probabilities (`classes` values per pixel, row-major, each pixel's
 /// summing to 1) in place on the CPU (`gpu::refine` is the GPU twin). Errors name a size that
@@ -328,6 +306,7 @@ pub fn argmax_and_confidence(probabilities: &[f32], classes: usize) -> (Vec<u8>,
 #[cfg(test)]
 mod tests {
     use super::*;
+    use image::RgbImage;
 
     #[test]
     fn votes_count_every_pixel_alike() {

@@ -62,6 +62,29 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// Whether most frames lack dense depth: no depth at all, or a reconstruction's sparse
+    /// points ([`Scene::has_sparse_depth`]). Such a capture's field trains without surfaces to
+    /// follow, which the refinement's rounds (`RefineOptions::for_scene`) and what rays render
+    /// behind their last sample (`FieldConfig::for_scene`) both depend on.
+    pub fn lacks_dense_depth(&self) -> bool {
+        self.frames.iter().all(|f| f.depth.is_none()) || self.has_sparse_depth()
+    }
+
+    /// True when most frames with depth have readings at fewer than half their pixels: the
+    /// depth of a reconstruction's points, not of a sensor.
+    pub fn has_sparse_depth(&self) -> bool {
+        let mut sparse = 0;
+        let mut with_depth = 0;
+        for depth in self.frames.iter().filter_map(|f| f.depth.as_ref()) {
+            with_depth += 1;
+            let readings = depth.pixels().filter(|p| p.0[0] > 0).count();
+            if readings * 2 < depth.len() {
+                sparse += 1;
+            }
+        }
+        with_depth > 0 && sparse * 2 > with_depth
+    }
+
     pub fn has_depth(&self) -> bool {
         self.frames.iter().any(|f| f.depth.is_some())
     }

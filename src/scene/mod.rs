@@ -6,6 +6,7 @@ pub mod camera;
 pub mod decoded;
 pub mod demo;
 pub mod error;
+pub mod guide;
 pub mod import;
 pub mod label_set;
 pub mod manifest;
@@ -16,4 +17,5 @@ pub use archive::{read_archive, read_archive_path, write_archive, write_archive_
 pub use camera::{Bounds, Intrinsics, Pose};
 pub use decoded::{DepthImage, FeatureCodes, Frame, GT_VOID, Scene};
 pub use error::{Result, SceneError};
+pub use guide::Guide;
 pub use manifest::{Pca, Provenance};

@@ -1,7 +1,7 @@
 // End-to-end test of spreading strokes over a photo capture with sparse depth (a COLMAP model's
 // points) in headless Chromium: the walks that carry two strokes on one photo to the other
 // photos take seconds, and the page must keep drawing meanwhile (they run in slices and give
-// the thread back: src/field/pause.rs). Draws one stroke per class on photo 0, then checks that
+// the thread back: src/pause.rs). Draws one stroke per class on photo 0, then checks that
 // the page said "spreading", that no task held the page's thread for long while it did, and
 // that the labels reached other photos. Starts no server: run.sh does, or point E2E_URL at one.
 //

@@ -190,14 +190,15 @@ fn real_capture_downscaled() {
     }
 }
 
-/// Strokes on two photos reach every photo through the model's points (`field::point_walk`):
+/// Strokes on two photos reach every photo through the model's points (`spread::point_walk`):
 /// the labels the trainer draws from cover most photos, and nearly all of them are right.
 #[test]
 fn strokes_on_two_photos_reach_the_others_through_the_points() {
-    use scribblefield::field::point_walk::{PointWalkOptions, label_points};
-    use scribblefield::field::propagate::{PropagationOptions, UndrawnFrames, propagate_labels};
     use scribblefield::labels::rasterize_frame;
     use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
+    use scribblefield::spread::point_walk::{PointWalkOptions, label_points};
+    use scribblefield::spread::propagate::propagate_labels;
+    use scribblefield::spread::{PropagationOptions, UndrawnFrames};
     let Some(dir) = real_data(CAPTURE) else { return };
     let opts = ImportOptions {
         max_size: Some(200),
@@ -295,8 +296,8 @@ fn frames_with_class(maps: &[(u32, Vec<u16>)], class: u16) -> usize {
 /// photo got the room's far pixels alone (37 % of pixels labelled, docs/quality.md).
 #[test]
 fn strokes_whose_points_hold_one_class_still_carry_it_to_every_photo() {
-    use scribblefield::field::propagate::{PropagationCache, PropagationOptions, UndrawnFrames};
     use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
+    use scribblefield::spread::{PropagationCache, PropagationOptions, UndrawnFrames};
     let Some(dir) = real_data(CAPTURE) else { return };
     let opts = ImportOptions {
         max_size: Some(400),

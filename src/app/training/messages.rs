@@ -75,9 +75,9 @@ pub enum Phase {
 pub struct Spread {
     pub pixels: usize,
     pub frames: usize,
-    /// What the spread's self-check found (`field::spread_check`), and whether it withheld
+    /// What the spread's self-check found (`spread::check`), and whether it withheld
     /// spreading.
-    pub check: Option<crate::field::spread_check::SpreadCheck>,
+    pub check: Option<crate::spread::check::SpreadCheck>,
     pub withheld: bool,
 }
 

@@ -19,10 +19,10 @@ use crate::field::FieldConfig;
 use crate::field::gpu::refine::RefinePass;
 use crate::field::gpu::trainer::{DepthGuide, RenderedFrame, Trainer, ViewCamera};
 use crate::field::gpu::view::frame_depth_at;
-use crate::field::pause::Pause;
-use crate::field::refine::Guide;
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
+use crate::pause::Pause;
+use crate::scene::Guide;
 use crate::scene::Scene;
 
 /// The visible frame is re-rendered at most this often while training (a render costs as much
@@ -32,7 +32,7 @@ const RENDER_INTERVAL_MS: f64 = 1500.0;
 /// Work on the page's thread between two gives back (it also draws the page and takes strokes).
 const SLICE_MS: f64 = 12.0;
 
-/// Pauses a long computation on the page's thread ([`crate::field::pause`]) once it has held the
+/// Pauses a long computation on the page's thread ([`crate::pause`]) once it has held the
 /// thread for [`SLICE_MS`], and tells the page the first time, so it can say what is going on.
 struct Slices<'a> {
     task: &'a TrainingTask,

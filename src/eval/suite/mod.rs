@@ -20,13 +20,14 @@ use crate::eval::Confusion;
 use crate::eval::headless::{budget_config, render_and_score, train_schedule};
 use crate::field::FieldConfig;
 use crate::field::gpu::trainer::Trainer;
-use crate::field::propagate::propagate_labels;
-use crate::field::refine::{Guide, RefineOptions};
-use crate::field::spread_check::{SpreadCheck, check_spread_now};
+use crate::field::refine::RefineOptions;
 use crate::gpu::{GpuContext, GpuOptions};
 use crate::labels::synthetic::{ScribbleOptions, scribble_frames};
 use crate::labels::{LabelSet, UNLABELLED, rasterize_frame};
+use crate::scene::Guide;
 use crate::scene::{GT_VOID, Scene};
+use crate::spread::check::{SpreadCheck, check_spread_now};
+use crate::spread::propagate::propagate_labels;
 
 pub use captures::{CAPTURES, Capture};
 pub use report::{RunResult, SuiteReport};

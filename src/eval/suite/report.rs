@@ -26,7 +26,7 @@ pub struct RunResult {
     pub spread: Option<SpreadFigures>,
     /// What the spread's self-check found, and whether it withheld spreading.
     #[serde(default)]
-    pub check: Option<crate::field::spread_check::SpreadCheck>,
+    pub check: Option<crate::spread::check::SpreadCheck>,
     #[serde(default)]
     pub withheld: bool,
     /// The class the opacity term pulls through the scene box (`Trainer::opacity_far_class`).

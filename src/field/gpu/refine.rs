@@ -3,11 +3,12 @@
 //! submission, then one read-back. The page uses it so a 640 x 480 refinement (0.44 s on one CPU
 //! core natively, more in wasm) does not hold up the page's thread; it awaits the read-back
 //! without blocking.
-use crate::field::refine::{Guide, HALF_TAPS, RefineOptions, TapScales, check_inputs, log_depth};
+use crate::field::refine::{HALF_TAPS, RefineOptions, TapScales, check_inputs, log_depth};
 use crate::gpu::buffers::{read_elements_async, storage_buffer_from, storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::{Dispatch, bind_named, whole};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
+use crate::scene::Guide;
 
 const WORKGROUP: u32 = 64;
 const _: () = assert!(HALF_TAPS == 3, "shaders/refine.wgsl has HALF_TAPS = 3");

@@ -70,7 +70,7 @@ impl LabelIndex {
     }
 
     /// The index of per-frame label maps (`frame`, one class id per pixel of a `width x height`
-    /// frame, `UNLABELLED` elsewhere), such as `field::propagate` makes. Class ids at or above
+    /// frame, `UNLABELLED` elsewhere), such as `spread::propagate` makes. Class ids at or above
     /// `num_classes`, and frames at or beyond `frame_count`, are left out.
     pub fn from_maps(maps: &[(u32, Vec<u16>)], frame_count: u32, width: u32, height: u32, num_classes: u32) -> Self {
         let mut pixels_by_class = vec![Vec::new(); num_classes as usize];

@@ -6,8 +6,9 @@
 //! is rendered twice: first with every sample spread over the ray, which gives a rough depth, then
 //! with that depth as the guide (NeRF's coarse-to-fine idea with the renderer's own estimate).
 use crate::field::reference::sampling::{clip_to_bounds, ray_through_pixel};
-use crate::field::refine::{Guide, RefineOptions, argmax_and_confidence, refine_probabilities};
+use crate::field::refine::{RefineOptions, argmax_and_confidence, refine_probabilities};
 use crate::gpu::{GpuContext, GpuError};
+use crate::scene::Guide;
 
 use super::refine::RefinePass;
 use crate::scene::resample::nearest_source;

@@ -12,17 +12,17 @@
 //! The same code runs natively and in the browser: nothing here blocks.
 use crate::field::config::FieldConfig;
 use crate::field::params::ParamLayout;
-use crate::field::pause::{NoPause, Pause, run_to_end};
-use crate::field::propagate::PropagationCache;
 use crate::field::reference::LossTerms;
-use crate::field::spread_check::{SpreadCheck, check_spread};
 use crate::gpu::buffers::{
     PendingRead, read_buffer_async, read_elements_async, storage_buffer_from, storage_buffer_zeroed,
 };
 use crate::gpu::timing::{PassTime, PassTimer, total_by_name};
 use crate::gpu::{GpuContext, GpuError};
 use crate::labels::LabelSet;
+use crate::pause::{NoPause, Pause, run_to_end};
 use crate::scene::{Bounds, Pca, Scene};
+use crate::spread::check::{SpreadCheck, check_spread};
+use crate::spread::propagate::PropagationCache;
 
 use super::adam::{AdamBuffers, AdamPass};
 use super::composite::{CompositeInputs, CompositeLayout, CompositePass, LOSS_WORDS};
@@ -462,13 +462,13 @@ impl Trainer {
 
     /// Replaces the labels training draws from (after the user draws, erases or undoes): each
     /// annotated frame of `scene` (the scene this trainer was made for) with its strokes spread
-    /// as `FieldConfig::scribble_propagation` says (`field::propagate`).
+    /// as `FieldConfig::scribble_propagation` says (`spread::propagate`).
     pub fn set_labels(&mut self, labels: Option<&LabelSet>, scene: &Scene) -> Result<(), GpuError> {
         run_to_end(self.set_labels_pausing(labels, scene, &mut NoPause))
     }
 
     /// [`Trainer::set_labels`], pausing between iterations of the walks that spread the strokes
-    /// (the page's thread also draws: `field::pause`).
+    /// (the page's thread also draws: `pause`).
     pub async fn set_labels_pausing(
         &mut self,
         labels: Option<&LabelSet>,
@@ -549,7 +549,7 @@ impl Trainer {
         Ok(())
     }
 
-    /// What the spread's self-check found for the current labels (`field::spread_check`);
+    /// What the spread's self-check found for the current labels (`spread::check`);
     /// None without labels, with spreading off or with the check off.
     pub fn spread_check(&self) -> Option<SpreadCheck> {
         self.spread_check

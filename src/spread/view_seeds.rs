@@ -1,7 +1,7 @@
 //! Seeds for every frame of a capture with sparse depth, from its labelled points
 //! (docs/results/quality-log.md, "Labels in every view").
 //!
-//! The points a walk over the reconstruction labels (`field::point_walk`) reach every frame that
+//! The points a walk over the reconstruction labels (`spread::point_walk`) reach every frame that
 //! sees them, but they reach it only where the reconstruction has points. A photo capture's
 //! model is dense on the object a user photographs from all sides and nearly empty elsewhere: an
 //! out-of-focus or textureless room behind it gives the matcher nothing to track. So a frame's
@@ -147,7 +147,7 @@ impl View {
 
 /// The class the strokes give a region of pixels, when one class clearly holds it: `strokes`
 /// are frames' rasterized strokes, each with its region (the pixels far from every point,
-/// [`View::far_from_points`]; a frame's support plane, `field::support_plane`).
+/// [`View::far_from_points`]; a frame's support plane, `spread::support_plane`).
 pub fn region_class(strokes: &[(&[u16], &[bool])], classes: usize) -> Option<u16> {
     let mut counts = vec![0usize; classes];
     for (map, region) in strokes {

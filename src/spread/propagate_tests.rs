@@ -2,7 +2,7 @@
 use image::{ImageBuffer, Luma, Rgb, RgbImage};
 
 use super::*;
-use crate::field::pixel_walk::srgb_to_lab;
+use crate::spread::colour::srgb_to_lab;
 
 /// Left half dark red, right half light grey, 24 x 16.
 fn two_regions() -> RgbImage {

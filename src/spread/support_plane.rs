@@ -62,7 +62,7 @@ impl Plane {
 }
 
 /// The pixels of the largest plane in `depth` (raw readings, 0 = none) seen by `camera`, with
-/// `normals` per pixel (`field::normals`); `None` when no plane holds [`MIN_SHARE`] of the
+/// `normals` per pixel (`spread::normals`); `None` when no plane holds [`MIN_SHARE`] of the
 /// readings. Deterministic: the search draws from a fixed seed.
 pub fn largest_plane(depth: &DepthImage, camera: &Intrinsics, normals: &[Option<[f32; 3]>]) -> Option<Vec<bool>> {
     let (w, h) = (depth.width() as usize, depth.height() as usize);
@@ -138,7 +138,7 @@ mod tests {
     #[test]
     fn the_floor_is_found_and_the_box_on_it_is_not() {
         let depth = floor_with_box();
-        let normals = crate::field::normals::depth_normals(&depth, &camera());
+        let normals = crate::spread::normals::depth_normals(&depth, &camera());
         let plane = largest_plane(&depth, &camera(), &normals).expect("a floor");
         let at = |x: usize, y: usize| plane[y * 80 + x];
         assert!(at(5, 5) && at(70, 55) && at(10, 45), "floor pixels");
@@ -153,7 +153,7 @@ mod tests {
         let bumpy = DepthImage::from_fn(80, 60, |x, y| {
             Luma([(1000.0 + 150.0 * ((f64::from(x) * 0.7).sin() + (f64::from(y) * 0.9).cos())) as u16])
         });
-        let normals = crate::field::normals::depth_normals(&bumpy, &k);
+        let normals = crate::spread::normals::depth_normals(&bumpy, &k);
         assert_eq!(largest_plane(&bumpy, &k, &normals), None);
         let empty = DepthImage::new(80, 60);
         assert_eq!(largest_plane(&empty, &k, &[]), None);

@@ -11,10 +11,11 @@
 //! each frame then trains on (and walks from) the labels of its own readings.
 use glam::DVec3;
 
-use super::pause::{NoPause, Pause, run_to_end};
-use super::pixel_walk::{conjugate_gradient, srgb_to_lab};
+use super::colour::srgb_to_lab;
+use super::pixel_walk::conjugate_gradient;
 use super::sparse_solve::Factored;
 use crate::labels::UNLABELLED;
+use crate::pause::{NoPause, Pause, run_to_end};
 use crate::scene::Scene;
 
 /// Neighbours each point links to (the graph is made symmetric, so some have more).
@@ -49,29 +50,6 @@ impl Default for PointWalkOptions {
             min_margin: 0.2,
         }
     }
-}
-
-/// Whether most of `scene`'s frames lack dense depth: no depth at all, or a reconstruction's
-/// sparse points ([`has_sparse_depth`]). Such a capture's field trains without surfaces to
-/// follow, which the refinement's rounds (`RefineOptions::for_scene`) and what rays render
-/// behind their last sample (`FieldConfig::for_scene`) both depend on.
-pub fn lacks_dense_depth(scene: &Scene) -> bool {
-    scene.frames.iter().all(|f| f.depth.is_none()) || has_sparse_depth(scene)
-}
-
-/// True when most frames with depth have readings at fewer than half their pixels: the depth of
-/// a reconstruction's points, not of a sensor.
-pub fn has_sparse_depth(scene: &Scene) -> bool {
-    let mut sparse = 0;
-    let mut with_depth = 0;
-    for depth in scene.frames.iter().filter_map(|f| f.depth.as_ref()) {
-        with_depth += 1;
-        let readings = depth.pixels().filter(|p| p.0[0] > 0).count();
-        if readings * 2 < depth.len() {
-            sparse += 1;
-        }
-    }
-    with_depth > 0 && sparse * 2 > with_depth
 }
 
 /// Every depth reading of a scene as a world point.

@@ -8,11 +8,10 @@
 //!   them as drawn. This is the spread a user cannot see: labels carried to frames nobody drew on.
 //! - **within frames**: every other stroke of each class (or the second half of a class's only
 //!   stroke) is held back on every drawn frame at once.
-use crate::field::pause::{NoPause, Pause, run_to_end};
-use crate::field::point_walk::has_sparse_depth;
-use crate::field::propagate::{PropagationCache, PropagationOptions};
 use crate::labels::{FrameLabels, LabelSet, Stroke, UNLABELLED, rasterize_frame};
+use crate::pause::{NoPause, Pause, run_to_end};
 use crate::scene::Scene;
+use crate::spread::{PropagationCache, PropagationOptions};
 
 /// How well a spread from part of the strokes predicts the rest.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -109,7 +108,7 @@ pub async fn check_spread(
         .map(|f| f.frame)
         .filter(|&f| (f as usize) < scene.frames.len())
         .collect();
-    if options.across_views && has_sparse_depth(scene) && drawn.len() >= 2 {
+    if options.across_views && scene.has_sparse_depth() && drawn.len() >= 2 {
         let mut total = FoldAgreement::default();
         for &frame in &drawn {
             let kept = LabelSet {
