@@ -59,7 +59,7 @@ fi
 echo "==> demo scene"
 # With weight-free baseline feature codes on a 40 x 30 grid (stride 4 of 160 x 120), so the demo
 # trains with feature supervision as the paper does: +3.1 MB (1.3 to 4.4 MB), and mean IoU 0.58 ->
-# 0.96 on it with scribbles on frames 0 and 12 (issue 3's note; `segment --preset budget`).
+# 0.96 on it with scribbles on frames 0 and 12 (`segment --preset budget`).
 cargo run --release --quiet -- demo-scene -o www/demo.scene.zip --features baseline --feature-stride 4
 
 RAW=$(wc -c < "$WASM")

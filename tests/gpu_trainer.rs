@@ -107,7 +107,7 @@ fn a_second_trainer_compiles_no_pipelines() {
 }
 
 /// `bench --json`'s traffic estimate of a whole step at the full config (4096 rays x 64
-/// samples): near issue 15's reading of the kernels (roughly 8.6 GB, MLP backward more than half;
+/// samples): near a first reading of the kernels (roughly 8.6 GB, MLP backward more than half;
 /// the CPU-device kernels this test runs on move somewhat less), and fewer samples at the heads
 /// move less through the heads' MLPs and the same through the density's.
 #[test]

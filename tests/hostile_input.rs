@@ -103,8 +103,8 @@ fn a_frame_listed_twice_is_refused_naming_it() {
 
 #[test]
 fn a_small_link_holding_millions_of_points_is_refused_quickly() {
-    // Like the link: 32 strokes of 65536 repeated points (2 M points) deflate to a code of a
-    // few thousand characters. It must be refused before the points are built.
+    // Like the hostile link first reported: 32 strokes of 65536 repeated points (2 M points)
+    // deflate to a code of a few thousand characters. It must be refused before the points are built.
     let strokes = (0..32)
         .map(|_| Stroke {
             class: Some(0),

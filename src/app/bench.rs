@@ -1,9 +1,9 @@
 //! The page's bench (`#bench=PRESET[&bench-steps=N][&bench-inflight=N][&rays=N][&kernels=...]`,
-//! issue 15): instead of the annotator, trains a preset on the built-in demo scene with
-//! synthetic scribbles (the scene and labels of `scribblefield bench`, `eval::bench`) on the
-//! page's own WebGPU device, in batches as the page trains while the user annotates
-//! (`training::batches`: the same batch sizing, up to two batches in flight, a yield to the
-//! browser and a repaint at the page's interval between batches), and reports the figures of
+//! figures in docs/results/bench.md): instead of the annotator, trains a preset on the built-in
+//! demo scene with synthetic scribbles (the scene and labels of `scribblefield bench`,
+//! `eval::bench`) on the page's own WebGPU device, in batches as the page trains while the user
+//! annotates (`training::batches`: the same batch sizing, up to two batches in flight, a yield to
+//! the browser and a repaint at the page's interval between batches), and reports the figures of
 //! `bench --json` that apply on `<body data-bench="...">` (JSON): while it runs
 //! `{"state":"running","stage":...}`, then `{"state":"done",...}` with the report, or
 //! `{"state":"error","message":...}`. Browsers offer no timestamp queries by default, so the

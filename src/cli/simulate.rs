@@ -134,7 +134,7 @@ pub fn run_one(
 ) -> Result<simulate::SimulateState, Box<dyn std::error::Error>> {
     let bar = progress::bar("training");
     let quiet = bar.is_hidden();
-    // The whole run's time left, from the clicks labelled in this session so far (the bar's own
+    // The whole run's time left, from the clicks labelled in this run so far (the bar's own
     // estimate only covers the current round's training).
     let started = std::time::Instant::now();
     let mut clicks_before = 0u32;

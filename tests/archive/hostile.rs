@@ -49,7 +49,7 @@ fn duplicate_entry_names_are_refused_naming_the_entry() {
 
 #[test]
 fn frames_sharing_one_image_entry_are_refused_naming_both() {
-    // The case: many large frames decoding one small image.
+    // The case first reported: many large frames decoding one small image.
     let err = error_after(|e| {
         edit_manifest(e, |m| {
             m["frames"][2]["rgb"] = "rgb/00000.png".into();

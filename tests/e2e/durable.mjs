@@ -1,4 +1,4 @@
-// End-to-end test of keeping annotations (issue 14) in headless Chromium: an old build's
+// End-to-end test of keeping annotations (saves in IndexedDB) in headless Chromium: an old build's
 // local-storage save is migrated; two tabs on one scene (the second follows read-only, takes
 // over when the first closes, and a reload loses no stroke); a corrupted save is set aside and
 // the next edit leaves it alone; a full disk (IndexedDB put stubbed to fail) shows "not saved",

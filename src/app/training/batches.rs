@@ -2,8 +2,9 @@
 //! (`app::bench`) alike: record and submit a batch of steps, yield to the browser, and adapt the
 //! batch to the GPU time it took.
 //!
-//! On a GPU two batches are in flight (issue 15, item 6): the next batch is recorded and
-//! submitted while the previous one runs, and only then does the task wait, for the older one.
+//! On a GPU two batches are in flight, to bring the page near native speed: the next batch is
+//! recorded and submitted while the previous one runs, and only then does the task wait, for the
+//! older one.
 //! So the GPU does not idle while the page's thread records, and the wait for a batch's end
 //! overlaps the next batch's work. The steps are submitted in the same order either way, so
 //! training is the same; only when the page's thread waits changes. On a CPU rasterizer one: a
