@@ -190,9 +190,9 @@ fn spread_only(runs: &[suite::RunSpec], data: &std::path::Path, options: &SuiteO
         Ok::<_, String>((capture.name, set, figures, check, seconds))
     });
     println!(
-        "| capture | set | drawn px | spread px | frames | right | right on drawn frames | check across views | check within frames | seconds |"
+        "| capture | set | drawn px | spread px | frames | right | right on drawn frames | least right class | check across views | check within frames | class left out: unclaimed | seconds |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     let fold = |f: Option<scribblefield::spread::check::FoldAgreement>| {
         f.map_or("-".to_string(), |f| {
             format!("{:.3} of {}/{}", f.agreement(), f.labelled, f.held)
@@ -201,14 +201,19 @@ fn spread_only(runs: &[suite::RunSpec], data: &std::path::Path, options: &SuiteO
     for r in results {
         let (name, set, f, check, seconds) = r?;
         println!(
-            "| {name} | {set} | {} | {} | {} | {:.3} | {:.3} | {} | {} | {seconds:.1} |",
+            "| {name} | {set} | {} | {} | {} | {:.3} | {:.3} | {} | {} | {} | {} | {seconds:.1} |",
             f.drawn,
             f.written,
             f.frames,
             f.right,
             f.right_on_drawn_frames,
+            f.worst_class
+                .map_or("-".to_string(), |c| format!("{c}: {:.3}", f.worst_class_right)),
             fold(check.across_views),
-            fold(check.within_frames)
+            fold(check.within_frames),
+            check
+                .class_left_out
+                .map_or("-".to_string(), |l| format!("{:.3} of {}", l.unclaimed(), l.held))
         );
     }
     Ok(())

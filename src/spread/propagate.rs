@@ -50,7 +50,7 @@ pub fn propagate_frame(
 }
 
 /// [`propagate_frame`], pausing between iterations of its walks.
-async fn walk_frame(
+pub(crate) async fn walk_frame(
     strokes: &[u16],
     classes: usize,
     guide: Guide<'_>,

@@ -67,7 +67,22 @@ pub struct SpreadFigures {
     /// gives); 1 where they have no spread label.
     #[serde(default)]
     pub right_on_drawn_frames: f64,
+    /// The class whose spread labels are least often right (of those given at least
+    /// [`MIN_CLASS_LABELS`] scored labels), and that share: a small object the walk leaks out of
+    /// hides in `right` behind the large classes around it.
+    #[serde(default)]
+    pub worst_class: Option<u16>,
+    #[serde(default = "one")]
+    pub worst_class_right: f64,
 }
+
+fn one() -> f64 {
+    1.0
+}
+
+/// Scored spread labels a class needs before its share right counts towards
+/// [`SpreadFigures::worst_class`].
+pub const MIN_CLASS_LABELS: u64 = 20;
 
 impl SpreadFigures {
     /// Compares the label maps training drew from (`maps`, by frame) with the strokes
@@ -80,6 +95,8 @@ impl SpreadFigures {
         let mut figures = SpreadFigures::default();
         let (mut scored, mut right) = (0u64, 0u64);
         let (mut scored_drawn, mut right_drawn) = (0u64, 0u64);
+        // Scored and right labels per class given.
+        let mut by_class: std::collections::BTreeMap<u16, (u64, u64)> = Default::default();
         for (frame, map) in maps {
             let strokes = drawn.iter().find(|(f, _)| f == frame).map(|(_, s)| s.as_slice());
             let gt = gt_of(*frame).map(|g| g.as_raw().as_slice());
@@ -100,6 +117,9 @@ impl SpreadFigures {
                     let is_right = u64::from(u16::from(g) == label);
                     scored += 1;
                     right += is_right;
+                    let class = by_class.entry(label).or_default();
+                    class.0 += 1;
+                    class.1 += is_right;
                     if strokes.is_some() {
                         scored_drawn += 1;
                         right_drawn += is_right;
@@ -111,6 +131,14 @@ impl SpreadFigures {
         let share = |right: u64, scored: u64| if scored > 0 { right as f64 / scored as f64 } else { 1.0 };
         figures.right = share(right, scored);
         figures.right_on_drawn_frames = share(right_drawn, scored_drawn);
+        figures.worst_class_right = 1.0;
+        for (&class, &(scored, right)) in by_class.iter().filter(|(_, (scored, _))| *scored >= MIN_CLASS_LABELS) {
+            let right = share(right, scored);
+            if right < figures.worst_class_right {
+                figures.worst_class = Some(class);
+                figures.worst_class_right = right;
+            }
+        }
         figures
     }
 }
@@ -142,5 +170,31 @@ mod tests {
         // not scored); on frame 5, nobody drew, one of three.
         assert!((f.right_on_drawn_frames - 0.5).abs() < 1e-12);
         assert!((f.right - 2.0 / 5.0).abs() < 1e-12);
+        // Too few labels per class to name a worst one.
+        assert_eq!((f.worst_class, f.worst_class_right), (None, 1.0));
+    }
+
+    #[test]
+    fn the_worst_class_is_the_least_right_of_those_with_enough_labels() {
+        // Frame 0 is class 0 everywhere: 25 labels of class 0 (all right) and 10 of class 1
+        // (all wrong, but too few to count). Frame 1 is class 2 on its first 6 pixels and class
+        // 3 after: 24 labels of class 2, 6 of them right.
+        let n = 40;
+        let gt0 = GrayImage::from_raw(n, 1, vec![0; n as usize]).unwrap();
+        let gt1 = GrayImage::from_raw(
+            n,
+            1,
+            (0..n).map(|i| u8::from(i >= 6) * 3 + 2 * u8::from(i < 6)).collect(),
+        )
+        .unwrap();
+        let mut map0 = vec![UNLABELLED; n as usize];
+        map0[..25].fill(0);
+        map0[25..35].fill(1);
+        let mut map1 = vec![UNLABELLED; n as usize];
+        map1[..24].fill(2);
+        let maps = vec![(0, map0), (1, map1)];
+        let f = SpreadFigures::measure(&maps, &[], |frame| Some(if frame == 0 { &gt0 } else { &gt1 }));
+        assert_eq!(f.worst_class, Some(2));
+        assert!((f.worst_class_right - 6.0 / 24.0).abs() < 1e-12);
     }
 }
