@@ -111,7 +111,7 @@ pub fn run(mut args: BenchArgs) -> CliResult {
         "ratio:            {:.2}  (trainer's MLP throughput / plain matmul)",
         gflop / seconds / matmul.gflops
     );
-    let bytes: u64 = shape.iter().map(|s| s.bytes).sum::<u64>() + trainer.gradient_clear_bytes();
+    let bytes: u64 = shape.iter().map(|s| s.bytes).sum::<u64>();
     let dispatches: u64 = shape.iter().map(|s| s.dispatches).sum();
     println!(
         "per step:         {:.3} GB through global memory (estimate), {dispatches} dispatches and a gradient clear",

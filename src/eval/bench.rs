@@ -112,8 +112,7 @@ pub fn step_report(
         "samples_per_s": samples / step_s,
         // The mean kept by the keep stage over the timed steps (FieldConfig::head_weight_threshold).
         "samples_to_heads_per_step": to_heads,
-        "bytes_per_step": shape.iter().map(|s| s.bytes).sum::<u64>() + trainer.gradient_clear_bytes(),
-        "gradient_clear_bytes": trainer.gradient_clear_bytes(),
+        "bytes_per_step": shape.iter().map(|s| s.bytes).sum::<u64>(),
         "dispatches_per_step": shape.iter().map(|s| s.dispatches).sum::<u64>(),
         "mlp_gflop_per_step": gflop,
         "mlp_gflops": gflop / step_s,

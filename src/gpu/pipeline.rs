@@ -97,34 +97,6 @@ pub async fn create_compute_pipeline(
     }
 }
 
-/// A layout entry for a storage buffer visible to compute shaders.
-pub fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-/// A layout entry for a uniform buffer visible to compute shaders.
-pub fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
 /// Workgroup counts for `items` independent items in workgroups of `workgroup_size`, spread over
 /// x and y when one dimension would exceed the device's limit (65535 by default). Kernels turn
 /// the 2D workgroup id back into an item index with `linear_item_index` from

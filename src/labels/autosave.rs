@@ -1,6 +1,9 @@
-//! What the annotator keeps in the browser's storage so nothing is lost to a reload or a crash:
-//! one entry per scene, under a key derived from where the scene came from, holding the labels
-//! and enough about the scene to refuse restoring them onto a different one.
+//! One saved state of a scene's labels, as the annotator keeps it so nothing is lost to a reload
+//! or a crash: the labels and enough about the scene (frames and size) to refuse restoring them
+//! onto a different one. `labels::snapshots` keeps the last few of these per scene, keyed by the
+//! archive's content. Where a scene came from (`SceneSource`) names it in messages and share
+//! links; its `storage_key` is the key the old build saved under in local storage, which the
+//! store reads once to migrate such saves.
 use serde::{Deserialize, Serialize};
 
 use super::LabelSet;

@@ -102,7 +102,7 @@ await runBrowserTest("bench", { checks, consoleLog }, async (context) => {
     const bytes = report.stages.reduce((a, s) => a + s.bytes, 0);
     assert(Number.isInteger(report.dispatches_per_step) && report.dispatches_per_step > 0, `dispatches ${report.dispatches_per_step}`);
     assert(dispatches === report.dispatches_per_step, `stages ${dispatches} dispatches, step ${report.dispatches_per_step}`);
-    assert(bytes + report.gradient_clear_bytes === report.bytes_per_step, `stages ${bytes} + clear ${report.gradient_clear_bytes} bytes, step ${report.bytes_per_step}`);
+    assert(bytes === report.bytes_per_step, `stages ${bytes} bytes, step ${report.bytes_per_step}`);
     // No timestamp queries in the page: no GPU times per stage.
     assert(report.stages.every((s) => s.gpu_ms === null || positive(s.gpu_ms)), "a stage's gpu_ms is neither null nor positive");
   });

@@ -137,7 +137,7 @@ impl StepStage {
     ///
     /// The MLPs' stages are `None`: their passes know which kernels they record, and count
     /// them (`Trainer::stage_bytes`). Adam zeroes the gradient it consumed, so there is no
-    /// separate clear of the gradient buffer before a step ([`gradient_clear_bytes`] is 0).
+    /// separate clear of the gradient buffer before a step.
     pub(super) fn global_bytes(self, cfg: &FieldConfig, kept: u64, heads: HeadRowFormats) -> Option<u64> {
         let layout = ParamLayout::new(cfg);
         let r = u64::from(cfg.batch_rays);
@@ -200,12 +200,6 @@ impl StepStage {
         };
         Some(bytes)
     }
-}
-
-/// Bytes a clear of the gradient buffer writes before each step: none, Adam zeroes the gradient
-/// it consumes (the step's last stage), so the next step starts from a clear buffer.
-pub(super) fn gradient_clear_bytes(_cfg: &FieldConfig) -> u64 {
-    0
 }
 
 /// One stage of a training step as `bench` reports it.
@@ -292,12 +286,6 @@ impl Trainer {
             semantic_input: self.semantic.input().format,
             semantic_gradient: gradient(&self.semantic),
         }
-    }
-
-    /// Bytes a clear of the gradient buffer writes before each step (not a dispatch): 0 since
-    /// Adam zeroes the gradient as it consumes it (kept so `bench --json` can show it).
-    pub fn gradient_clear_bytes(&self) -> u64 {
-        gradient_clear_bytes(&self.cfg)
     }
 
     /// Records one stage's passes.
