@@ -4,9 +4,10 @@
 //! -- --ignored --nocapture`.
 use scribblefield::field::gpu::dense::RowFormat;
 use scribblefield::field::gpu::encoding::{
-    AtomicAdd, BackwardStrategy, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
-    PositionEncodeBuffers, PositionEncodePass, ShOutputLayout, WORKGROUP_SIZE,
+    AtomicAdd, BackwardStrategy, HashGridBackwardBuffers, HashGridBackwardPass, PositionEncodeBuffers,
+    PositionEncodePass, WORKGROUP_SIZE,
 };
+use scribblefield::field::gpu::sh_encode::{DirectionShBuffers, DirectionShPass, ShOutputLayout};
 use scribblefield::field::reference::hash_grid::{self, HashGrid};
 use scribblefield::field::reference::{frequency, sh};
 use scribblefield::field::{Encoding, FieldConfig, bf16};

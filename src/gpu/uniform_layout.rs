@@ -85,7 +85,7 @@ pub const MIRRORS: &[Mirror] = &[
         "SampleRange",
     ),
     mirror(
-        "src/field/gpu/encoding.rs",
+        "src/field/gpu/sh_encode.rs",
         "ShUniforms",
         "sh_encode.wgsl",
         "ShUniforms",

@@ -1,6 +1,6 @@
-//! The input encodings on the GPU: the position encoding (hash grid + frequencies) and its
-//! hash-table gradient, and the spherical harmonics of the view direction. The GPU twins of
-//! `reference::{hash_grid, frequency, sh}`; tested against them in `tests/gpu_field_encoding.rs`.
+//! The position encoding on the GPU (hash grid + frequencies) and its hash-table gradient. The
+//! GPU twins of `reference::{hash_grid, frequency}`; tested against them in
+//! `tests/gpu_field_encoding.rs`. The view direction's encoding is `sh_encode`.
 //!
 //! - [`PositionEncodePass`] (`shaders/hash_encode.wgsl`): N positions (`vec4<f32>`, xyz in
 //!   [0,1]³) → N rows of `cfg.encoding_dim()` values, `[hash levels… | frequencies]`, exactly
@@ -10,8 +10,6 @@
 //!   fixed point or an f32 compare-exchange loop, by device ([`AtomicAdd`];
 //!   docs/architecture.md, "Fixed-point hash gradients"). The table range must be zero first:
 //!   [`HashGridBackwardPass::record_clear`] does that (in the trainer, the previous step's Adam).
-//! - [`DirectionShPass`] (`shaders/sh_encode.wgsl`): one unit direction per ray → the 16 SH
-//!   values of every sample of the ray, in given columns of a strided per-sample buffer.
 //!
 //! Passes are built once with their buffers and only record dispatches, so a training step can
 //! record all of them into one encoder. The sample count is fixed at creation.
@@ -19,9 +17,7 @@ use std::ops::Range;
 
 use crate::field::config::FieldConfig;
 use crate::field::gpu::fixed_point::decode_table;
-use crate::field::gpu::row_view::RowFormat;
 use crate::field::reference::hash_grid::HashGrid;
-use crate::field::reference::sh::SH_COEFFS;
 use crate::gpu::buffers::{PendingRead, read_buffer_async, storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::{Dispatch, whole};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec};
@@ -59,8 +55,8 @@ pub const MAX_HASH_LEVELS: usize = 32;
 pub const MAX_HASH_FEATURES: usize = 8;
 
 /// Bytes per position or direction: a `vec4<f32>`.
-const VEC4_BYTES: u64 = 16;
-const F32_BYTES: u64 = 4;
+pub(super) const VEC4_BYTES: u64 = 16;
+pub(super) const F32_BYTES: u64 = 4;
 
 /// Uniform block of `hash_encode.wgsl` and `hash_backward.wgsl` (`HashGridUniforms` in
 /// `_hash_grid.wgsl`, field by field).
@@ -125,34 +121,6 @@ impl HashGridUniforms {
             level_geometry,
         })
     }
-}
-
-/// Uniform block of `sh_encode.wgsl` (`ShUniforms`, field by field).
-#[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct ShUniforms {
-    pub sample_count: u32,
-    pub samples_per_ray: u32,
-    pub row_stride: u32,
-    pub column_offset: u32,
-    pub direction_stride: u32,
-    pub direction_offset: u32,
-    pub _pad0: u32,
-    pub _pad1: u32,
-}
-
-/// Where ray r's direction sits in the directions buffer: `vec4` index `r·stride + offset`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct DirectionLayout {
-    pub stride: usize,
-    pub offset: usize,
-}
-
-impl DirectionLayout {
-    /// One direction per ray, back to back.
-    pub const PACKED: DirectionLayout = DirectionLayout { stride: 1, offset: 0 };
-    /// The `dir` field of the ray batch's `RayGeometry` records (3 vec4s each, dir second).
-    pub const RAY_GEOMETRY: DirectionLayout = DirectionLayout { stride: 3, offset: 1 };
 }
 
 /// The buffers of [`PositionEncodePass`].
@@ -572,132 +540,12 @@ impl HashGridBackwardPass {
     }
 }
 
-/// Where [`DirectionShPass`] writes: 16 columns of a per-sample buffer whose rows also hold
-/// other values (the colour MLP's input `[SH 16 | geometry]`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ShOutputLayout {
-    /// Samples of one ray: sample n takes the direction of ray n / samples_per_ray.
-    pub samples_per_ray: usize,
-    /// Values per output row.
-    pub row_stride: usize,
-    /// Column of the first SH value; columns `column_offset..column_offset + 16` are written.
-    pub column_offset: usize,
-    /// f32 rows, or bf16 rows (`row_stride` and `column_offset` even).
-    pub format: RowFormat,
-}
-
-/// The buffers of [`DirectionShPass`].
-#[derive(Debug, Clone, Copy)]
-pub struct DirectionShBuffers<'a> {
-    /// One unit direction per ray as `vec4<f32>` (xyz; w unused).
-    pub directions: &'a wgpu::Buffer,
-    /// Output: N rows of `row_stride` values in `ShOutputLayout::format`; only the SH columns
-    /// are written.
-    pub output: &'a wgpu::Buffer,
-}
-
-/// Degree-4 SH of each ray's direction, written for each of its samples (see the module docs).
-#[derive(Debug)]
-pub struct DirectionShPass {
-    dispatch: Dispatch,
-    _uniforms: wgpu::Buffer,
-}
-
-impl DirectionShPass {
-    pub async fn new(
-        ctx: &GpuContext,
-        samples: usize,
-        layout: ShOutputLayout,
-        buffers: DirectionShBuffers<'_>,
-    ) -> Result<Self, GpuError> {
-        Self::with_directions(ctx, samples, layout, DirectionLayout::PACKED, buffers).await
-    }
-
-    /// As [`DirectionShPass::new`] with directions laid out as `directions_at` says.
-    pub async fn with_directions(
-        ctx: &GpuContext,
-        samples: usize,
-        layout: ShOutputLayout,
-        directions_at: DirectionLayout,
-        buffers: DirectionShBuffers<'_>,
-    ) -> Result<Self, GpuError> {
-        const WHAT: &str = "view direction SH";
-        check_samples(WHAT, samples)?;
-        if layout.samples_per_ray == 0 || layout.column_offset + SH_COEFFS > layout.row_stride {
-            return Err(GpuError::invalid_argument(
-                WHAT,
-                format!("{layout:?}: needs samples_per_ray >= 1 and column_offset + {SH_COEFFS} <= row_stride"),
-            ));
-        }
-        let rays = samples.div_ceil(layout.samples_per_ray) as u64;
-        if directions_at.stride == 0 || directions_at.offset >= directions_at.stride {
-            return Err(GpuError::invalid_argument(
-                WHAT,
-                format!("{directions_at:?}: offset must be below a positive stride"),
-            ));
-        }
-        let direction_vec4s = (rays - 1) * directions_at.stride as u64 + directions_at.offset as u64 + 1;
-        check_buffer(
-            ctx,
-            WHAT,
-            "directions",
-            buffers.directions,
-            direction_vec4s * VEC4_BYTES,
-        )?;
-        let bf16 = layout.format == RowFormat::Bf16;
-        if bf16 && (!layout.row_stride.is_multiple_of(2) || !layout.column_offset.is_multiple_of(2)) {
-            return Err(GpuError::invalid_argument(
-                WHAT,
-                format!("{layout:?}: bf16 rows need an even row stride and column offset"),
-            ));
-        }
-        let output_values = samples as u64 * layout.row_stride as u64;
-        let output_words = if bf16 { output_values / 2 } else { output_values };
-        check_buffer(ctx, WHAT, "output", buffers.output, output_words * F32_BYTES)?;
-        check_index_range(WHAT, output_values)?;
-        check_index_range(WHAT, samples as u64 + u64::from(WORKGROUP_SIZE) * u64::from(u16::MAX))?;
-        let uniforms = ShUniforms {
-            sample_count: samples as u32,
-            samples_per_ray: index_u32("samples per ray", layout.samples_per_ray)?,
-            row_stride: index_u32("SH row stride", layout.row_stride)?,
-            column_offset: index_u32("SH column offset", layout.column_offset)?,
-            direction_stride: index_u32("direction stride", directions_at.stride)?,
-            direction_offset: index_u32("direction offset", directions_at.offset)?,
-            _pad0: 0,
-            _pad1: 0,
-        };
-        let groups = Dispatch1d::for_device(ctx, samples as u64, WORKGROUP_SIZE)?;
-        let constants = [("SH_BF16", f64::from(u8::from(bf16)))];
-        let spec = KernelSpec {
-            constants: &constants,
-            ..KernelSpec::new(WHAT, shaders::SH_ENCODE, "sh_encode")
-        };
-        let uniform_buffer = uniform_buffer_from(ctx, "view direction SH uniforms", &uniforms);
-        let bindings = whole(&[
-            ("sh_layout", &uniform_buffer),
-            ("directions", buffers.directions),
-            ("sh_out", buffers.output),
-        ]);
-        let dispatch = Dispatch::build(ctx, &spec, &bindings, groups).await?;
-        Ok(DirectionShPass {
-            dispatch,
-            _uniforms: uniform_buffer,
-        })
-    }
-
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        if !self.dispatch.is_empty() {
-            self.dispatch.record(pass);
-        }
-    }
-}
-
-fn index_u32(what: &str, value: usize) -> Result<u32, GpuError> {
+pub(super) fn index_u32(what: &str, value: usize) -> Result<u32, GpuError> {
     u32::try_from(value).map_err(|_| GpuError::invalid_argument(what, format!("{value} does not fit the kernels' u32")))
 }
 
 /// The kernels index with u32: every element index (and the dispatch's overshoot) must fit.
-fn check_index_range(what: &str, elements: u64) -> Result<(), GpuError> {
+pub(super) fn check_index_range(what: &str, elements: u64) -> Result<(), GpuError> {
     if elements > u64::from(u32::MAX) {
         return Err(GpuError::invalid_argument(
             what,
@@ -707,12 +555,18 @@ fn check_index_range(what: &str, elements: u64) -> Result<(), GpuError> {
     Ok(())
 }
 
-fn check_samples(what: &str, samples: usize) -> Result<(), GpuError> {
+pub(super) fn check_samples(what: &str, samples: usize) -> Result<(), GpuError> {
     index_u32(what, samples).map(|_| ())
 }
 
 /// The buffer holds at least `needed` bytes and can be bound whole on this device.
-fn check_buffer(ctx: &GpuContext, what: &str, role: &str, buffer: &wgpu::Buffer, needed: u64) -> Result<(), GpuError> {
+pub(super) fn check_buffer(
+    ctx: &GpuContext,
+    what: &str,
+    role: &str,
+    buffer: &wgpu::Buffer,
+    needed: u64,
+) -> Result<(), GpuError> {
     if buffer.size() < needed {
         return Err(GpuError::invalid_argument(
             format!("{what}: {role} buffer"),
@@ -723,59 +577,5 @@ fn check_buffer(ctx: &GpuContext, what: &str, role: &str, buffer: &wgpu::Buffer,
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::field::config::Encoding;
-
-    #[test]
-    fn uniform_blocks_match_the_wgsl_layout() {
-        // 12 scalars then 32 vec4<u32> (stride 16 in the uniform address space).
-        assert_eq!(size_of::<HashGridUniforms>(), 12 * 4 + MAX_HASH_LEVELS * 16);
-        assert_eq!(size_of::<ShUniforms>(), 32);
-    }
-
-    #[test]
-    fn uniforms_follow_the_reference_grid() {
-        let cfg = FieldConfig::default();
-        let u = HashGridUniforms::new(&cfg, 1000, 7).unwrap();
-        assert_eq!(
-            (u.levels, u.features, u.table_size, u.table_offset),
-            (16, 2, 1 << 19, 7)
-        );
-        assert_eq!((u.row_stride, u.frequency_column, u.frequencies), (44, 32, 2));
-        assert_eq!(u.groups_per_level, 1000usize.div_ceil(WORKGROUP_SIZE as usize) as u32);
-        // 16, 32, 64 cells are dense (65³ ≤ 2^19); 128 is hashed.
-        assert_eq!(
-            &u.level_geometry[..4],
-            &[
-                [16, 17, 0, 0],
-                [32, 33, 4913, 0],
-                [64, 65, 4913 + 35_937, 0],
-                [128, 0, 315_475, 0]
-            ]
-        );
-        assert_eq!(u.level_geometry[15][0], 16 << 15);
-        assert_eq!(u.level_geometry[15][2], 315_475 + 12 * (1 << 19));
-        assert_eq!(u.level_geometry[16], [0; 4]);
-
-        let freq = FieldConfig {
-            encoding: Encoding::freq_only_baseline(),
-            ..FieldConfig::default()
-        };
-        let u = HashGridUniforms::new(&freq, 10, 0).unwrap();
-        assert_eq!(
-            (u.levels, u.row_stride, u.frequency_column, u.frequencies),
-            (0, 60, 0, 10)
-        );
-    }
-
-    #[test]
-    fn invalid_configs_are_refused() {
-        let cfg = FieldConfig {
-            hash_levels: 0,
-            ..FieldConfig::default()
-        };
-        assert!(HashGridUniforms::new(&cfg, 10, 0).is_err());
-        assert!(HashGridUniforms::new(&FieldConfig::default(), 10, usize::MAX).is_err());
-    }
-}
+#[path = "encoding_tests.rs"]
+mod tests;

@@ -18,5 +18,6 @@ pub mod rays;
 pub mod refine;
 pub mod row_view;
 pub mod scene_buffers;
+pub mod sh_encode;
 pub mod trainer;
 pub mod view;

@@ -30,14 +30,14 @@ use super::dense::{
     DenseFamily, DensePipelines, InputRows, MlpGradients, MlpPass, MlpPassDesc, RowFormat, RowView, mlp_row_format,
 };
 use super::encoding::{
-    AtomicAdd, DirectionLayout, DirectionShBuffers, DirectionShPass, HashGridBackwardBuffers, HashGridBackwardPass,
-    PositionEncodeBuffers, PositionEncodePass, ShOutputLayout,
+    AtomicAdd, HashGridBackwardBuffers, HashGridBackwardPass, PositionEncodeBuffers, PositionEncodePass,
 };
 use super::head_glue::{GlueBuffers, GlueDims, GlueRows, HeadGluePass};
 use super::keep::{HeadRows, KeepBuffers, KeepPass, KeepShape};
 use super::rays::{FrameTilePass, RayBatchPass, SamplePointsPass, StepUniforms};
 use super::rays::{NO_LABEL, RayGeometry, TARGET_FLAGS, TARGET_HEADER_WORDS, TARGET_LABEL, TARGET_PIXEL};
 use super::scene_buffers::{LabelIndex, SceneBuffers};
+use super::sh_encode::{DirectionLayout, DirectionShBuffers, DirectionShPass, ShOutputLayout};
 use super::view::view_rays;
 pub use super::view::{DepthGuide, FrameAssembler, RenderedFrame, ViewCamera};
 use crate::field::reference::mlp::{Rounding, StoredRows};
