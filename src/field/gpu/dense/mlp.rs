@@ -1,6 +1,7 @@
 //! Whole MLPs on the dense layers: the twin of `reference::mlp`.
+use super::backward::{DenseBackward, DenseGradients, OutputGradient};
 use super::chain::{BackwardChain, ChainDesc, chain_block};
-use super::layer::{DenseBackward, DenseForward, DenseGradients, DenseLayerSpec, OutputGradient};
+use super::layer::{DenseForward, DenseLayerSpec};
 use super::pipelines::ProductKind;
 use super::uniform::MlpPacking;
 use super::uniform::uniform_weight_chunks;

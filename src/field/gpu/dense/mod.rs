@@ -54,6 +54,7 @@
 //! ReLU's bits between layers), [`pipelines`] (the pipeline cache and the choice of
 //! kernel per product), [`layer`] (layer specs, one layer's forward and backward) and [`mlp`]
 //! (whole MLPs). Everything a caller needs is re-exported here.
+mod backward;
 mod chain;
 mod layer;
 mod mlp;
@@ -62,7 +63,8 @@ mod relu_mask;
 mod tiled;
 mod uniform;
 
-pub use layer::{DenseBackward, DenseDims, DenseForward, DenseGradients, DenseLayerSpec};
+pub use backward::{DenseBackward, DenseGradients};
+pub use layer::{DenseDims, DenseForward, DenseLayerSpec};
 pub use mlp::{InputRows, MlpGradients, MlpPass, MlpPassDesc, mlp_row_format};
 pub use pipelines::DensePipelines;
 pub use relu_mask::ReluMask;
