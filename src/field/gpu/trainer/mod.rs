@@ -40,11 +40,13 @@ use super::view::view_rays;
 pub use super::view::{DepthGuide, FrameAssembler, RenderedFrame, ViewCamera};
 use crate::field::reference::mlp::{Rounding, StoredRows};
 pub use stages::StageShape;
-use stages::{FIELD_STAGES, StepStage, TRAINING_STEP};
+use stages::{FIELD_STAGES, TRAINING_STEP};
 
 mod labels;
 mod render;
 mod stages;
+mod state;
+pub use state::TrainerState;
 
 const SH: u32 = 16;
 
@@ -53,15 +55,6 @@ const SH: u32 = 16;
 pub struct StepLosses {
     pub step: u32,
     pub terms: LossTerms,
-}
-
-/// A trainer's resumable state (see [`Trainer::read_state`]); the vectors follow `ParamLayout`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TrainerState {
-    pub step: u32,
-    pub params: Vec<f32>,
-    pub first_moment: Vec<f32>,
-    pub second_moment: Vec<f32>,
 }
 
 /// The per-sample buffers between passes, owned here so passes can share them. From
@@ -633,112 +626,5 @@ impl Trainer {
     /// Two reads around some steps give the mean kept samples per step (`bench`).
     pub fn kept_tally(&self) -> PendingRead<u32> {
         read_buffer_async::<u32>(&self.ctx, &self.head_rows.kept_tally)
-    }
-
-    /// Reads the parameters back (tests, checkpoints).
-    pub fn read_params(&self) -> PendingRead<f32> {
-        read_elements_async::<f32>(&self.ctx, &self.optimizer.params, 0..self.layout.total as u64)
-    }
-
-    /// Reads back the gradient buffer as it is, as f32 (a fixed-point table decoded). Between
-    /// steps it is all zeros: each step's Adam
-    /// zeroes the gradient it consumed (tests check that; [`Trainer::step_gradient`] reads a
-    /// step's gradient).
-    pub async fn read_gradients(&self) -> Result<Vec<f32>, GpuError> {
-        let exponents = self.hash_backward.read_exponents(&self.ctx);
-        let mut values = read_buffer_async::<f32>(&self.ctx, &self.optimizer.grads).await?;
-        self.hash_backward.decode_fixed_point(&mut values, exponents).await?;
-        Ok(values)
-    }
-
-    /// Runs one training step up to, not including, its Adam update and reads back the gradient
-    /// it produced (tests: compare with the reference). The step counts (its losses can be
-    /// read), the parameters do not move, and the gradient buffer is cleared after the copy so
-    /// the next step starts from zero as it would after Adam.
-    pub async fn step_gradient(&mut self) -> Result<Vec<f32>, GpuError> {
-        let mut encoder = self.begin_step();
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("training step without its update"),
-                timestamp_writes: None,
-            });
-            for &stage in TRAINING_STEP.iter().filter(|&&s| s != StepStage::Adam) {
-                self.record_stage(stage, &mut pass);
-            }
-        }
-        self.ctx.queue.submit([encoder.finish()]);
-        let read = read_buffer_async::<f32>(&self.ctx, &self.optimizer.grads);
-        let exponents = self.hash_backward.read_exponents(&self.ctx);
-        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("clearing the gradient read back"),
-        });
-        encoder.clear_buffer(&self.optimizer.grads, 0, None);
-        self.ctx.queue.submit([encoder.finish()]);
-        let mut values = read.await?;
-        self.hash_backward.decode_fixed_point(&mut values, exponents).await?;
-        Ok(values)
-    }
-
-    /// Everything a training run depends on besides the scene, the config and the labels: the
-    /// parameters, Adam's two moments and the step count (which seeds the ray batches and sets
-    /// Adam's bias corrections). Restoring it continues the run where it stopped.
-    pub async fn read_state(&self) -> Result<TrainerState, GpuError> {
-        let range = 0..self.layout.total as u64;
-        let params = read_elements_async::<f32>(&self.ctx, &self.optimizer.params, range.clone());
-        let first = read_elements_async::<f32>(&self.ctx, &self.optimizer.first_moment, range.clone());
-        let second = read_elements_async::<f32>(&self.ctx, &self.optimizer.second_moment, range);
-        Ok(TrainerState {
-            step: self.step,
-            params: params.await?,
-            first_moment: first.await?,
-            second_moment: second.await?,
-        })
-    }
-
-    /// Puts back a state from [`Trainer::read_state`] of a trainer with the same config.
-    pub fn restore_state(&mut self, state: &TrainerState) -> Result<(), GpuError> {
-        let total = self.layout.total;
-        for (what, len) in [
-            ("parameters", state.params.len()),
-            ("Adam first moment", state.first_moment.len()),
-            ("Adam second moment", state.second_moment.len()),
-        ] {
-            if len != total {
-                return Err(GpuError::invalid_argument(
-                    what,
-                    format!("{len} values given, the layout has {total}"),
-                ));
-            }
-        }
-        let queue = &self.ctx.queue;
-        queue.write_buffer(&self.optimizer.params, 0, bytemuck::cast_slice(&state.params));
-        queue.write_buffer(
-            &self.optimizer.first_moment,
-            0,
-            bytemuck::cast_slice(&state.first_moment),
-        );
-        queue.write_buffer(
-            &self.optimizer.second_moment,
-            0,
-            bytemuck::cast_slice(&state.second_moment),
-        );
-        self.step = state.step;
-        self.pending_losses = None;
-        self.last_losses = None;
-        Ok(())
-    }
-
-    /// Replaces the parameters (tests: start from the reference's values).
-    pub fn write_params(&self, params: &[f32]) -> Result<(), GpuError> {
-        if params.len() != self.layout.total {
-            return Err(GpuError::invalid_argument(
-                "parameters",
-                format!("{} values given, the layout has {}", params.len(), self.layout.total),
-            ));
-        }
-        self.ctx
-            .queue
-            .write_buffer(&self.optimizer.params, 0, bytemuck::cast_slice(params));
-        Ok(())
     }
 }
