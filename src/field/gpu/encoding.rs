@@ -214,7 +214,10 @@ pub enum BackwardStrategy {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum AtomicAdd {
     /// An atomic load, then a compare-exchange loop on the f32's bits (`hash_backward.wgsl`):
-    /// what WebGPU allows.
+    /// the one f32 add core WebGPU allows. [`AtomicAdd::best_for`] picks it for no device (it
+    /// retries under contention: fixed point replaced it on GPUs, one invocation per level on
+    /// CPU devices); it stays the portable f32 add the encoding tests run beside the others on
+    /// every device.
     CompareExchange,
     /// One float `atomicAdd` (`hash_backward_float_atomics.wgsl`): native devices with
     /// `SHADER_FLOAT32_ATOMIC` (Vulkan's VK_EXT_shader_atomic_float, Metal 3).
