@@ -16,7 +16,7 @@
 use crate::labels::{FrameLabels, LabelSet, Stroke, UNLABELLED, rasterize_frame};
 use crate::pause::{NoPause, Pause, run_to_end};
 use crate::scene::{Guide, Intrinsics, Scene};
-use crate::spread::propagate::walk_frame;
+use crate::spread::propagate::{LeftOutMemo, walk_frame};
 use crate::spread::{PropagationCache, PropagationOptions};
 
 /// How well a spread from part of the strokes predicts the rest.
@@ -180,7 +180,7 @@ pub async fn check_spread(
         }
         check.within_frames = Some(total);
     }
-    check.class_left_out = class_left_out(scene, labels, &drawn, classes, options, pause).await;
+    check.class_left_out = class_left_out(cache, scene, labels, &drawn, classes, options, pause).await;
     check
 }
 
@@ -189,6 +189,7 @@ pub async fn check_spread(
 /// crosses the edges of an object nobody stroked leaks out of the objects that were stroked just
 /// the same, and a small object's class then covers its surroundings in every view.
 async fn class_left_out(
+    cache: &mut PropagationCache,
     scene: &Scene,
     labels: &LabelSet,
     drawn: &[u32],
@@ -197,15 +198,37 @@ async fn class_left_out(
     pause: &mut impl Pause,
 ) -> Option<LeftOut> {
     let mut total: Option<LeftOut> = None;
+    cache.left_out.retain(|frame, _| drawn.contains(frame));
     for &frame in drawn {
         let Some(guide) = Guide::of_frame(scene, frame as usize) else {
             continue;
         };
         let full = rasterize_frame(labels.frame(frame), scene.width, scene.height);
-        if let Some(found) = left_out_in_frame(&full, classes, guide, Some(&scene.intrinsics), options, pause).await {
+        // The fold walks each frame once per class: only a frame whose strokes changed since
+        // the last check walks again.
+        let memo = cache
+            .left_out
+            .get(&frame)
+            .filter(|m| m.strokes == full && m.classes == classes && m.options == *options);
+        let held_claimed = match memo {
+            Some(memo) => memo.held_claimed,
+            None => {
+                let found = left_out_in_frame(&full, classes, guide, Some(&scene.intrinsics), options, pause).await;
+                let held_claimed = found.map(|f| (f.held, f.claimed));
+                let memo = LeftOutMemo {
+                    strokes: full,
+                    classes,
+                    options: *options,
+                    held_claimed,
+                };
+                cache.left_out.insert(frame, memo);
+                held_claimed
+            }
+        };
+        if let Some((held, claimed)) = held_claimed {
             let sum = total.get_or_insert_with(LeftOut::default);
-            sum.held += found.held;
-            sum.claimed += found.claimed;
+            sum.held += held;
+            sum.claimed += claimed;
         }
     }
     total
@@ -370,6 +393,49 @@ mod tests {
             ..SpreadCheck::default()
         };
         assert!(check.apply(&PropagationOptions::default()).enabled);
+    }
+
+    #[test]
+    fn the_fold_that_leaves_a_class_out_walks_again_only_where_strokes_changed() {
+        use crate::labels::ClassInfo;
+        use crate::pause::CountPauses;
+        use crate::scene::demo::{DemoOptions, demo_scene};
+        let scene = demo_scene(&DemoOptions {
+            width: 32,
+            height: 24,
+            frames: 4,
+            ..DemoOptions::default()
+        })
+        .unwrap();
+        let class = |name: &str| ClassInfo {
+            name: name.into(),
+            color: [0, 0, 0],
+        };
+        let mut labels = LabelSet::new(vec![class("a"), class("b"), class("c")]);
+        let dot = |class: u16, x: f32, y: f32| Stroke {
+            class: Some(class),
+            radius: 1.0,
+            points: vec![[x, y]],
+        };
+        for frame in [0, 2] {
+            labels.push_stroke(frame, dot(0, 4.5, 20.5));
+            labels.push_stroke(frame, dot(1, 16.5, 4.5));
+            labels.push_stroke(frame, dot(2, 28.5, 12.5));
+        }
+        let options = PropagationOptions::default();
+        let mut cache = PropagationCache::default();
+        let fold = |cache: &mut PropagationCache, labels: &LabelSet| {
+            let mut pauses = CountPauses(0);
+            let found = run_to_end(class_left_out(cache, &scene, labels, &[0, 2], 3, &options, &mut pauses));
+            (found, pauses.0)
+        };
+        let (first, walked) = fold(&mut cache, &labels);
+        assert!(walked > 0 && first.is_some());
+        assert_eq!(fold(&mut cache, &labels), (first, 0), "nothing changed: nothing walks");
+        labels.push_stroke(2, dot(0, 8.5, 20.5));
+        let (changed, walked_again) = fold(&mut cache, &labels);
+        assert!(walked_again > 0 && walked_again < walked, "{walked_again} of {walked}");
+        assert_eq!(changed, fold(&mut PropagationCache::default(), &labels).0);
     }
 
     #[test]

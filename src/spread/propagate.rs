@@ -123,6 +123,19 @@ pub struct PropagationCache {
     planes: HashMap<u32, Option<Vec<bool>>>,
     /// The class the last maps gave the pixels far from every point ([`PropagationCache::far_class`]).
     far_class: Option<u16>,
+    /// Per drawn frame, what the self-check's fold that leaves each class out found there
+    /// (`spread::check`), and for which strokes, classes and options.
+    pub(crate) left_out: HashMap<u32, LeftOutMemo>,
+}
+
+/// One frame's result of the self-check's class-left-out fold: pixels of the held-back strokes
+/// and those another class claimed (`None`: fewer than three classes on the frame).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct LeftOutMemo {
+    pub strokes: Vec<u16>,
+    pub classes: usize,
+    pub options: PropagationOptions,
+    pub held_claimed: Option<(u64, u64)>,
 }
 
 impl PropagationCache {
