@@ -33,6 +33,9 @@ pub struct RenderedTextures {
     pub step: u32,
     /// A quick low-resolution render (the full one follows).
     pub coarse: bool,
+    /// Whether the field had learnt classes from labels (`training::Rendered::labelled`): the
+    /// mask and its confidence are shown only then.
+    pub labelled: bool,
     pub mask: TextureHandle,
     pub confidence: TextureHandle,
     pub rgb: TextureHandle,
@@ -45,7 +48,7 @@ impl RenderedTextures {
     pub fn new(
         ctx: &egui::Context,
         r: &RenderedFrame,
-        (frame, step, coarse): (u32, u32, bool),
+        (frame, step, coarse, labelled): (u32, u32, bool, bool),
         classes: &[ClassInfo],
     ) -> Self {
         let size = [r.width as usize, r.height as usize];
@@ -106,6 +109,7 @@ impl RenderedTextures {
             frame,
             step,
             coarse,
+            labelled,
             // NEAREST keeps class boundaries crisp when zoomed in.
             mask: tex("mask", mask, TextureOptions::NEAREST),
             confidence: tex("confidence", confidence, TextureOptions::NEAREST),

@@ -155,6 +155,9 @@ pub fn show(
                 format!("frame {frame} at step {}", r.step)
             };
             ui.label(RichText::new(what).small());
+            if !r.labelled {
+                ui.label(RichText::new("Masks appear once the field has trained on a stroke.").small());
+            }
             // Two images a row, so all three fit beside the facts above on a small screen.
             let width = ((ui.available_width() - ui.spacing().item_spacing.x) / 2.0).max(16.0);
             let size = egui::vec2(width, width * h as f32 / w.max(1) as f32);

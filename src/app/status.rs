@@ -73,6 +73,9 @@ pub struct Annotating {
     pub view: [f32; 4],
     /// `none`, `coarse` (a quick low-resolution mask) or `full`; absent without training.
     pub mask: Option<&'static str>,
+    /// The mask is drawn over the frame: false until the field has trained on a stroke (before,
+    /// its classes are the semantic head's random start).
+    pub classes_shown: bool,
     /// The latest refresh's time to the first mask and to the full one (`null` while under way).
     pub refresh_ms: Option<[Option<f64>; 2]>,
     /// Per step of the latest batch: recording and submitting, then waiting for the GPU.
@@ -167,6 +170,7 @@ mod tests {
             render_ms: 1500.0,
             view: [1.0, 2.0, 3.0, 4.0],
             mask: Some("coarse"),
+            classes_shown: true,
             refresh_ms: Some([Some(10.0), None]),
             step_ms: Some([1.0, 2.0]),
             batch: Some(3),
@@ -184,6 +188,7 @@ mod tests {
         assert_eq!(json["frame"], 5);
         assert_eq!(json["view"][2], 3.0);
         assert_eq!(json["mask"], "coarse");
+        assert_eq!(json["classes_shown"], true);
         assert_eq!(json["spread"][1], 3);
         assert_eq!(json["refresh_ms"][1], serde_json::Value::Null);
         assert_eq!(json["features"], serde_json::Value::Null);

@@ -120,6 +120,9 @@ await runBrowserTest("annotate", {
       return t.training === "running";
     }, "training to start", LOAD_TIMEOUT_MS);
     console.log(`     training started at ${elapsed()}`);
+    // Nothing is drawn yet: the field's first render shows no classes over the frame.
+    s = await waitForStatus(page, (t) => t.rendered >= 0, "a first render", 120_000);
+    assert(s.classes_shown === false, `classes shown before any stroke: ${show(s)}`);
   });
 
   // Scribble: every class visible on each chosen frame, until every class has some.
@@ -184,6 +187,7 @@ await runBrowserTest("annotate", {
       `page says refresh_ms=${JSON.stringify(last.refresh_ms)}, step_ms=${JSON.stringify(last.step_ms)}`);
     const order = seen.map(([m]) => m).filter((m) => m !== "none");
     assert(order[0] === "coarse" && order.includes("full"), `masks came as ${order.join(", ") || "nothing"}`);
+    assert(last.classes_shown === true, `the field trained on the strokes, yet no classes are shown: ${show(last)}`);
   });
   const shot = await page.screenshot({ path: join(outDir, "annotate-mask-frame5.png") });
   console.log(`     (screenshot of frame 5 with the mask: ${saturatedColours(shot)} saturated colours)`);

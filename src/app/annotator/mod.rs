@@ -439,7 +439,7 @@ impl Annotator {
             self.view.rendered = Some(RenderedTextures::new(
                 ctx,
                 &r.image,
-                (r.frame, r.step, r.coarse),
+                (r.frame, r.step, r.coarse, r.labelled),
                 &self.doc.labels.classes,
             ));
         }

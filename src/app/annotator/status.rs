@@ -57,6 +57,7 @@ impl Annotator {
             render_ms: 0.0,
             view: rect(view.image_rect),
             mask: None,
+            classes_shown: rendered.is_some_and(|r| r.labelled),
             refresh_ms: None,
             step_ms: None,
             batch: None,

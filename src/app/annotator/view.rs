@@ -140,7 +140,13 @@ impl View {
                 opacity,
             });
         }
-        if let Some(r) = self.rendered.as_ref().filter(|r| r.frame as usize == self.frame) {
+        // Before the field has learnt classes from a stroke its mask is the semantic head's
+        // random start: nothing to show over the frame.
+        if let Some(r) = self
+            .rendered
+            .as_ref()
+            .filter(|r| r.frame as usize == self.frame && r.labelled)
+        {
             if self.layers.mask {
                 layers.push(Layer {
                     texture: &r.mask,

@@ -103,6 +103,9 @@ pub struct Rendered {
     pub image: RenderedFrame,
     /// A quick low-resolution render; the full one follows.
     pub coarse: bool,
+    /// Whether the field had any labelled pixel to train its classes on: before the first
+    /// stroke the semantic head's classes are its random start, not a mask to show.
+    pub labelled: bool,
 }
 
 /// How long the latest refresh of the visible mask took, from the request (a frame shown, or

@@ -433,6 +433,7 @@ impl TrainingTask {
             step: trainer.steps_done(),
             image,
             coarse,
+            labelled: trainer.labelled_pixels() > 0,
         })));
     }
 
