@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 const LAYERS: &[&[&str]] = &[
     // Basics that know nothing of the pipeline: the random source, the CPU optimizer, the CPU
     // dense layer, percent-encoding, pausing long work (`pause`), the class palette, the WebGPU
-    // plumbing, the safetensors format (feature weights, trainer checkpoints).
+    // plumbing, the safetensors format (feature weights, trainer checkpoints), reading users' files through caps.
     &[
         "rng",
         "adam",
@@ -23,6 +23,7 @@ const LAYERS: &[&[&str]] = &[
         "pause",
         "gpu",
         "safetensors",
+        "bounded_read",
     ],
     // Frames, cameras, ground truth, the labels a scene carries, the archive and importers.
     &["scene"],
