@@ -11,7 +11,7 @@ seconds="${1:-600}"
 shift || true
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(archive archive_entries labels_json share_link npy safetensors transforms_json colmap_text seven_scenes_text)
+    targets=(archive archive_entries labels_json share_link npy safetensors transforms_json colmap_text seven_scenes_text pth pickle colmap_binary scannet_text checkpoint field_config pack_zip)
 fi
 work="${FUZZ_WORK:-/tmp/scribblefield-fuzz}"
 cargo +nightly fuzz build -O

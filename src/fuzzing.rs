@@ -16,6 +16,9 @@ use crate::scene::import::text_checks;
 use crate::scene::label_set::{LabelSet, limits as label_limits};
 use crate::scene::{GT_VOID, Scene, read_archive};
 
+mod parsers;
+pub use parsers::{NEXT_FILE, checkpoint, colmap_binary, field_config, pack_zip, pickle, pth, scannet_text};
+
 /// What a target did with one input: accepted, or refused with the crate's message.
 pub type Outcome = Result<(), String>;
 
@@ -34,6 +37,13 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("transforms_json", transforms_json),
     ("colmap_text", colmap_text),
     ("seven_scenes_text", seven_scenes_text),
+    ("pth", pth),
+    ("pickle", pickle),
+    ("colmap_binary", colmap_binary),
+    ("scannet_text", scannet_text),
+    ("checkpoint", checkpoint),
+    ("field_config", field_config),
+    ("pack_zip", pack_zip),
 ];
 
 /// Frames the scene of a fuzzed `labels.json` has: enough for any frame index the corpus uses,

@@ -1,6 +1,7 @@
 //! scribblefield: scribbles on a few RGB-D frames, propagated to dense masks by a neural field.
 pub mod adam;
 pub mod app;
+pub mod bounded_read;
 pub mod colors;
 pub mod dense;
 pub mod eval;

@@ -11,6 +11,8 @@ use std::path::{Path, PathBuf};
 
 /// Lowest first. A module may use modules of strictly lower layers only.
 const LAYERS: &[&[&str]] = &[
+    // Reading a user's file through caps (regular files only), below everything that reads one.
+    &["bounded_read"],
     // Basics that know nothing of the pipeline: the random source, the CPU optimizer, the CPU
     // dense layer, percent-encoding, pausing long work (`pause`), the class palette, the WebGPU
     // plumbing, the safetensors format (feature weights, trainer checkpoints).

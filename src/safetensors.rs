@@ -51,6 +51,10 @@ pub struct SafeTensors {
     data: Vec<u8>,
 }
 
+/// Largest safetensors file read (a regular file only): the weights read here are tens of MB,
+/// a trainer checkpoint at most `field::checkpoint::MAX_FILE_BYTES`.
+const MAX_FILE_BYTES: u64 = 2 << 30;
+
 fn dtype_size(dtype: &str) -> Option<usize> {
     Some(match dtype {
         "BOOL" | "U8" | "I8" | "F8_E4M3" | "F8_E5M2" => 1,
@@ -61,12 +65,34 @@ fn dtype_size(dtype: &str) -> Option<usize> {
     })
 }
 
+/// Tensors must not share bytes (the format's own rule): a file whose tensors all point at one
+/// range would decode to many times its size.
+fn check_no_overlap(tensors: &BTreeMap<String, TensorInfo>) -> Result<(), String> {
+    let mut ranges: Vec<(&str, &TensorInfo)> = tensors
+        .iter()
+        .filter(|(_, t)| t.end > t.begin)
+        .map(|(n, t)| (n.as_str(), t))
+        .collect();
+    ranges.sort_by_key(|(_, t)| t.begin);
+    for pair in ranges.windows(2) {
+        let ((a, ta), (b, tb)) = (pair[0], pair[1]);
+        if tb.begin < ta.end {
+            return Err(format!(
+                "tensors `{a}` (data_offsets [{}, {}]) and `{b}` ([{}, {}]) overlap; each tensor has bytes of its own",
+                ta.begin, ta.end, tb.begin, tb.end
+            ));
+        }
+    }
+    Ok(())
+}
+
 impl SafeTensors {
     pub fn open(path: &Path) -> Result<Self, SafeTensorsError> {
-        let bytes = std::fs::read(path).map_err(|source| SafeTensorsError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let bytes =
+            crate::bounded_read::read_regular_file(path, MAX_FILE_BYTES).map_err(|source| SafeTensorsError::Io {
+                path: path.to_path_buf(),
+                source,
+            })?;
         Self::from_bytes(path.display().to_string(), bytes)
     }
 
@@ -166,6 +192,7 @@ impl SafeTensors {
                 },
             );
         }
+        check_no_overlap(&tensors).map_err(bad)?;
         bytes.drain(..header_end);
         Ok(SafeTensors {
             file,

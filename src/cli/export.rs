@@ -31,10 +31,8 @@ pub struct ExportArgs {
 
 pub fn run(args: ExportArgs) -> CliResult {
     let file = args.checkpoint.display().to_string();
-    let bytes = std::fs::read(&args.checkpoint).map_err(|e| {
-        format!("{file}: cannot read the checkpoint: {e} (write one with `segment --save-checkpoint FILE`)")
-    })?;
-    let checkpoint = Checkpoint::from_bytes(&file, bytes)?;
+    let checkpoint = Checkpoint::read_file(&args.checkpoint)
+        .map_err(|e| format!("{e} (write one with `segment --save-checkpoint FILE`)"))?;
     let trained_on = TrainedOn::from_checkpoint(&file, &checkpoint)?;
     let mut scene = read_archive_path(&args.archive)?;
     let archive_name = args.archive.display().to_string();

@@ -163,7 +163,11 @@ impl FeatureArgs {
                 bake(
                     frames,
                     load,
-                    &format!("imported from {}", dir.display()),
+                    // The folder's name only: the archive is shared, the packer's paths are not.
+                    &format!(
+                        "imported from {}",
+                        scribblefield::scene::private_paths::folder_name(dir)
+                    ),
                     &opts,
                     on_progress,
                 )?

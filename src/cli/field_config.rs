@@ -3,6 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use clap::Args;
+use scribblefield::bounded_read::read_regular_text;
 use scribblefield::field::{FieldConfig, Preset};
 use scribblefield::gpu::GpuContext;
 use scribblefield::scene::{FeatureCodes, Scene};
@@ -114,6 +115,10 @@ fn is_inline(arg: &str) -> bool {
     arg.trim_start().starts_with('{')
 }
 
+/// Largest `--config` file read: a whole config is about 2 KB; `--config /dev/zero` or a FIFO
+/// must end in an error, not fill memory or wait.
+const MAX_CONFIG_BYTES: u64 = 1 << 20;
+
 /// The JSON text of a `--config` argument and how to name it in errors: the argument itself when
 /// inline, else the file it names.
 pub(super) fn config_text(arg: &str) -> Result<(String, String), String> {
@@ -121,7 +126,7 @@ pub(super) fn config_text(arg: &str) -> Result<(String, String), String> {
         return Ok((arg.to_string(), "(inline JSON)".into()));
     }
     let path = PathBuf::from(arg);
-    let text = std::fs::read_to_string(&path).map_err(|e| {
+    let text = read_regular_text(&path, MAX_CONFIG_BYTES).map_err(|e| {
         format!(
             "--config {arg}: {e} (give a JSON file, or the JSON itself such as '{{\"feature_supervision\": true}}')"
         )
@@ -137,6 +142,16 @@ pub fn apply_config_changes(base: &FieldConfig, changes: &serde_json::Value) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[cfg(unix)]
+    #[test]
+    fn a_config_that_is_no_regular_file_is_refused_unread() {
+        let e = config_text("/dev/zero").unwrap_err();
+        assert!(
+            e.contains("/dev/zero") && e.contains("a character device, not a regular file"),
+            "{e}"
+        );
+    }
 
     #[test]
     fn config_changes_replace_fields_of_the_preset() {

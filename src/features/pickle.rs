@@ -9,6 +9,39 @@
 use std::collections::HashMap;
 use std::rc::Rc;
 
+mod describe;
+pub use describe::brief;
+use describe::opcode_name;
+
+/// What one pickle may build, so that a hostile one cannot exhaust memory or the stack. A
+/// state dict's pickle is small (a few values per tensor); these are far above any.
+#[derive(Clone, Copy, Debug)]
+pub struct Limits {
+    /// Bytes of values built (each value on the stack, in a container or the memo, plus the
+    /// text and bytes it owns). Values fetched from the memo are shared, not copied, but each
+    /// fetch still costs a value.
+    pub built_bytes: usize,
+    /// Nesting of tuples: dropping, comparing and printing a value recurse into it, so a
+    /// million nested tuples would overflow the thread's stack.
+    pub depth: usize,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            built_bytes: 256 << 20,
+            depth: 64,
+        }
+    }
+}
+
+/// Most dimensions of a tensor (torch's own limit is 64).
+const MAX_DIMS: usize = 64;
+
+/// Longest module or class name of a GLOBAL: Python names are short, and each instance of a
+/// class copies its name.
+const MAX_GLOBAL_NAME: usize = 1024;
+
 /// The element type of a torch storage, from its class name (`torch.FloatStorage`, ...).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Dtype {
@@ -87,9 +120,11 @@ pub enum Value {
     Bool(bool),
     Int(i64),
     Float(f64),
-    Str(String),
-    Bytes(Vec<u8>),
-    Tuple(Rc<Vec<Value>>),
+    /// Shared, so that a memo fetch does not copy the text.
+    Str(Rc<str>),
+    Bytes(Rc<[u8]>),
+    /// The items and the nesting depth (1 for a tuple of no tuples).
+    Tuple(Rc<Vec<Value>>, u32),
     /// Index into [`Pickle::dicts`]: dicts are shared and filled after being memoised, so they
     /// live in an arena and values refer to them.
     Dict(usize),
@@ -115,7 +150,7 @@ impl Pickle {
     pub fn get(&self, dict: usize, key: &str) -> Option<&Value> {
         self.dicts[dict]
             .iter()
-            .find(|(k, _)| matches!(k, Value::Str(s) if s == key))
+            .find(|(k, _)| matches!(k, Value::Str(s) if &**s == key))
             .map(|(_, v)| v)
     }
 }
@@ -133,37 +168,29 @@ impl std::fmt::Display for PickleError {
     }
 }
 
-/// Names of the opcodes outside the subset, for a useful refusal.
-fn opcode_name(op: u8) -> &'static str {
-    match op {
-        b'0' => "POP",
-        b'1' => "POP_MARK",
-        b'2' => "DUP",
-        b'F' => "FLOAT",
-        b'I' => "INT",
-        b'L' => "LONG",
-        b'P' => "PERSID",
-        b'S' => "STRING",
-        b'T' => "BINSTRING",
-        b'U' => "SHORT_BINSTRING",
-        b'V' => "UNICODE",
-        b'g' => "GET",
-        b'p' => "PUT",
-        b'i' => "INST",
-        b'o' => "OBJ",
-        0x82 => "EXT1",
-        0x83 => "EXT2",
-        0x84 => "EXT4",
-        0x8b => "LONG4",
-        0x8e => "BINBYTES8",
-        0x8f => "EMPTY_SET",
-        0x90 => "ADDITEMS",
-        0x91 => "FROZENSET",
-        0x92 => "NEWOBJ_EX",
-        0x96 => "BYTEARRAY8",
-        0x97 => "NEXT_BUFFER",
-        0x98 => "READONLY_BUFFER",
-        _ => "not a pickle opcode",
+/// A dict key that can be hashed: what a dict's keys are looked up by, so that a dict of many
+/// keys is built in linear time. Other keys (tuples, objects) are kept without a lookup.
+#[derive(Hash, PartialEq, Eq)]
+enum Key {
+    None,
+    Bool(bool),
+    Int(i64),
+    Float(u64),
+    Str(Rc<str>),
+    Bytes(Rc<[u8]>),
+}
+
+impl Key {
+    fn of(v: &Value) -> Option<Key> {
+        Some(match v {
+            Value::None => Key::None,
+            Value::Bool(b) => Key::Bool(*b),
+            Value::Int(i) => Key::Int(*i),
+            Value::Float(f) => Key::Float(f.to_bits()),
+            Value::Str(s) => Key::Str(s.clone()),
+            Value::Bytes(b) => Key::Bytes(b.clone()),
+            _ => return None,
+        })
     }
 }
 
@@ -175,11 +202,16 @@ struct Machine<'a> {
     stack: Vec<Value>,
     marks: Vec<usize>,
     memo: HashMap<u32, Value>,
+    /// Where each hashable key of each dict is: (dict, key) -> index in the dict.
+    keys: HashMap<(usize, Key), usize>,
+    limits: Limits,
+    /// Bytes of values built so far (see [`Limits::built_bytes`]).
+    built: usize,
     out: Pickle,
 }
 
-/// Parses `bytes` (a whole pickle) into values without running anything.
-pub fn parse(bytes: &[u8]) -> Result<Pickle, PickleError> {
+/// Parses `bytes` (a whole pickle) into values without running anything, within `limits`.
+pub fn parse_with(bytes: &[u8], limits: Limits) -> Result<Pickle, PickleError> {
     let mut m = Machine {
         bytes,
         pos: 0,
@@ -187,6 +219,9 @@ pub fn parse(bytes: &[u8]) -> Result<Pickle, PickleError> {
         stack: Vec::new(),
         marks: Vec::new(),
         memo: HashMap::new(),
+        keys: HashMap::new(),
+        limits,
+        built: 0,
         out: Pickle::default(),
     };
     m.run()?;
@@ -222,8 +257,12 @@ impl Machine<'_> {
 
     fn line(&mut self) -> Result<String, PickleError> {
         let rest = &self.bytes[self.pos..];
-        let Some(n) = rest.iter().position(|&b| b == b'\n') else {
-            return self.fail("truncated: a GLOBAL name without its newline");
+        let Some(n) = rest.iter().take(MAX_GLOBAL_NAME + 1).position(|&b| b == b'\n') else {
+            return self.fail(if rest.len() > MAX_GLOBAL_NAME {
+                format!("a GLOBAL name longer than {MAX_GLOBAL_NAME} bytes")
+            } else {
+                "truncated: a GLOBAL name without its newline".into()
+            });
         };
         let s = String::from_utf8(rest[..n].to_vec());
         self.pos += n + 1;
@@ -231,11 +270,55 @@ impl Machine<'_> {
     }
 
     fn utf8(&mut self, n: usize) -> Result<Value, PickleError> {
-        let b = self.take(n)?.to_vec();
-        match String::from_utf8(b) {
-            Ok(s) => Ok(Value::Str(s)),
+        let b = self.take(n)?;
+        match std::str::from_utf8(b) {
+            Ok(s) => {
+                let s: Rc<str> = Rc::from(s);
+                self.spend(s.len())?;
+                Ok(Value::Str(s))
+            }
             Err(_) => self.fail("a string that is not UTF-8"),
         }
+    }
+
+    /// Counts `bytes` more of values built against [`Limits::built_bytes`].
+    fn spend(&mut self, bytes: usize) -> Result<(), PickleError> {
+        self.built = self.built.saturating_add(bytes);
+        if self.built > self.limits.built_bytes {
+            return self.fail(format!(
+                "builds more than {} bytes of values (a memo or container bomb?); a state dict's pickle \
+                 builds far less",
+                self.limits.built_bytes
+            ));
+        }
+        Ok(())
+    }
+
+    /// Pushes a value, counting it.
+    fn push(&mut self, v: Value) -> Result<(), PickleError> {
+        self.spend(std::mem::size_of::<Value>())?;
+        self.stack.push(v);
+        Ok(())
+    }
+
+    /// A tuple of `items`, refused when it nests deeper than [`Limits::depth`].
+    fn tuple_of(&self, items: Vec<Value>) -> Result<Value, PickleError> {
+        let inner = items
+            .iter()
+            .map(|v| match v {
+                Value::Tuple(_, d) => *d,
+                _ => 0,
+            })
+            .max()
+            .unwrap_or(0);
+        let depth = inner + 1;
+        if depth as usize > self.limits.depth {
+            return self.fail(format!(
+                "tuples nested more than {} deep; a state dict's are a few deep",
+                self.limits.depth
+            ));
+        }
+        Ok(Value::Tuple(Rc::new(items), depth))
     }
 
     fn pop(&mut self) -> Result<Value, PickleError> {
@@ -266,7 +349,8 @@ impl Machine<'_> {
             items.push(self.pop()?);
         }
         items.reverse();
-        self.stack.push(Value::Tuple(Rc::new(items)));
+        let t = self.tuple_of(items)?;
+        self.stack.push(t);
         Ok(())
     }
 
@@ -280,8 +364,15 @@ impl Machine<'_> {
         let mut it = items.into_iter();
         while let (Some(k), Some(v)) = (it.next(), it.next()) {
             let entries = &mut self.out.dicts[d];
-            match entries.iter_mut().find(|(old, _)| *old == k) {
-                Some(slot) => slot.1 = v,
+            match Key::of(&k) {
+                Some(key) => match self.keys.entry((d, key)) {
+                    std::collections::hash_map::Entry::Occupied(slot) => entries[*slot.get()].1 = v,
+                    std::collections::hash_map::Entry::Vacant(slot) => {
+                        slot.insert(entries.len());
+                        entries.push((k, v));
+                    }
+                },
+                // Unhashable in Python too (or an object): kept as it comes.
                 None => entries.push((k, v)),
             }
         }
@@ -298,6 +389,7 @@ impl Machine<'_> {
 
     fn memo_put(&mut self, key: u32) -> Result<(), PickleError> {
         let v = self.top()?.clone();
+        self.spend(2 * std::mem::size_of::<Value>())?;
         self.memo.insert(key, v);
         Ok(())
     }
@@ -305,8 +397,8 @@ impl Machine<'_> {
     fn memo_get(&mut self, key: u32) -> Result<(), PickleError> {
         match self.memo.get(&key) {
             Some(v) => {
-                self.stack.push(v.clone());
-                Ok(())
+                let v = v.clone();
+                self.push(v)
             }
             None => self.fail(format!("memo key {key} used before it was set")),
         }
@@ -338,14 +430,19 @@ impl Machine<'_> {
                 b'c' => {
                     let module = self.line()?;
                     let name = self.line()?;
-                    self.stack.push(Value::Global(Rc::new((module, name))));
+                    self.spend(name.len() + module.len())?;
+                    self.push(Value::Global(Rc::new((module, name))))?;
                 }
                 // STACK_GLOBAL (protocol 4): module and name from the stack.
                 0x93 => {
                     let (Value::Str(name), Value::Str(module)) = (self.pop()?, self.pop()?) else {
                         return self.fail("STACK_GLOBAL without two strings");
                     };
-                    self.stack.push(Value::Global(Rc::new((module, name))));
+                    if name.len().max(module.len()) > MAX_GLOBAL_NAME {
+                        return self.fail(format!("a STACK_GLOBAL name longer than {MAX_GLOBAL_NAME} bytes"));
+                    }
+                    self.spend(name.len() + module.len())?;
+                    self.push(Value::Global(Rc::new((module.to_string(), name.to_string()))))?;
                 }
                 // BINPUT, LONG_BINPUT, and MEMOIZE (protocol 4: the next free key).
                 b'q' | b'r' | 0x94 => {
@@ -362,12 +459,14 @@ impl Machine<'_> {
                     self.memo_get(k)?;
                 }
                 b'}' => {
+                    self.spend(std::mem::size_of::<Vec<(Value, Value)>>())?;
                     self.out.dicts.push(Vec::new());
-                    self.stack.push(Value::Dict(self.out.dicts.len() - 1));
+                    self.push(Value::Dict(self.out.dicts.len() - 1))?;
                 }
                 b']' => {
+                    self.spend(std::mem::size_of::<Vec<Value>>())?;
                     self.out.lists.push(Vec::new());
-                    self.stack.push(Value::List(self.out.lists.len() - 1));
+                    self.push(Value::List(self.out.lists.len() - 1))?;
                 }
                 b'(' => self.marks.push(self.stack.len()),
                 b's' => {
@@ -389,7 +488,8 @@ impl Machine<'_> {
                 }
                 b't' => {
                     let items = self.pop_mark()?;
-                    self.stack.push(Value::Tuple(Rc::new(items)));
+                    let t = self.tuple_of(items)?;
+                    self.stack.push(t);
                 }
                 b')' => self.tuple(0)?,
                 0x85 => self.tuple(1)?,
@@ -397,15 +497,15 @@ impl Machine<'_> {
                 0x87 => self.tuple(3)?,
                 b'J' => {
                     let v = i32::from_le_bytes(self.take(4)?.try_into().expect("4 bytes"));
-                    self.stack.push(Value::Int(v as i64));
+                    self.push(Value::Int(v as i64))?;
                 }
                 b'K' => {
                     let v = self.u8()?;
-                    self.stack.push(Value::Int(v as i64));
+                    self.push(Value::Int(v as i64))?;
                 }
                 b'M' => {
                     let v = u16::from_le_bytes(self.take(2)?.try_into().expect("2 bytes"));
-                    self.stack.push(Value::Int(v as i64));
+                    self.push(Value::Int(v as i64))?;
                 }
                 0x8a => {
                     let n = self.u8()? as usize;
@@ -421,26 +521,26 @@ impl Machine<'_> {
                     };
                     let mut le = [fill; 8];
                     le[..n].copy_from_slice(b);
-                    self.stack.push(Value::Int(i64::from_le_bytes(le)));
+                    self.push(Value::Int(i64::from_le_bytes(le)))?;
                 }
                 b'G' => {
                     let v = f64::from_be_bytes(self.take(8)?.try_into().expect("8 bytes"));
-                    self.stack.push(Value::Float(v));
+                    self.push(Value::Float(v))?;
                 }
                 b'X' => {
                     let n = self.u32()? as usize;
                     let s = self.utf8(n)?;
-                    self.stack.push(s);
+                    self.push(s)?;
                 }
                 0x8c => {
                     let n = self.u8()? as usize;
                     let s = self.utf8(n)?;
-                    self.stack.push(s);
+                    self.push(s)?;
                 }
                 0x8d => {
                     let n = u64::from_le_bytes(self.take(8)?.try_into().expect("8 bytes"));
                     let s = self.utf8(usize::try_from(n).unwrap_or(usize::MAX))?;
-                    self.stack.push(s);
+                    self.push(s)?;
                 }
                 b'C' | b'B' => {
                     let n = if op == b'C' {
@@ -448,22 +548,23 @@ impl Machine<'_> {
                     } else {
                         self.u32()? as usize
                     };
-                    let b = self.take(n)?.to_vec();
-                    self.stack.push(Value::Bytes(b));
+                    let b: Rc<[u8]> = Rc::from(self.take(n)?);
+                    self.spend(b.len())?;
+                    self.push(Value::Bytes(b))?;
                 }
-                b'N' => self.stack.push(Value::None),
-                0x88 => self.stack.push(Value::Bool(true)),
-                0x89 => self.stack.push(Value::Bool(false)),
+                b'N' => self.push(Value::None)?,
+                0x88 => self.push(Value::Bool(true))?,
+                0x89 => self.push(Value::Bool(false))?,
                 b'Q' => {
                     let pid = self.pop()?;
                     let storage = self.persistent_load(&pid)?;
-                    self.stack.push(Value::Storage(Rc::new(storage)));
+                    self.push(Value::Storage(Rc::new(storage)))?;
                 }
                 b'R' => {
                     let args = self.pop()?;
                     let callable = self.pop()?;
                     let v = self.reduce(&callable, &args)?;
-                    self.stack.push(v);
+                    self.push(v)?;
                 }
                 // NEWOBJ: `cls.__new__(cls, *args)` of a class we do not model.
                 0x81 => {
@@ -471,7 +572,9 @@ impl Machine<'_> {
                     let Value::Global(g) = self.pop()? else {
                         return self.fail("NEWOBJ of something that is not a class");
                     };
-                    self.stack.push(Value::Object(format!("{}.{}", g.0, g.1)));
+                    let object = format!("{}.{}", g.0, g.1);
+                    self.spend(object.len())?;
+                    self.push(Value::Object(object))?;
                 }
                 // BUILD sets an object's attributes (e.g. a state dict's `_metadata`), which no
                 // caller needs: the state is dropped and the object kept.
@@ -492,7 +595,7 @@ impl Machine<'_> {
 
     /// torch's persistent id of a storage: `('storage', torch.FloatStorage, key, location, numel)`.
     fn persistent_load(&self, pid: &Value) -> Result<StorageRef, PickleError> {
-        if let Value::Tuple(t) = pid
+        if let Value::Tuple(t, _) = pid
             && let [
                 Value::Str(kind),
                 Value::Global(class),
@@ -500,7 +603,7 @@ impl Machine<'_> {
                 Value::Str(_location),
                 Value::Int(numel),
             ] = &t[..]
-            && kind == "storage"
+            && &**kind == "storage"
             && *numel >= 0
         {
             let Some(dtype) = Dtype::from_storage_class(&class.1).filter(|_| class.0 == "torch") else {
@@ -508,20 +611,21 @@ impl Machine<'_> {
             };
             return Ok(StorageRef {
                 dtype,
-                key: key.clone(),
+                key: key.to_string(),
                 numel: *numel as u64,
             });
         }
         self.fail(format!(
-            "a persistent id that is not torch's ('storage', type, key, location, numel): {pid:?}"
+            "a persistent id that is not torch's ('storage', type, key, location, numel): {}",
+            brief(pid)
         ))
     }
 
     fn reduce(&mut self, callable: &Value, args: &Value) -> Result<Value, PickleError> {
         let Value::Global(g) = callable else {
-            return self.fail(format!("REDUCE of {callable:?}, which is not a global"));
+            return self.fail(format!("REDUCE of {}, which is not a global", brief(callable)));
         };
-        let Value::Tuple(args) = args else {
+        let Value::Tuple(args, _) = args else {
             return self.fail(format!("REDUCE of {}.{} with arguments that are not a tuple", g.0, g.1));
         };
         match (g.0.as_str(), g.1.as_str()) {
@@ -541,13 +645,17 @@ impl Machine<'_> {
                 [func, _, inner, _] => self.reduce(func, inner),
                 _ => self.fail("_rebuild_from_type_v2 with other than 4 arguments"),
             },
-            (module, name) => Ok(Value::Object(format!("{module}.{name}"))),
+            (module, name) => {
+                let object = format!("{module}.{name}");
+                self.spend(object.len())?;
+                Ok(Value::Object(object))
+            }
         }
     }
 
     fn rebuild_tensor(&self, args: &[Value]) -> Result<Value, PickleError> {
         let dims = |v: &Value| -> Option<Vec<usize>> {
-            let Value::Tuple(t) = v else { return None };
+            let Value::Tuple(t, _) = v else { return None };
             t.iter()
                 .map(|d| match d {
                     Value::Int(i) => usize::try_from(*i).ok(),
@@ -558,7 +666,7 @@ impl Machine<'_> {
         match args {
             [Value::Storage(s), Value::Int(offset), size, stride, ..] if *offset >= 0 => {
                 match (dims(size), dims(stride)) {
-                    (Some(shape), Some(stride)) if shape.len() == stride.len() => {
+                    (Some(shape), Some(stride)) if shape.len() == stride.len() && shape.len() <= MAX_DIMS => {
                         Ok(Value::Tensor(Rc::new(TensorRef {
                             storage: s.clone(),
                             offset: *offset as u64,
@@ -566,7 +674,14 @@ impl Machine<'_> {
                             stride,
                         })))
                     }
-                    _ => self.fail(format!("a tensor with size {size:?} and stride {stride:?}")),
+                    (Some(shape), _) if shape.len() > MAX_DIMS => {
+                        self.fail(format!("a tensor of {} dimensions (at most {MAX_DIMS})", shape.len()))
+                    }
+                    _ => self.fail(format!(
+                        "a tensor with size {} and stride {}",
+                        brief(size),
+                        brief(stride)
+                    )),
                 }
             }
             _ => self.fail("_rebuild_tensor_v2 without (storage, offset, size, stride, ...)"),

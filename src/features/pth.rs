@@ -7,6 +7,7 @@
 //! that training scripts use (`teacher`, `model`, `state_dict`, `student`); names lose a leading
 //! `module.` (DistributedDataParallel) and `backbone.` (DINO's `MultiCropWrapper`). Tensors must
 //! be contiguous; float32, float16, bfloat16 and float64 are read (as `f32`).
+use std::cell::{Cell, RefCell};
 use std::collections::BTreeMap;
 use std::io::{Read, Seek};
 use std::path::Path;
@@ -14,6 +15,7 @@ use std::path::Path;
 use half::{bf16, f16};
 
 use super::FeatureError;
+pub use super::pickle::Limits as PickleLimits;
 use super::pickle::{self, Dtype, Pickle, TensorRef, Value};
 
 /// Keys under which checkpoints nest the state dict, in the order they are tried: DINO's eval
@@ -21,27 +23,76 @@ use super::pickle::{self, Dtype, Pickle, TensorRef, Value};
 const WRAPPER_KEYS: [&str; 4] = ["teacher", "model", "state_dict", "student"];
 /// Name prefixes dropped from every tensor name.
 const PREFIXES: [&str; 2] = ["module.", "backbone."];
+/// Keys of a dict listed in a message.
+const MAX_KEYS_SHOWN: usize = 20;
 
-/// A loaded state dict: each tensor's view and the bytes of every storage it uses.
+/// What reading one checkpoint may cost. Every cap is on bytes actually read (through
+/// `Read::take`), never on the size an entry declares, since a crafted zip can declare anything.
+#[derive(Clone, Copy, Debug)]
+pub struct PthLimits {
+    /// `data.pkl`: a state dict's pickle is tens of KB, a training checkpoint's a few MB.
+    pub pickle_bytes: u64,
+    /// Storage bytes inflated over all tensors read: bounds the time a zip bomb can take. The
+    /// largest model read here (DINOv2 ViT-B/14, 86 M parameters) needs 350 MB in float32.
+    pub storage_bytes: u64,
+    pub pickle: PickleLimits,
+}
+
+impl Default for PthLimits {
+    fn default() -> Self {
+        PthLimits {
+            pickle_bytes: 64 << 20,
+            storage_bytes: 2 << 30,
+            pickle: PickleLimits::default(),
+        }
+    }
+}
+
+/// The zip archive, read from as tensors are asked for.
+trait Source: Read + Seek {}
+impl<T: Read + Seek> Source for T {}
+
+/// A loaded state dict: each tensor's view, and the archive its storages are read from when a
+/// tensor is asked for (only the bytes of that tensor are kept, so memory follows the model the
+/// caller builds, not what the file claims).
 pub struct Pth {
     file: String,
     /// Where the state dict was found, e.g. "under `teacher`", for messages.
     pub location: String,
     tensors: BTreeMap<String, TensorRef>,
-    storages: BTreeMap<String, Vec<u8>>,
+    /// The folder of `data.pkl` (`archive/`), with its slash.
+    folder: String,
+    zip: RefCell<zip::ZipArchive<Box<dyn Source>>>,
+    limits: PthLimits,
+    /// Storage bytes inflated so far (see [`PthLimits::storage_bytes`]).
+    inflated: Cell<u64>,
 }
 
 impl Pth {
     pub fn open(path: &Path) -> Result<Self, FeatureError> {
+        Self::open_with(path, PthLimits::default())
+    }
+
+    /// [`Pth::open`] within `limits`.
+    pub fn open_with(path: &Path, limits: PthLimits) -> Result<Self, FeatureError> {
         let file = std::fs::File::open(path).map_err(|e| FeatureError::io(path, e))?;
-        Self::from_reader(path.display().to_string(), std::io::BufReader::new(file))
+        Self::from_reader(
+            path.display().to_string(),
+            Box::new(std::io::BufReader::new(file)),
+            limits,
+        )
     }
 
     pub fn from_bytes(file: impl Into<String>, bytes: Vec<u8>) -> Result<Self, FeatureError> {
-        Self::from_reader(file.into(), std::io::Cursor::new(bytes))
+        Self::from_bytes_with(file, bytes, PthLimits::default())
     }
 
-    fn from_reader<R: Read + Seek>(file: String, mut reader: R) -> Result<Self, FeatureError> {
+    /// [`Pth::from_bytes`] within `limits`.
+    pub fn from_bytes_with(file: impl Into<String>, bytes: Vec<u8>, limits: PthLimits) -> Result<Self, FeatureError> {
+        Self::from_reader(file.into(), Box::new(std::io::Cursor::new(bytes)), limits)
+    }
+
+    fn from_reader(file: String, mut reader: Box<dyn Source>, limits: PthLimits) -> Result<Self, FeatureError> {
         let bad = |problem: String| FeatureError::invalid(file.clone(), problem);
         let mut magic = [0u8; 2];
         let n = reader.read(&mut magic).map_err(|e| FeatureError::io(&file, e))?;
@@ -66,19 +117,7 @@ impl Pth {
             .map(|n| n.into_owned())
             .ok_or_else(|| bad("a zip archive without `<folder>/data.pkl`: not a PyTorch checkpoint".into()))?;
         let folder = pkl.trim_end_matches("data.pkl").to_string();
-        let mut read = |name: &str| -> Result<Option<Vec<u8>>, FeatureError> {
-            let mut entry = match zip.by_name(name) {
-                Ok(e) => e,
-                Err(zip::result::ZipError::FileNotFound) => return Ok(None),
-                Err(e) => return Err(bad(format!("entry `{name}`: {e}"))),
-            };
-            let mut buf = Vec::with_capacity(entry.size().min(1 << 30) as usize);
-            entry
-                .read_to_end(&mut buf)
-                .map_err(|e| bad(format!("entry `{name}`: {e} (truncated file?)")))?;
-            Ok(Some(buf))
-        };
-        if let Some(order) = read(&format!("{folder}byteorder"))?
+        if let Some(order) = read_entry(&mut zip, &format!("{folder}byteorder"), 64, &bad)?
             && order != b"little"
         {
             return Err(bad(format!(
@@ -86,34 +125,57 @@ impl Pth {
                 String::from_utf8_lossy(&order)
             )));
         }
-        let pkl_bytes = read(&pkl)?.unwrap_or_default();
-        let pickle = pickle::parse(&pkl_bytes).map_err(|e| bad(format!("{pkl} {e}")))?;
+        let pkl_bytes = read_entry(&mut zip, &pkl, limits.pickle_bytes, &bad)?.unwrap_or_default();
+        let pickle = pickle::parse_with(&pkl_bytes, limits.pickle).map_err(|e| bad(format!("{pkl} {e}")))?;
+        drop(pkl_bytes);
         let (location, tensors) = state_dict(&pickle).map_err(|p| bad(format!("{pkl}: {p}")))?;
-        let mut storages = BTreeMap::new();
-        for t in tensors.values() {
+        drop(pickle);
+        // Each storage is checked against its entry's declared size here, without reading it;
+        // the bytes read later are checked again, since the declaration may lie.
+        let mut seen: BTreeMap<&str, (&Dtype, u64)> = BTreeMap::new();
+        for (name, t) in &tensors {
             let s = &t.storage;
-            if storages.contains_key(&s.key) {
-                continue;
+            match seen.get(s.key.as_str()) {
+                Some(&(dtype, numel)) if (dtype, numel) == (&s.dtype, s.numel) => continue,
+                Some(&(dtype, numel)) => {
+                    return Err(bad(format!(
+                        "{pkl}: tensor `{name}` names storage `{}` as {} {} values, another tensor as {numel} {} \
+                         values; one storage has one size and type",
+                        s.key,
+                        s.numel,
+                        s.dtype.name(),
+                        dtype.name()
+                    )));
+                }
+                None => {}
             }
+            seen.insert(&s.key, (&s.dtype, s.numel));
             let name = format!("{folder}data/{}", s.key);
-            let bytes = read(&name)?.ok_or_else(|| bad(format!("storage entry `{name}` missing")))?;
-            let want = s.numel.saturating_mul(s.dtype.size() as u64);
-            if bytes.len() as u64 != want {
+            let declared = match zip.by_name(&name) {
+                Ok(e) => e.size(),
+                Err(zip::result::ZipError::FileNotFound) => {
+                    return Err(bad(format!("storage entry `{name}` missing")));
+                }
+                Err(e) => return Err(bad(format!("entry `{name}`: {e}"))),
+            };
+            let want = storage_bytes(s);
+            if declared != want {
                 return Err(bad(format!(
-                    "storage `{name}` has {} bytes, but the pickle says {} {} values ({want} bytes); \
+                    "storage `{name}` has {declared} bytes, but the pickle says {} {} values ({want} bytes); \
                      truncated or corrupt checkpoint",
-                    bytes.len(),
                     s.numel,
                     s.dtype.name()
                 )));
             }
-            storages.insert(s.key.clone(), bytes);
         }
         Ok(Pth {
             file,
             location,
             tensors,
-            storages,
+            folder,
+            zip: RefCell::new(zip),
+            limits,
+            inflated: Cell::new(0),
         })
     }
 
@@ -153,6 +215,11 @@ impl Pth {
             }
             expected *= d;
         }
+        if let Dtype::Other(class, _) = &t.storage.dtype {
+            return Err(bad(format!(
+                "is {class}, not a floating-point tensor (float32, float16, bfloat16 or float64)"
+            )));
+        }
         let numel: usize = t.shape.iter().product();
         let size = t.storage.dtype.size();
         let end = t.offset.saturating_add(numel as u64);
@@ -162,7 +229,12 @@ impl Pth {
                 t.storage.key, t.offset, t.storage.numel
             )));
         }
-        let bytes = &self.storages[&t.storage.key][t.offset as usize * size..end as usize * size];
+        let skip = t
+            .offset
+            .checked_mul(size as u64)
+            .ok_or_else(|| bad(format!("has offset {}, past any storage", t.offset)))?;
+        let bytes = self.read_storage(&t.storage, skip, numel * size)?;
+        let bytes = &bytes[..];
         let le2 = |b: &[u8]| u16::from_le_bytes([b[0], b[1]]);
         Ok(match &t.storage.dtype {
             Dtype::F32 => bytes
@@ -178,19 +250,81 @@ impl Pth {
                 .chunks_exact(8)
                 .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")) as f32)
                 .collect(),
-            Dtype::Other(class, _) => {
-                return Err(bad(format!(
-                    "is {class}, not a floating-point tensor (float32, float16, bfloat16 or float64)"
-                )));
-            }
+            // Refused above, before any byte was read.
+            Dtype::Other(..) => Vec::new(),
         })
+    }
+}
+
+/// Bytes of storage `s` as the pickle describes it.
+fn storage_bytes(s: &pickle::StorageRef) -> u64 {
+    s.numel.saturating_mul(s.dtype.size() as u64)
+}
+
+/// The whole entry `name`, read through a cap of `cap` bytes; `None` when there is none.
+fn read_entry<R: Read + Seek>(
+    zip: &mut zip::ZipArchive<R>,
+    name: &str,
+    cap: u64,
+    bad: &dyn Fn(String) -> FeatureError,
+) -> Result<Option<Vec<u8>>, FeatureError> {
+    let entry = match zip.by_name(name) {
+        Ok(e) => e,
+        Err(zip::result::ZipError::FileNotFound) => return Ok(None),
+        Err(e) => return Err(bad(format!("entry `{name}`: {e}"))),
+    };
+    let mut buf = Vec::with_capacity(entry.size().min(cap) as usize);
+    entry
+        .take(cap + 1)
+        .read_to_end(&mut buf)
+        .map_err(|e| bad(format!("entry `{name}`: {e} (truncated file?)")))?;
+    if buf.len() as u64 > cap {
+        return Err(bad(format!(
+            "entry `{name}` inflates to more than {cap} bytes, more than a checkpoint's {name} holds"
+        )));
+    }
+    Ok(Some(buf))
+}
+
+impl Pth {
+    /// `len` bytes of storage `s` from byte `skip` on, inflated from its entry through a cap.
+    fn read_storage(&self, s: &pickle::StorageRef, skip: u64, len: usize) -> Result<Vec<u8>, FeatureError> {
+        let name = format!("{}data/{}", self.folder, s.key);
+        let bad = |problem: String| FeatureError::invalid(self.file.clone(), format!("storage `{name}` {problem}"));
+        let spent = self.inflated.get().saturating_add(skip).saturating_add(len as u64);
+        if spent > self.limits.storage_bytes {
+            return Err(bad(format!(
+                "would take the tensors read past {} bytes in all, more than any model read here needs \
+                 (a zip bomb, or a model this reader does not know)",
+                self.limits.storage_bytes
+            )));
+        }
+        self.inflated.set(spent);
+        let mut zip = self.zip.borrow_mut();
+        let mut entry = zip.by_name(&name).map_err(|e| bad(e.to_string()))?;
+        let skipped = std::io::copy(&mut (&mut entry).take(skip), &mut std::io::sink())
+            .map_err(|e| bad(format!("{e} (truncated file?)")))?;
+        let mut buf = Vec::with_capacity(len);
+        (&mut entry)
+            .take(len as u64)
+            .read_to_end(&mut buf)
+            .map_err(|e| bad(format!("{e} (truncated file?)")))?;
+        if skipped != skip || buf.len() != len {
+            return Err(bad(format!(
+                "ends after {} bytes, before byte {} that the tensor needs: truncated or corrupt checkpoint",
+                skipped + buf.len() as u64,
+                skip + len as u64
+            )));
+        }
+        Ok(buf)
     }
 }
 
 /// The tensors of the state dict in `p`, with where it was found.
 fn state_dict(p: &Pickle) -> Result<(String, BTreeMap<String, TensorRef>), String> {
     let Some(Value::Dict(root)) = p.root else {
-        return Err(format!("the checkpoint is not a dict but {:?}", p.root));
+        let what = p.root.as_ref().map_or("nothing".to_string(), pickle::brief);
+        return Err(format!("the checkpoint is not a dict but {what}"));
     };
     let has_tensors = |d: usize| p.dicts[d].iter().any(|(_, v)| matches!(v, Value::Tensor(_)));
     let (location, dict) = if has_tensors(root) {
@@ -206,9 +340,10 @@ fn state_dict(p: &Pickle) -> Result<(String, BTreeMap<String, TensorRef>), Strin
                 let keys: Vec<String> = p.dicts[root]
                     .iter()
                     .map(|(k, _)| match k {
-                        Value::Str(s) => s.clone(),
-                        other => format!("{other:?}"),
+                        Value::Str(s) => s.chars().take(200).collect(),
+                        other => pickle::brief(other),
                     })
+                    .take(MAX_KEYS_SHOWN)
                     .collect();
                 format!(
                     "no state dict: no tensors at the top nor under {} (keys: {})",
@@ -223,7 +358,7 @@ fn state_dict(p: &Pickle) -> Result<(String, BTreeMap<String, TensorRef>), Strin
             // Non-tensor entries (e.g. a step counter) are not weights.
             continue;
         };
-        let mut short = name.as_str();
+        let mut short: &str = name;
         for prefix in PREFIXES {
             short = short.strip_prefix(prefix).unwrap_or(short);
         }

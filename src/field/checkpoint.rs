@@ -37,6 +37,13 @@ const OLD_MAGIC: &[u8; 8] = b"SFTRAIN1";
 const MOMENTS: [&str; 2] = ["adam.first_moment.", "adam.second_moment."];
 /// Metadata keys of the format itself; a writer's own keys must be others.
 const RESERVED: [&str; 4] = ["format", "version", "step", "config"];
+/// Most parameters a checkpoint's config may ask for. Reading one holds the file and three
+/// float copies of the parameters (the parameters and both moments), so 2^25 keeps a hostile
+/// file's peak near 800 MB; the default model has 16.7 M at most (16 levels of 2^19 x 2).
+pub const MAX_PARAMS: usize = 1 << 25;
+/// Largest checkpoint file read: the three copies of [`MAX_PARAMS`] as f32, and room for the
+/// header and the metadata (labels among them).
+pub const MAX_FILE_BYTES: u64 = 3 * 4 * MAX_PARAMS as u64 + (64 << 20);
 
 /// A checkpoint that cannot be read or does not fit, naming the file.
 #[derive(Debug, thiserror::Error)]
@@ -116,6 +123,17 @@ impl Checkpoint {
         to_bytes_with_metadata(&entries, &metadata)
     }
 
+    /// Reads the checkpoint file at `path`: a regular file (a FIFO or device is refused before it
+    /// is opened), through a cap of [`MAX_FILE_BYTES`] whatever its size claims.
+    pub fn read_file(path: &std::path::Path) -> Result<Self, CheckpointError> {
+        let file = path.display().to_string();
+        let bytes = crate::bounded_read::read_regular_file(path, MAX_FILE_BYTES).map_err(|e| CheckpointError {
+            file: file.clone(),
+            problem: format!("cannot read the checkpoint: {e}"),
+        })?;
+        Self::from_bytes(&file, bytes)
+    }
+
     /// Reads a checkpoint from `bytes`, the content of the file named `file` in messages.
     pub fn from_bytes(file: &str, bytes: Vec<u8>) -> Result<Self, CheckpointError> {
         let bad = |problem: String| CheckpointError {
@@ -162,6 +180,14 @@ impl Checkpoint {
             config_of(get("config")?).map_err(|e| bad(format!("`__metadata__` config is not a field config: {e}")))?;
         config.validate().map_err(|e| bad(format!("`__metadata__` {e}")))?;
         let layout = ParamLayout::new(&config);
+        if layout.total > MAX_PARAMS {
+            return Err(bad(format!(
+                "`__metadata__` config has {} parameters, more than the {MAX_PARAMS} a checkpoint may hold \
+                 (its host memory would be {} MiB before any tensor is read)",
+                layout.total,
+                (layout.total as u64 * 12) >> 20
+            )));
+        }
         let list = tensors(&config, &layout);
         let expected: std::collections::BTreeSet<String> = [""]
             .into_iter()
@@ -176,9 +202,17 @@ impl Checkpoint {
         let read = |prefix: &str| -> Result<Vec<f32>, CheckpointError> {
             let mut out = Vec::new();
             for (name, shape, _) in &list {
-                let values = st
-                    .f32(&format!("{prefix}{name}"), shape)
-                    .map_err(|e| bad(strip_file(e.to_string(), file)))?;
+                let full = format!("{prefix}{name}");
+                let values = st.f32(&full, shape).map_err(|e| bad(strip_file(e.to_string(), file)))?;
+                // A field with NaN or infinite weights renders every pixel as class 0 without a
+                // word; refused here, by the tensor that has them.
+                if let Some((i, v)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+                    let bad_count = values.iter().filter(|v| !v.is_finite()).count();
+                    return Err(bad(format!(
+                        "tensor `{full}` has {bad_count} values that are not finite (the first: {v} at index {i}); \
+                         the field it saved had diverged"
+                    )));
+                }
                 out.extend_from_slice(&values);
             }
             Ok(out)

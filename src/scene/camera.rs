@@ -148,6 +148,11 @@ impl Pose {
         if a.iter().any(|v| !v.is_finite()) {
             return Err("pose has non-finite values".into());
         }
+        // Every importer and the archive reader check poses here, so one that the GPU would see
+        // as infinite (1e300 is finite in f64 only) is refused wherever it comes from.
+        for (i, &v) in a.iter().enumerate() {
+            f32_finite("pose", &format!("row {} column {}", i / 4, i % 4), v)?;
+        }
         let last = [a[12], a[13], a[14], a[15]];
         if (last[0].abs() + last[1].abs() + last[2].abs() + (last[3] - 1.0).abs()) > RIGID_TOLERANCE {
             return Err(format!("pose's last row must be 0 0 0 1, got {last:?}"));

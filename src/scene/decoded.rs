@@ -5,6 +5,7 @@ use image::{GrayImage, ImageBuffer, Luma, RgbImage};
 use super::camera::{Bounds, Intrinsics, Pose};
 use super::label_set::{ClassInfo, LabelSet};
 use super::manifest::{Pca, Provenance};
+use super::private_paths::scrub;
 
 /// Depth in units of `Scene::depth_scale` metres; 0 = no reading.
 pub type DepthImage = ImageBuffer<Luma<u16>, Vec<u16>>;
@@ -131,7 +132,10 @@ impl Scene {
                 let _ = writeln!(
                     s,
                     "features:    yes ({} x {} x {}, {})",
-                    f.width, f.height, f.dim, f.extractor
+                    f.width,
+                    f.height,
+                    f.dim,
+                    scrub(&f.extractor, None)
                 );
             }
             None => {
@@ -161,14 +165,16 @@ impl Scene {
             let _ = writeln!(s, "classes:     {}", names.join(", "));
         }
         if !self.provenance.source.is_empty() || !self.provenance.importer.is_empty() {
+            // Archives packed before provenance was made relative may hold absolute paths.
             let _ = writeln!(
                 s,
                 "provenance:  {} ({})",
-                self.provenance.source, self.provenance.importer
+                scrub(&self.provenance.source, None),
+                self.provenance.importer
             );
         }
         for n in &self.provenance.notes {
-            let _ = writeln!(s, "note:        {n}");
+            let _ = writeln!(s, "note:        {}", scrub(n, None));
         }
         s
     }

@@ -11,6 +11,7 @@ pub mod import;
 pub mod label_set;
 pub mod manifest;
 pub mod pca;
+pub mod private_paths;
 pub mod resample;
 
 pub use archive::{read_archive, read_archive_path, write_archive, write_archive_path};

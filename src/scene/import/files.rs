@@ -26,6 +26,9 @@ pub struct Meta {
     pub is_dir: bool,
     /// Bytes (0 for a folder).
     pub len: u64,
+    /// The path itself is a symbolic link (what it says of the target: the fields above). The
+    /// walks through folders do not follow links to folders (see `colmap::photos_under`).
+    pub is_link: bool,
 }
 
 impl Meta {
@@ -41,7 +44,8 @@ impl Meta {
 /// importers' messages (which name the path) read the same from both sources.
 pub trait CaptureFiles {
     fn metadata(&self, path: &Path) -> io::Result<Meta>;
-    fn read(&self, path: &Path) -> io::Result<Vec<u8>>;
+    /// The whole file, refused when it has more than `cap` bytes (counted as they are read).
+    fn read(&self, path: &Path, cap: u64) -> io::Result<Vec<u8>>;
     /// The paths of the entries directly in `dir` (files and folders).
     fn read_dir(&self, dir: &Path) -> io::Result<Vec<PathBuf>>;
 }
@@ -52,13 +56,17 @@ pub struct Disk;
 impl CaptureFiles for Disk {
     fn metadata(&self, path: &Path) -> io::Result<Meta> {
         let m = std::fs::metadata(path)?;
+        let is_link = std::fs::symlink_metadata(path)?.file_type().is_symlink();
         Ok(Meta {
             is_dir: m.is_dir(),
             len: if m.is_dir() { 0 } else { m.len() },
+            is_link,
         })
     }
-    fn read(&self, path: &Path) -> io::Result<Vec<u8>> {
-        std::fs::read(path)
+    /// Only a regular file is read (a link to one is followed: captures link folders and
+    /// files in on purpose): a FIFO would block forever, `/dev/zero` never ends.
+    fn read(&self, path: &Path, cap: u64) -> io::Result<Vec<u8>> {
+        crate::bounded_read::read_regular_file(path, cap)
     }
     fn read_dir(&self, dir: &Path) -> io::Result<Vec<PathBuf>> {
         std::fs::read_dir(dir)?.map(|e| e.map(|e| e.path())).collect()
@@ -109,8 +117,10 @@ pub(super) fn metadata(path: &Path) -> io::Result<Meta> {
     with_source(|f| f.metadata(path))
 }
 
-pub(super) fn read(path: &Path) -> io::Result<Vec<u8>> {
-    with_source(|f| f.read(path))
+/// The file at `path`, at most `cap` bytes of it (each caller's cap is what its kind of file
+/// can hold).
+pub(super) fn read(path: &Path, cap: u64) -> io::Result<Vec<u8>> {
+    with_source(|f| f.read(path, cap))
 }
 
 pub(super) fn read_dir(dir: &Path) -> io::Result<Vec<PathBuf>> {
@@ -346,17 +356,26 @@ impl CaptureFiles for MemoryFiles {
             return Ok(Meta {
                 is_dir: false,
                 len: bytes.len() as u64,
+                is_link: false,
             });
         }
         if self.dirs.contains(&k) {
-            return Ok(Meta { is_dir: true, len: 0 });
+            return Ok(Meta {
+                is_dir: true,
+                len: 0,
+                is_link: false,
+            });
         }
         Err(not_found(path))
     }
 
-    fn read(&self, path: &Path) -> io::Result<Vec<u8>> {
+    fn read(&self, path: &Path, cap: u64) -> io::Result<Vec<u8>> {
         let k = key(path).ok_or_else(|| not_found(path))?;
         match self.files.get(&k) {
+            Some(bytes) if bytes.len() as u64 > cap => Err(io::Error::new(
+                io::ErrorKind::InvalidData,
+                format!("{} bytes, more than the {cap} read from such a file", bytes.len()),
+            )),
             Some(bytes) => Ok(bytes.clone()),
             None if self.dirs.contains(&k) => Err(io::Error::new(io::ErrorKind::IsADirectory, "is a folder")),
             None => Err(not_found(path)),
@@ -408,7 +427,8 @@ mod tests {
         let mut listed = f.read_dir(Path::new("cap")).unwrap();
         listed.sort();
         assert_eq!(listed, [PathBuf::from("cap/images"), PathBuf::from("cap/sparse")]);
-        assert_eq!(f.read(Path::new("cap/images/b.jpg")).unwrap(), [3]);
+        assert_eq!(f.read(Path::new("cap/images/b.jpg"), 1).unwrap(), [3]);
+        assert!(f.read(Path::new("cap/images/a.jpg"), 1).is_err());
     }
 
     #[test]

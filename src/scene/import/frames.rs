@@ -8,7 +8,7 @@ use std::pin::Pin;
 use image::{GrayImage, RgbImage};
 
 use super::files::CapturePath;
-use super::images::{load_depth, load_gt, load_rgb};
+use super::images::{dimensions, load_depth, load_gt, load_rgb};
 use super::resize::{resize_nearest, resize_rgb, same_aspect, target_size};
 use super::{Background, ImportOptions};
 use crate::pause::Pause;
@@ -263,6 +263,14 @@ pub(super) async fn load_frames_prepared(
 ) -> Result<Loaded> {
     let total = files.len();
     progress.show(0, total);
+    if let Some(first) = files.first() {
+        // From the first image's header, before any frame is decoded: every frame must have its
+        // size, and the frames the scene would hold must fit the archive's budget.
+        let name = first.rgb.display().to_string();
+        let size = target_size(dimensions(&first.rgb)?, opts.max_size);
+        check_pixel_budget(size, total, &name)?;
+        check_decoded_budget(size, &files, &name)?;
+    }
     let mut frames = Vec::with_capacity(total);
     let mut sizes: Option<((u32, u32), (u32, u32))> = None;
     let mut notes = Vec::new();
@@ -393,6 +401,30 @@ fn check_pixel_budget(size: (u32, u32), frames: usize, first: &str) -> Result<()
                 size.0,
                 size.1,
                 limits::MAX_TOTAL_PIXELS
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The bytes `files` decode to at `size` (colour 3 a pixel, depth 2, ground truth 1) within the
+/// archive's decoded budget, which writing the scene would check only after decoding them all.
+fn check_decoded_budget(size: (u32, u32), files: &[FrameFiles], first: &str) -> Result<()> {
+    let pixels = size.0 as u64 * size.1 as u64;
+    let bytes = files
+        .iter()
+        .map(|f| pixels * (3 + 2 * f.depth.is_some() as u64 + f.gt.is_some() as u64))
+        .fold(0u64, u64::saturating_add);
+    if bytes > limits::MAX_DECODED_BYTES {
+        return Err(SceneError::invalid(
+            first,
+            format!(
+                "{} frames of {}x{} decode to {bytes} bytes, more than the budget of {} bytes for one scene \
+                 (checked from the image header, before decoding); use --max-size, --every or --max-frames",
+                files.len(),
+                size.0,
+                size.1,
+                limits::MAX_DECODED_BYTES
             ),
         ));
     }

@@ -12,6 +12,9 @@ use crate::scene::error::{Result, SceneError};
 
 /// Bytes searched at the end of a JPEG for its end-of-image marker.
 const JPEG_TAIL: usize = 1024;
+/// Largest image file read: as an archive's image entry, the largest frame at 8 bytes a pixel
+/// (16-bit RGBA, stored) and 1 MiB of headers.
+pub(super) const MAX_IMAGE_FILE_BYTES: u64 = limits::MAX_SIDE as u64 * limits::MAX_SIDE as u64 * 8 + (1 << 20);
 
 fn name(path: &Path) -> String {
     path.display().to_string()
@@ -19,7 +22,7 @@ fn name(path: &Path) -> String {
 
 /// Decodes any supported image, refusing absurd sizes before allocating.
 pub(super) fn decode(path: &Path) -> Result<DynamicImage> {
-    let bytes = super::files::read(path).map_err(|e| SceneError::io(path, e))?;
+    let bytes = super::files::read(path, MAX_IMAGE_FILE_BYTES).map_err(|e| SceneError::io(path, e))?;
     if bytes.is_empty() {
         return Err(SceneError::invalid(name(path), "image file is empty"));
     }
@@ -56,7 +59,7 @@ fn check_jpeg_complete(bytes: &[u8], path: &Path) -> Result<()> {
 
 /// Width and height from the image header, without decoding the pixels.
 pub(super) fn dimensions(path: &Path) -> Result<(u32, u32)> {
-    let bytes = super::files::read(path).map_err(|e| SceneError::io(path, e))?;
+    let bytes = super::files::read(path, MAX_IMAGE_FILE_BYTES).map_err(|e| SceneError::io(path, e))?;
     let reader = ImageReader::new(std::io::Cursor::new(&bytes[..]))
         .with_guessed_format()
         .map_err(|e| SceneError::io(path, e))?;

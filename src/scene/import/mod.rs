@@ -30,6 +30,7 @@ mod seven_scenes;
 mod text;
 mod transforms;
 
+use crate::scene::private_paths::{folder_name, scrub};
 pub use files::{CaptureFiles, MAX_CAPTURE_BYTES, MemoryFiles, reading_from};
 use frames::Progress;
 pub use options::{Background, Split};
@@ -243,8 +244,15 @@ impl Built {
         let mut notes = self.notes;
         notes.extend(self.report.iter().cloned());
         notes.extend(self.warnings.iter().cloned());
+        // The capture by its folder's name: an archive is shared, the packer's paths are not.
+        let name = folder_name(input);
+        let given = input.display().to_string();
+        let notes = notes
+            .iter()
+            .map(|n| scrub(n, Some((given.as_str(), name.as_str()))))
+            .collect();
         self.scene.provenance = Provenance {
-            source: input.display().to_string(),
+            source: name,
             importer: self.layout.name().into(),
             tool: format!("scribblefield {}", env!("CARGO_PKG_VERSION")),
             notes,
@@ -328,7 +336,7 @@ fn capture_path(base: &Path, relative: &str, field: &str, file: &str, opts: &Imp
 pub mod text_checks {
     use std::path::Path;
 
-    use super::{ImportOptions, colmap, text, transforms};
+    use super::{ImportOptions, colmap, scannet, text, transforms};
     use crate::scene::camera::{Intrinsics, Pose};
     use crate::scene::error::{Result, SceneError};
 
@@ -340,6 +348,25 @@ pub mod text_checks {
     /// A COLMAP text model (`cameras.txt`, `images.txt`, `points3D.txt`); returns its image count.
     pub fn colmap_text(cameras: &str, images: &str, points: &str) -> Result<usize> {
         colmap::check_text_model([cameras, images, points])
+    }
+
+    /// A COLMAP binary model (`cameras.bin`, `images.bin`, `points3D.bin`); returns its image count.
+    pub fn colmap_binary(cameras: &[u8], images: &[u8], points: &[u8]) -> Result<usize> {
+        colmap::check_binary_model([cameras, images, points])
+    }
+
+    /// A ScanNet pose file (`pose/N.txt`): `None` where it marks a lost frame (non-finite).
+    pub fn scannet_pose(bytes: &[u8]) -> Result<Option<Pose>> {
+        let file = "pose/0.txt";
+        scannet::pose_from_text(text_of(bytes, file)?, file)
+    }
+
+    /// ScanNet intrinsics (`intrinsic/intrinsic_color.txt`) for colour images of `size`.
+    pub fn scannet_intrinsics(bytes: &[u8], size: (u32, u32)) -> Result<Intrinsics> {
+        let file = "intrinsic/intrinsic_color.txt";
+        let (k, _skew) = text::intrinsics_from_numbers(&text::parse_numbers(text_of(bytes, file)?, file)?, file)?;
+        scannet::check_principal_point(&k, size, Path::new(file))?;
+        Ok(k)
     }
 
     /// A 7-Scenes `frame-NNNNNN.pose.txt`: a 4x4 (or 3x4) camera-to-world matrix.

@@ -210,17 +210,21 @@ fn intrinsics(dir: &Path, file: &str, what: &str) -> Result<(Intrinsics, Vec<Str
 /// A pose file: None when it holds non-finite values (ScanNet's mark of a lost frame); an
 /// error when it is not a pose at all.
 fn read_scannet_pose(path: &Path) -> Result<Option<Pose>> {
-    let file = shown(path);
-    let numbers = parse_numbers(&read_text(path)?, &file)?;
+    pose_from_text(&read_text(path)?, &shown(path))
+}
+
+/// [`read_scannet_pose`] of the text of `file`.
+pub(super) fn pose_from_text(text: &str, file: &str) -> Result<Option<Pose>> {
+    let numbers = parse_numbers(text, file)?;
     if numbers.iter().any(|v| !v.is_finite()) {
         return Ok(None);
     }
-    pose_from_numbers(&numbers, &file).map(Some)
+    pose_from_numbers(&numbers, file).map(Some)
 }
 
 /// A principal point outside its image means the intrinsics are not this camera's (say, the
 /// colour and depth files swapped, or K of another resolution).
-fn check_principal_point(k: &Intrinsics, (w, h): (u32, u32), path: &Path) -> Result<()> {
+pub(super) fn check_principal_point(k: &Intrinsics, (w, h): (u32, u32), path: &Path) -> Result<()> {
     if (0.0..w as f64).contains(&k.cx) && (0.0..h as f64).contains(&k.cy) {
         return Ok(());
     }

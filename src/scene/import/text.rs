@@ -19,7 +19,7 @@ pub(super) fn read_text(path: &Path) -> Result<String> {
             format!("{} bytes is far too large for this text file", meta.len()),
         ));
     }
-    let bytes = super::files::read(path).map_err(|e| SceneError::io(path, e))?;
+    let bytes = super::files::read(path, MAX_TEXT_BYTES).map_err(|e| SceneError::io(path, e))?;
     String::from_utf8(bytes).map_err(|_| SceneError::invalid(path.display().to_string(), "not a text file (not UTF-8)"))
 }
 

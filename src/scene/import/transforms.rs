@@ -116,7 +116,7 @@ pub(super) fn list(json_path: &Path, opts: &ImportOptions) -> Result<Listing> {
             format!("{} bytes is too large for a transforms file", meta.len()),
         ));
     }
-    let bytes = super::files::read(json_path).map_err(|e| SceneError::io(json_path, e))?;
+    let bytes = super::files::read(json_path, limits::MAX_JSON_BYTES).map_err(|e| SceneError::io(json_path, e))?;
     let (parsed, camera, mut warnings) = parse(&bytes, &file)?;
 
     let mut entries = Vec::new();

@@ -6,7 +6,10 @@ use std::path::Path;
 
 use glam::{DVec2, DVec3};
 
-use super::model::{At, Camera, Image, MODELS, Model, Point3D, SUPPORTED, camera, duplicate, param_count, rotation};
+use super::model::{
+    At, Camera, Image, MAX_POINTS, MODELS, Model, Point3D, SUPPORTED, camera, duplicate, param_count, rotation,
+    too_many_points,
+};
 use super::read_model_file;
 use crate::scene::error::{Result, SceneError};
 
@@ -25,6 +28,16 @@ pub(super) fn read(dir: &Path) -> Result<Model> {
         cameras: read_cameras(&mut Reader::new(&read_model_file(&paths[0])?, &files[0]))?,
         images: read_images(&mut Reader::new(&read_model_file(&paths[1])?, &files[1]))?,
         points: read_points(&mut Reader::new(&read_model_file(&paths[2])?, &files[2]))?,
+        files,
+    })
+}
+
+/// The model in the three files' bytes (cameras, images, points3D), named `files` in messages.
+pub(super) fn parse(bytes: [&[u8]; 3], files: [String; 3]) -> Result<Model> {
+    Ok(Model {
+        cameras: read_cameras(&mut Reader::new(bytes[0], &files[0]))?,
+        images: read_images(&mut Reader::new(bytes[1], &files[1]))?,
+        points: read_points(&mut Reader::new(bytes[2], &files[2]))?,
         files,
     })
 }
@@ -220,6 +233,9 @@ fn read_images(r: &mut Reader) -> Result<Vec<Image>> {
 fn read_points(r: &mut Reader) -> Result<HashMap<u64, Point3D>> {
     // point3D_id u64, xyz 3 x f64, rgb 3 x u8, error f64, track length u64, track elements.
     let n = r.count("3D points", 8 + 24 + 3 + 8 + 8)?;
+    if n > MAX_POINTS {
+        return Err(too_many_points(n, r.file));
+    }
     let mut points = HashMap::with_capacity(n);
     for i in 0..n {
         r.at = At::Record(i + 1);

@@ -36,8 +36,9 @@ const MASKS_DIR: &str = "masks";
 /// Model folders tried in order: COLMAP's mapper writes sparse/0, sparse/1, ... (one per model).
 const MODEL_DIRS: [&str; 2] = ["sparse/0", "sparse"];
 const IMAGE_EXTS: &[&str] = &["jpg", "jpeg", "png"];
-/// Largest model file read (COLMAP models of thousands of photos reach a few hundred MB).
-const MAX_MODEL_BYTES: u64 = 4 << 30;
+/// Largest model file read, checked as it is read: COLMAP models of the captures packed here
+/// are tens of MB; with `model::MAX_POINTS` it keeps a model's memory near 1 GB.
+const MAX_MODEL_BYTES: u64 = 256 << 20;
 /// Folder depth searched for photos that the model does not register.
 const MAX_IMAGE_DEPTH: usize = 4;
 /// Points trusted for bounds and depth: seen by at least two photos, reprojection error at most
@@ -93,7 +94,7 @@ fn read_model_file(path: &Path) -> Result<Vec<u8>> {
             format!("{} bytes is too large for a COLMAP model file", meta.len()),
         ));
     }
-    super::files::read(path).map_err(|e| SceneError::io(path, e))
+    super::files::read(path, MAX_MODEL_BYTES).map_err(|e| SceneError::io(path, e))
 }
 
 /// Reads the model in `dir`: binary when cameras.bin is there (as COLMAP itself prefers), text
@@ -250,7 +251,15 @@ pub(super) async fn import(input: &Path, opts: &ImportOptions, progress: &mut Pr
 /// shared output camera follow, and each photo's sparse depth can be computed. The fuzz target
 /// and its corpus replay (`scribblefield::fuzzing`) run this. Returns the number of images.
 pub(super) fn check_text_model(texts: [&str; 3]) -> Result<usize> {
-    let model = text::parse(texts, FILES.map(|f| format!("{f}.txt")))?;
+    check_model(text::parse(texts, FILES.map(|f| format!("{f}.txt")))?)
+}
+
+/// [`check_text_model`] for a binary model (`cameras.bin`, `images.bin`, `points3D.bin`).
+pub(super) fn check_binary_model(bytes: [&[u8]; 3]) -> Result<usize> {
+    check_model(binary::parse(bytes, FILES.map(|f| format!("{f}.bin")))?)
+}
+
+fn check_model(model: Model) -> Result<usize> {
     model.check()?;
     let mut images: Vec<&Image> = model.images.iter().collect();
     images.sort_by(|a, b| a.name.cmp(&b.name));
@@ -289,7 +298,10 @@ fn photos_under(dir: &Path) -> Result<Vec<String>> {
                 continue;
             };
             let rel = format!("{prefix}{name}");
-            if path.is_capture_dir() && depth < MAX_IMAGE_DEPTH {
+            // A link to a folder is not walked: `images/a -> .` would list every photo again
+            // under each name, and a few such links multiply the walk past any bound.
+            let folder = super::files::metadata(&path).is_ok_and(|m| m.is_dir && !m.is_link);
+            if folder && depth < MAX_IMAGE_DEPTH {
                 stack.push((path.clone(), format!("{rel}/"), depth + 1));
             } else if is_photo(name) {
                 out.push(rel);

@@ -47,6 +47,26 @@ impl std::fmt::Display for At {
     }
 }
 
+/// Most 3D points in a model: each costs about 260 bytes once read (its track, the map), so
+/// 2 M keep a model's memory near 500 MB. Models of the captures packed here (a few hundred
+/// photos) have 10^4 to 10^6.
+pub(super) const MAX_POINTS: usize = 2_000_000;
+
+/// The error for a model with more than [`MAX_POINTS`] points.
+pub(super) fn too_many_points(n: usize, file: &str) -> SceneError {
+    SceneError::invalid(
+        file,
+        format!(
+            "{n} 3D points, more than the {MAX_POINTS} read from a model; filter the model first (COLMAP's \
+             point_filtering, or export fewer points)"
+        ),
+    )
+}
+
+/// Largest |k1|, |k2|, |p1|, |p2| accepted: calibrated lenses, fisheye ones included, stay
+/// below about 1; far larger terms are a broken calibration, not a lens.
+pub(super) const MAX_DISTORTION: f64 = 10.0;
+
 /// The OPENCV lens model, which covers every supported model (the others fix some of its
 /// parameters): pixel = (fx x'' + cx, fy y'' + cy), with (x'', y'') the distorted normalised
 /// coordinates; cx, cy in COLMAP pixels (corner origin).
@@ -172,6 +192,16 @@ pub(super) fn camera(model: &str, id: u32, size: (u32, u32), params: &[f64], fil
             format!(
                 "{at}: camera {id}: focal length must be positive, got fx = {}, fy = {}",
                 lens.fx, lens.fy
+            ),
+        ));
+    }
+    let terms = [("k1", lens.k1), ("k2", lens.k2), ("p1", lens.p1), ("p2", lens.p2)];
+    if let Some((name, v)) = terms.iter().find(|(_, v)| !v.is_finite() || v.abs() > MAX_DISTORTION) {
+        return Err(SceneError::invalid(
+            file,
+            format!(
+                "{at}: camera {id}: distortion {name} = {v:e} is outside [-{MAX_DISTORTION}, {MAX_DISTORTION}]; \
+                 real lenses stay well inside it, and such a lens would map every pixel outside the photo"
             ),
         ));
     }

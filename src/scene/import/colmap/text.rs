@@ -6,7 +6,9 @@ use std::str::FromStr;
 
 use glam::{DVec2, DVec3};
 
-use super::model::{At, Camera, Image, Model, Point3D, camera, duplicate, param_count, rotation};
+use super::model::{
+    At, Camera, Image, MAX_POINTS, Model, Point3D, camera, duplicate, param_count, rotation, too_many_points,
+};
 use super::read_model_file;
 use crate::scene::error::{Result, SceneError};
 
@@ -233,6 +235,9 @@ fn read_points(text: &str, file: &str) -> Result<HashMap<u64, Point3D>> {
         };
         if points.insert(id, point).is_some() {
             return Err(duplicate("3D point", id, file, at));
+        }
+        if points.len() > MAX_POINTS {
+            return Err(too_many_points(points.len(), file));
         }
     }
     Ok(points)
