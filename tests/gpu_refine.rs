@@ -75,6 +75,7 @@ fn one_round_matches_the_cpu_twin() {
     let guide = Guide {
         rgb: &rgb,
         depth: Some(&depth),
+        codes: None,
     };
     let uniforms = RefineUniforms::new(rgb.width(), rgb.height(), CLASSES as u32, &options(1));
     assert_eq!(uniforms.step, 2, "the test should exercise spaced taps");
@@ -99,6 +100,7 @@ fn check_refine(ctx: &GpuContext, with_depth: bool) {
     let guide = Guide {
         rgb: &rgb,
         depth: with_depth.then_some(&depth),
+        codes: None,
     };
     let pass = pollster::block_on(RefinePass::new(ctx)).unwrap();
     for (iterations, votes) in [(0, false), (1, false), (3, false), (3, true)] {
@@ -141,6 +143,7 @@ fn a_rendered_frame_refined_on_the_gpu_matches_one_refined_on_the_cpu() {
     let guide = Guide {
         rgb: &rgb,
         depth: Some(&depth),
+        codes: None,
     };
     // Rendered rows: rgb, depth, the logits (log probabilities), no features.
     let mut assembler = FrameAssembler::new(rgb.width(), rgb.height(), CLASSES, 0);
@@ -173,6 +176,7 @@ fn a_rendered_frame_refined_on_the_gpu_matches_one_refined_on_the_cpu() {
         Guide {
             rgb: &wrong,
             depth: None,
+            codes: None,
         },
         &options(3),
     ))
@@ -195,6 +199,7 @@ fn bench() {
         let guide = Guide {
             rgb: &rgb,
             depth: Some(&depth),
+            codes: None,
         };
         let classes = 6;
         let base = vec![1.0 / classes as f32; (w * h) as usize * classes];

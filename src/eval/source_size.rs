@@ -307,6 +307,7 @@ pub fn render_at_source(
         let guide = Guide {
             rgb: &f.rgb,
             depth: f.depth.as_ref(),
+            codes: None,
         };
         refine_probabilities(&mut probabilities, classes, guide, refine)?;
     }

@@ -369,7 +369,11 @@ mod tests {
                 _ => UNLABELLED,
             })
             .collect();
-        let guide = Guide { rgb: &rgb, depth: None };
+        let guide = Guide {
+            rgb: &rgb,
+            depth: None,
+            codes: None,
+        };
         let options = PropagationOptions::default();
         run_to_end(left_out_in_frame(&strokes, 3, guide, None, &options, &mut NoPause)).unwrap()
     }
@@ -397,26 +401,10 @@ mod tests {
 
     #[test]
     fn the_fold_that_leaves_a_class_out_walks_again_only_where_strokes_changed() {
-        use crate::labels::ClassInfo;
         use crate::pause::CountPauses;
-        use crate::scene::demo::{DemoOptions, demo_scene};
-        let scene = demo_scene(&DemoOptions {
-            width: 32,
-            height: 24,
-            frames: 4,
-            ..DemoOptions::default()
-        })
-        .unwrap();
-        let class = |name: &str| ClassInfo {
-            name: name.into(),
-            color: [0, 0, 0],
-        };
-        let mut labels = LabelSet::new(vec![class("a"), class("b"), class("c")]);
-        let dot = |class: u16, x: f32, y: f32| Stroke {
-            class: Some(class),
-            radius: 1.0,
-            points: vec![[x, y]],
-        };
+        use crate::spread::test_scenes::{classes, dot, small_demo};
+        let scene = small_demo(4);
+        let mut labels = classes(&["a", "b", "c"]);
         for frame in [0, 2] {
             labels.push_stroke(frame, dot(0, 4.5, 20.5));
             labels.push_stroke(frame, dot(1, 16.5, 4.5));

@@ -6,6 +6,7 @@
 //! the maps this layer writes (docs/quality.md has the rules and what each was measured to do).
 pub mod check;
 pub mod colour;
+pub mod margin;
 pub mod normals;
 pub mod options;
 pub mod pixel_walk;
@@ -13,6 +14,8 @@ pub mod point_walk;
 pub mod propagate;
 pub mod sparse_solve;
 pub mod support_plane;
+#[cfg(test)]
+mod test_scenes;
 pub mod view_seeds;
 
 pub use options::{PropagationOptions, UndrawnFrames};

@@ -61,6 +61,15 @@ pub struct PropagationOptions {
     /// least, however far they spread (0: every labelled pixel alike): spread labels weigh less
     /// than drawn ones. At most 0.9.
     pub drawn_share: f32,
+    /// Difference of the image feature codes between neighbours, in units of the frame's
+    /// root-mean-square neighbour difference, at which the step weight falls to e^-1/2; 0 leaves
+    /// features out. Features tell apart objects of one colour that colour alone cannot.
+    pub feature_sigma: f32,
+    /// Pixels the walk labels within this share of the image diagonal of a pixel not of their
+    /// class (another class's, or one left unlabelled) are dropped (`spread::margin`): where the
+    /// walk stopped it may have stopped wrong. Strokes and carried labels are never dropped; 0
+    /// keeps every label.
+    pub edge_margin: f32,
     /// Before training, hold back part of the strokes, spread from the rest and compare
     /// (`spread::check`); where the spread agrees with the held-back strokes on less than
     /// `min_agreement` of their pixels, train without that spread: without labels across views
@@ -95,6 +104,8 @@ impl Default for PropagationOptions {
             undrawn_frames: UndrawnFrames::Points,
             support_plane: true,
             drawn_share: 0.0,
+            feature_sigma: 0.0,
+            edge_margin: 0.0,
             self_check: true,
             min_agreement: 0.9,
         }
@@ -137,6 +148,18 @@ impl PropagationOptions {
             return Err(format!(
                 "scribble_propagation: `drawn_share` = {}: must be in [0, 0.9]",
                 self.drawn_share
+            ));
+        }
+        if !(self.feature_sigma.is_finite() && self.feature_sigma >= 0.0) {
+            return Err(format!(
+                "scribble_propagation: `feature_sigma` = {}: must be 0 (off) or a positive number",
+                self.feature_sigma
+            ));
+        }
+        if !(self.edge_margin.is_finite() && (0.0..=0.1).contains(&self.edge_margin)) {
+            return Err(format!(
+                "scribble_propagation: `edge_margin` = {}: must be in [0, 0.1]",
+                self.edge_margin
             ));
         }
         for (name, v) in [

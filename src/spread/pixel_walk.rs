@@ -51,6 +51,39 @@ impl PixelGraph {
         } else {
             0.0
         };
+        // Feature differences in units of the frame's root-mean-square neighbour difference, so
+        // one sigma means the same on every extractor and code size.
+        let dim = guide.codes.map_or(0, |c| c.dim);
+        let codes = match guide.codes {
+            Some(c) if options.feature_sigma > 0.0 && dim > 0 => c.upsampled(width, height),
+            _ => Vec::new(),
+        };
+        let code_distance = |a: usize, b: usize| -> f32 {
+            (0..dim)
+                .map(|k| (codes[a * dim + k] - codes[b * dim + k]).powi(2))
+                .sum()
+        };
+        let feature_scale = if codes.is_empty() {
+            0.0
+        } else {
+            let (mut sum, mut n) = (0f64, 0usize);
+            for i in 0..width * height {
+                if i % width + 1 < width {
+                    sum += f64::from(code_distance(i, i + 1));
+                    n += 1;
+                }
+                if i + width < width * height {
+                    sum += f64::from(code_distance(i, i + width));
+                    n += 1;
+                }
+            }
+            let mean = (sum / n.max(1) as f64) as f32;
+            if mean > 0.0 {
+                0.5 / (options.feature_sigma * options.feature_sigma * mean)
+            } else {
+                0.0
+            }
+        };
         let hole_factor = if dense_depth { options.depth_hole_factor } else { 1.0 };
         let weight = |a: usize, b: usize| {
             let dc: f32 = (0..3).map(|k| (lab[a][k] - lab[b][k]).powi(2)).sum();
@@ -64,7 +97,12 @@ impl PixelGraph {
                 (Some(n), Some(m), _, _) => 1.0 - (n[0] * m[0] + n[1] * m[1] + n[2] * m[2]),
                 _ => 0.0,
             };
-            ((-(dc * colour_scale + dd * depth_scale + turn * normal_scale)).exp() * factor).max(MIN_WEIGHT)
+            let df = if feature_scale > 0.0 {
+                code_distance(a, b) * feature_scale
+            } else {
+                0.0
+            };
+            ((-(dc * colour_scale + dd * depth_scale + turn * normal_scale + df)).exp() * factor).max(MIN_WEIGHT)
         };
         let mut right = vec![0f32; width * height];
         let mut down = vec![0f32; width * height];

@@ -19,6 +19,7 @@
 
 use crate::pause::{NoPause, Pause, run_to_end};
 use crate::scene::Guide;
+use crate::spread::margin;
 use crate::spread::normals::depth_normals;
 use crate::spread::options::{PropagationOptions, UndrawnFrames};
 use crate::spread::pixel_walk::PixelGraph;
@@ -89,6 +90,15 @@ pub(crate) async fn walk_frame(
         if first >= options.min_probability && first - second >= options.min_margin {
             *label = present[best];
         }
+    }
+    let (width, height) = (guide.rgb.width() as usize, guide.rgb.height() as usize);
+    let radius = (options.edge_margin * (width as f32).hypot(height as f32)).round() as usize;
+    if radius > 0 {
+        let walked_from: Vec<u16> = strokes
+            .iter()
+            .map(|&c| if (c as usize) < classes { c } else { UNLABELLED })
+            .collect();
+        margin::erode_walked(&mut seeds, &walked_from, width, height, radius);
     }
     seeds
 }
@@ -233,8 +243,8 @@ impl PropagationCache {
             // replaces the walk's (never a stroke).
             let map = match (walked, carried) {
                 (Some(mut map), Some(Carried::AsIs(carried))) => {
-                    let drawn = strokes.unwrap_or_default();
-                    for ((m, c), d) in map.iter_mut().zip(carried).zip(drawn) {
+                    let drawn = strokes.as_deref().unwrap_or_default();
+                    for ((m, c), &d) in map.iter_mut().zip(carried).zip(drawn) {
                         if c != UNLABELLED && d == UNLABELLED {
                             *m = c;
                         }

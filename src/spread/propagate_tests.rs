@@ -36,7 +36,11 @@ fn strokes_at(width: u32, height: u32, marks: &[(u32, u32, u16)]) -> Vec<u16> {
 fn two_strokes_fill_their_regions_and_stop_at_the_edge() {
     let rgb = two_regions();
     let strokes = columns(24, 16, &[(3, 0), (20, 1)]);
-    let guide = Guide { rgb: &rgb, depth: None };
+    let guide = Guide {
+        rgb: &rgb,
+        depth: None,
+        codes: None,
+    };
     let map = propagate_frame(&strokes, 2, guide, None, &PropagationOptions::default());
     for y in 0..16 {
         for x in 0..24 {
@@ -65,6 +69,7 @@ fn walk_over_a_fold(valley: bool, options: &PropagationOptions) -> Vec<u16> {
     let guide = Guide {
         rgb: &rgb,
         depth: Some(&depth),
+        codes: None,
     };
     propagate_frame(&strokes, 2, guide, Some(&camera), options)
 }
@@ -142,6 +147,7 @@ fn depth_separates_regions_of_one_colour_and_without_it_the_walk_is_unsure() {
         Guide {
             rgb: &rgb,
             depth: Some(&depth),
+            codes: None,
         },
         None,
         &options,
@@ -150,7 +156,17 @@ fn depth_separates_regions_of_one_colour_and_without_it_the_walk_is_unsure() {
     assert_eq!(with_depth[8 * 24 + 13], 1);
     let labelled = |m: &[u16]| m.iter().filter(|&&c| c != UNLABELLED).count();
     assert_eq!(labelled(&with_depth), 24 * 16);
-    let without = propagate_frame(&strokes, 2, Guide { rgb: &rgb, depth: None }, None, &options);
+    let without = propagate_frame(
+        &strokes,
+        2,
+        Guide {
+            rgb: &rgb,
+            depth: None,
+            codes: None,
+        },
+        None,
+        &options,
+    );
     for x in 9..15 {
         assert_eq!(
             without[8 * 24 + x],
@@ -164,7 +180,11 @@ fn depth_separates_regions_of_one_colour_and_without_it_the_walk_is_unsure() {
 #[test]
 fn one_class_or_disabled_keeps_the_strokes_and_unknown_classes_are_dropped() {
     let rgb = two_regions();
-    let guide = Guide { rgb: &rgb, depth: None };
+    let guide = Guide {
+        rgb: &rgb,
+        depth: None,
+        codes: None,
+    };
     let one = strokes_at(24, 16, &[(3, 8, 0), (4, 8, 0)]);
     assert_eq!(
         propagate_frame(&one, 2, guide, None, &PropagationOptions::default()),
@@ -182,25 +202,9 @@ fn one_class_or_disabled_keeps_the_strokes_and_unknown_classes_are_dropped() {
 
 #[test]
 fn the_cache_walks_again_only_a_frame_whose_strokes_changed() {
-    use crate::labels::{ClassInfo, Stroke};
-    use crate::scene::demo::{DemoOptions, demo_scene};
-    let scene = demo_scene(&DemoOptions {
-        width: 32,
-        height: 24,
-        frames: 24,
-        ..DemoOptions::default()
-    })
-    .unwrap();
-    let class = |name: &str| ClassInfo {
-        name: name.into(),
-        color: [0, 0, 0],
-    };
-    let mut labels = LabelSet::new(vec![class("a"), class("b")]);
-    let dot = |class: u16, x: f32, y: f32| Stroke {
-        class: Some(class),
-        radius: 1.0,
-        points: vec![[x, y]],
-    };
+    use crate::spread::test_scenes::{classes, dot, small_demo};
+    let scene = small_demo(24);
+    let mut labels = classes(&["a", "b"]);
     for frame in [0, 2] {
         labels.push_stroke(frame, dot(0, 4.5, 20.5));
         labels.push_stroke(frame, dot(1, 16.5, 4.5));
@@ -232,7 +236,11 @@ fn pixels_beyond_the_reach_of_every_stroke_stay_unlabelled() {
         }
     });
     let strokes = strokes_at(96, 8, &[(2, 4, 0), (12, 4, 1)]);
-    let guide = Guide { rgb: &rgb, depth: None };
+    let guide = Guide {
+        rgb: &rgb,
+        depth: None,
+        codes: None,
+    };
     let short = propagate_frame(&strokes, 2, guide, None, &PropagationOptions::default());
     assert_eq!(short[4 * 96 + 20], 1, "near the stroke");
     assert_eq!(short[4 * 96 + 90], UNLABELLED, "48 pixels of reach do not get there");
@@ -255,6 +263,24 @@ fn bad_options_are_named() {
         ..PropagationOptions::default()
     };
     assert!(bad.validate().unwrap_err().contains("colour_sigma"));
+    for (bad, name) in [
+        (
+            PropagationOptions {
+                feature_sigma: f32::NAN,
+                ..PropagationOptions::default()
+            },
+            "feature_sigma",
+        ),
+        (
+            PropagationOptions {
+                edge_margin: 0.5,
+                ..PropagationOptions::default()
+            },
+            "edge_margin",
+        ),
+    ] {
+        assert!(bad.validate().unwrap_err().contains(name), "{name}");
+    }
     PropagationOptions::default().validate().unwrap();
 }
 
@@ -312,4 +338,98 @@ fn the_plane_the_objects_stand_on_takes_the_class_its_strokes_give_where_the_wal
         right_with > 0.98 && right_without > 0.98,
         "{right_with}, {right_without}"
     );
+}
+
+#[test]
+fn feature_codes_stop_the_walk_where_colour_cannot() {
+    // One grey everywhere; the feature codes (a 12 x 8 grid, two values per cell) change at
+    // pixel column 12. The strokes sit at columns 3 and 14, so by distance alone column 10 is
+    // nearer class 1's.
+    let rgb = RgbImage::from_pixel(24, 16, Rgb([150, 150, 150]));
+    let values: Vec<half::f16> = (0..12 * 8)
+        .flat_map(|cell| {
+            let v = if cell % 12 < 6 { 0.0 } else { 1.0 };
+            [half::f16::from_f32(v), half::f16::from_f32(-v)]
+        })
+        .collect();
+    let codes = crate::scene::guide::FrameCodes {
+        width: 12,
+        height: 8,
+        dim: 2,
+        values: &values,
+    };
+    let strokes = columns(24, 16, &[(3, 0), (14, 1)]);
+    let with = PropagationOptions {
+        feature_sigma: 0.5,
+        ..PropagationOptions::default()
+    };
+    let guide = Guide {
+        rgb: &rgb,
+        depth: None,
+        codes: Some(codes),
+    };
+    let map = propagate_frame(&strokes, 2, guide, None, &with);
+    for y in 0..16 {
+        for x in 0..24 {
+            let want = match x {
+                0..=10 => Some(0),
+                13.. => Some(1),
+                _ => None,
+            };
+            if let Some(want) = want {
+                assert_eq!(map[y * 24 + x], want, "pixel ({x}, {y}) with features");
+            }
+        }
+    }
+    let off = PropagationOptions {
+        feature_sigma: 0.0,
+        ..with
+    };
+    let without = propagate_frame(&strokes, 2, guide, None, &off);
+    assert_ne!(
+        without[8 * 24 + 10],
+        0,
+        "colour alone gives column 10 to the nearer stroke"
+    );
+}
+
+#[test]
+fn codes_are_interpolated_between_cell_centres() {
+    let values: Vec<half::f16> = [0.0f32, 2.0].iter().map(|&v| half::f16::from_f32(v)).collect();
+    let codes = crate::scene::guide::FrameCodes {
+        width: 2,
+        height: 1,
+        dim: 1,
+        values: &values,
+    };
+    // Four pixels over two cells: cell centres at pixels 0.5 and 2.5.
+    assert_eq!(codes.upsampled(4, 1), vec![0.0, 0.5, 1.5, 2.0]);
+}
+
+#[test]
+fn a_margin_leaves_the_pixels_along_the_walks_edge_to_the_field() {
+    let rgb = two_regions();
+    let strokes = columns(24, 16, &[(3, 0), (20, 1)]);
+    let guide = Guide {
+        rgb: &rgb,
+        depth: None,
+        codes: None,
+    };
+    // 0.035 of the 24 x 16 frame's diagonal is one pixel.
+    let options = PropagationOptions {
+        edge_margin: 0.035,
+        ..PropagationOptions::default()
+    };
+    let map = propagate_frame(&strokes, 2, guide, None, &options);
+    for y in 0..16 {
+        for x in 0..24 {
+            let want = match x {
+                11 | 12 => UNLABELLED,
+                x if x < 11 => 0,
+                _ => 1,
+            };
+            // The frame's border has no pixel beyond it: its labels stay.
+            assert_eq!(map[y * 24 + x], want, "pixel ({x}, {y})");
+        }
+    }
 }

@@ -333,7 +333,15 @@ mod tests {
             votes: false,
             ..RefineOptions::default()
         };
-        f.refine(Guide { rgb: &rgb, depth: None }, &probabilities).unwrap();
+        f.refine(
+            Guide {
+                rgb: &rgb,
+                depth: None,
+                codes: None,
+            },
+            &probabilities,
+        )
+        .unwrap();
         assert_eq!(f.classes, vec![1, 1]);
         assert!(f.refined);
         let wrong = image::RgbImage::new(3, 1);
@@ -342,6 +350,7 @@ mod tests {
                 Guide {
                     rgb: &wrong,
                     depth: None,
+                    codes: None,
                 },
                 &RefineOptions::default(),
             )
