@@ -18,5 +18,5 @@ pub mod support_plane;
 mod test_scenes;
 pub mod view_seeds;
 
-pub use options::{PropagationOptions, UndrawnFrames};
+pub use options::{GuardedWalks, PropagationOptions, UndrawnFrames};
 pub use propagate::PropagationCache;

@@ -63,19 +63,49 @@ pub struct PropagationOptions {
     pub drawn_share: f32,
     /// Difference of the image feature codes between neighbours, in units of the frame's
     /// root-mean-square neighbour difference, at which the step weight falls to e^-1/2; 0 leaves
-    /// features out. Features tell apart objects of one colour that colour alone cannot.
+    /// features out. Features tell apart objects of one colour that colour alone cannot. Applies
+    /// to the walks `guarded_walks` names, as `edge_margin` does.
     pub feature_sigma: f32,
     /// Pixels the walk labels within this share of the image diagonal of a pixel not of their
     /// class (another class's, or one left unlabelled) are dropped (`spread::margin`): where the
     /// walk stopped it may have stopped wrong. Strokes and carried labels are never dropped; 0
     /// keeps every label.
     pub edge_margin: f32,
+    /// Which walks follow the feature codes and keep the margin (docs/quality.md, "Walks on
+    /// colour alone").
+    pub guarded_walks: GuardedWalks,
     /// Before training, hold back part of the strokes, spread from the rest and compare
     /// (`spread::check`); where the spread agrees with the held-back strokes on less than
     /// `min_agreement` of their pixels, train without that spread: without labels across views
     /// when the across-view folds fail, on the strokes alone when the within-frame fold fails.
     pub self_check: bool,
     pub min_agreement: f32,
+}
+
+/// Which walks inside a frame follow the feature codes and keep a margin along their edges
+/// (`PropagationOptions::feature_sigma`, `edge_margin`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GuardedWalks {
+    /// Every walk.
+    Every,
+    /// Walks with colour as their only cue among several objects: on a frame without depth,
+    /// from strokes of three or more classes. There objects meet other objects, and colour alone
+    /// carries one object's class onto its neighbour; with two classes (an object on its
+    /// backdrop) or with depth the walk's own labels up to the edges were measured to train
+    /// better.
+    ColourOnly,
+}
+
+impl GuardedWalks {
+    /// Whether a walk on a frame (`has_depth`: any depth reading) from strokes of `classes`
+    /// classes is guarded.
+    pub fn guards(self, has_depth: bool, classes: usize) -> bool {
+        match self {
+            GuardedWalks::Every => true,
+            GuardedWalks::ColourOnly => !has_depth && classes >= 3,
+        }
+    }
 }
 
 /// What labels across views give a frame with no strokes (`PropagationOptions::undrawn_frames`).
@@ -104,8 +134,9 @@ impl Default for PropagationOptions {
             undrawn_frames: UndrawnFrames::Points,
             support_plane: true,
             drawn_share: 0.0,
-            feature_sigma: 0.0,
-            edge_margin: 0.0,
+            feature_sigma: 0.5,
+            edge_margin: 0.02,
+            guarded_walks: GuardedWalks::ColourOnly,
             self_check: true,
             min_agreement: 0.9,
         }

@@ -67,6 +67,12 @@ pub(crate) async fn walk_frame(
     if !options.enabled || present.len() < 2 || seeds.len() != pixel_count(guide) {
         return seeds;
     }
+    let guarded = options.guarded_walks.guards(guide.depth.is_some(), present.len());
+    let options = &PropagationOptions {
+        feature_sigma: if guarded { options.feature_sigma } else { 0.0 },
+        edge_margin: if guarded { options.edge_margin } else { 0.0 },
+        ..*options
+    };
     let graph = PixelGraph::new(guide, camera, options);
     let mut probabilities: Vec<Vec<f32>> = Vec::with_capacity(present.len());
     for &class in &present {

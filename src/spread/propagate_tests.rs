@@ -3,6 +3,7 @@ use image::{ImageBuffer, Luma, Rgb, RgbImage};
 
 use super::*;
 use crate::spread::colour::srgb_to_lab;
+use crate::spread::options::GuardedWalks;
 
 /// Left half dark red, right half light grey, 24 x 16.
 fn two_regions() -> RgbImage {
@@ -361,6 +362,8 @@ fn feature_codes_stop_the_walk_where_colour_cannot() {
     let strokes = columns(24, 16, &[(3, 0), (14, 1)]);
     let with = PropagationOptions {
         feature_sigma: 0.5,
+        edge_margin: 0.0,
+        guarded_walks: GuardedWalks::Every,
         ..PropagationOptions::default()
     };
     let guide = Guide {
@@ -418,6 +421,7 @@ fn a_margin_leaves_the_pixels_along_the_walks_edge_to_the_field() {
     // 0.035 of the 24 x 16 frame's diagonal is one pixel.
     let options = PropagationOptions {
         edge_margin: 0.035,
+        guarded_walks: GuardedWalks::Every,
         ..PropagationOptions::default()
     };
     let map = propagate_frame(&strokes, 2, guide, None, &options);
@@ -432,4 +436,30 @@ fn a_margin_leaves_the_pixels_along_the_walks_edge_to_the_field() {
             assert_eq!(map[y * 24 + x], want, "pixel ({x}, {y})");
         }
     }
+}
+
+#[test]
+fn only_walks_on_colour_alone_among_three_classes_are_guarded_by_default() {
+    let guard = PropagationOptions::default().guarded_walks;
+    assert!(guard.guards(false, 3), "no depth, three classes");
+    assert!(!guard.guards(false, 2), "an object on its backdrop");
+    assert!(!guard.guards(true, 6), "with depth");
+    assert!(GuardedWalks::Every.guards(true, 2));
+    // Unguarded, the defaults walk exactly as with both terms off.
+    let rgb = two_regions();
+    let strokes = columns(24, 16, &[(3, 0), (20, 1)]);
+    let guide = Guide {
+        rgb: &rgb,
+        depth: None,
+        codes: None,
+    };
+    let off = PropagationOptions {
+        feature_sigma: 0.0,
+        edge_margin: 0.0,
+        ..PropagationOptions::default()
+    };
+    assert_eq!(
+        propagate_frame(&strokes, 2, guide, None, &PropagationOptions::default()),
+        propagate_frame(&strokes, 2, guide, None, &off)
+    );
 }
