@@ -382,10 +382,11 @@ impl FieldConfig {
             }
             Encoding::HashOnly => {}
         }
+        // Checked without a hash grid too: the table's size is computed from it either way.
+        in_range("log2_hash_table_size", c.log2_hash_table_size, 4, 24)?;
         if c.encoding.uses_hash_grid() {
             in_range("hash_levels", c.hash_levels, 1, 32)?;
             in_range("hash_features_per_level", c.hash_features_per_level, 1, 8)?;
-            in_range("log2_hash_table_size", c.log2_hash_table_size, 4, 24)?;
             in_range("hash_base_resolution", c.hash_base_resolution, 1, 1 << 16)?;
             if !(c.hash_level_scale.is_finite() && c.hash_level_scale >= 1.0) {
                 return Err(bad(

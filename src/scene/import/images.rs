@@ -20,12 +20,18 @@ fn name(path: &Path) -> String {
     path.display().to_string()
 }
 
-/// Decodes any supported image, refusing absurd sizes before allocating.
-pub(super) fn decode(path: &Path) -> Result<DynamicImage> {
+/// An image file's bytes, through the cap; an empty file is named as such.
+fn read_image_file(path: &Path) -> Result<Vec<u8>> {
     let bytes = super::files::read(path, MAX_IMAGE_FILE_BYTES).map_err(|e| SceneError::io(path, e))?;
     if bytes.is_empty() {
         return Err(SceneError::invalid(name(path), "image file is empty"));
     }
+    Ok(bytes)
+}
+
+/// Decodes any supported image, refusing absurd sizes before allocating.
+pub(super) fn decode(path: &Path) -> Result<DynamicImage> {
+    let bytes = read_image_file(path)?;
     let mut reader = ImageReader::new(std::io::Cursor::new(&bytes[..]))
         .with_guessed_format()
         .map_err(|e| SceneError::io(path, e))?;
@@ -59,7 +65,7 @@ fn check_jpeg_complete(bytes: &[u8], path: &Path) -> Result<()> {
 
 /// Width and height from the image header, without decoding the pixels.
 pub(super) fn dimensions(path: &Path) -> Result<(u32, u32)> {
-    let bytes = super::files::read(path, MAX_IMAGE_FILE_BYTES).map_err(|e| SceneError::io(path, e))?;
+    let bytes = read_image_file(path)?;
     let reader = ImageReader::new(std::io::Cursor::new(&bytes[..]))
         .with_guessed_format()
         .map_err(|e| SceneError::io(path, e))?;
