@@ -170,17 +170,8 @@ fn a_rendered_frame_refined_on_the_gpu_matches_one_refined_on_the_cpu() {
         .count();
     assert!(differing <= 2, "{differing} pixels differ");
     let wrong = RgbImage::new(4, 4);
-    let err = pollster::block_on(on_gpu.refine_on_gpu(
-        &ctx,
-        &pass,
-        Guide {
-            rgb: &wrong,
-            depth: None,
-            codes: None,
-        },
-        &options(3),
-    ))
-    .unwrap_err();
+    let err =
+        pollster::block_on(on_gpu.refine_on_gpu(&ctx, &pass, Guide::colour_only(&wrong), &options(3))).unwrap_err();
     assert!(err.to_string().contains("4 x 4"), "{err}");
 }
 

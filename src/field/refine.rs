@@ -413,17 +413,7 @@ mod tests {
         let mut map: Vec<u8> = (0..12 * 20).map(|i| u8::from(i % 20 < 11)).collect();
         map[5 * 20 + 16] = 1;
         let mut p = one_hot(&map, 2, 0.3);
-        refine_probabilities(
-            &mut p,
-            2,
-            Guide {
-                rgb: &rgb,
-                depth: None,
-                codes: None,
-            },
-            &options(),
-        )
-        .unwrap();
+        refine_probabilities(&mut p, 2, Guide::colour_only(&rgb), &options()).unwrap();
         let (classes, confidence) = argmax_and_confidence(&p, 2);
         let want: Vec<u8> = (0..12 * 20).map(|i| u8::from(i % 20 < 10)).collect();
         assert_eq!(classes, want);
@@ -515,46 +505,16 @@ mod tests {
         let map: Vec<u8> = (0..12 * 20).map(|i| u8::from(i % 20 < 12)).collect();
         let before = one_hot(&map, 2, 0.3);
         let mut p = before.clone();
-        refine_probabilities(
-            &mut p,
-            2,
-            Guide {
-                rgb: &rgb,
-                depth: None,
-                codes: None,
-            },
-            &RefineOptions::OFF,
-        )
-        .unwrap();
+        refine_probabilities(&mut p, 2, Guide::colour_only(&rgb), &RefineOptions::OFF).unwrap();
         assert_eq!(p, before);
 
-        let err = refine_probabilities(
-            &mut p,
-            3,
-            Guide {
-                rgb: &rgb,
-                depth: None,
-                codes: None,
-            },
-            &RefineOptions::default(),
-        )
-        .unwrap_err();
+        let err = refine_probabilities(&mut p, 3, Guide::colour_only(&rgb), &RefineOptions::default()).unwrap_err();
         assert!(err.contains("3 classes") && err.contains("20 x 12"), "{err}");
         let bad = RefineOptions {
             colour_sigma: 0.0,
             ..RefineOptions::default()
         };
-        let err = refine_probabilities(
-            &mut p,
-            2,
-            Guide {
-                rgb: &rgb,
-                depth: None,
-                codes: None,
-            },
-            &bad,
-        )
-        .unwrap_err();
+        let err = refine_probabilities(&mut p, 2, Guide::colour_only(&rgb), &bad).unwrap_err();
         assert!(err.contains("colour_sigma"), "{err}");
         let small_depth = ImageBuffer::from_pixel(4, 4, Luma([1000u16]));
         let err = refine_probabilities(

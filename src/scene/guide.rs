@@ -55,6 +55,15 @@ impl FrameCodes<'_> {
 }
 
 impl<'a> Guide<'a> {
+    /// A frame seen by its colours alone: no depth, no feature codes.
+    pub fn colour_only(rgb: &'a RgbImage) -> Guide<'a> {
+        Guide {
+            rgb,
+            depth: None,
+            codes: None,
+        }
+    }
+
     /// Frame `frame` of `scene`: its image and measured depth.
     pub fn of_frame(scene: &'a Scene, frame: usize) -> Option<Guide<'a>> {
         let f = scene.frames.get(frame)?;

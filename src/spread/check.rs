@@ -369,11 +369,7 @@ mod tests {
                 _ => UNLABELLED,
             })
             .collect();
-        let guide = Guide {
-            rgb: &rgb,
-            depth: None,
-            codes: None,
-        };
+        let guide = Guide::colour_only(&rgb);
         let options = PropagationOptions::default();
         run_to_end(left_out_in_frame(&strokes, 3, guide, None, &options, &mut NoPause)).unwrap()
     }

@@ -37,11 +37,7 @@ fn strokes_at(width: u32, height: u32, marks: &[(u32, u32, u16)]) -> Vec<u16> {
 fn two_strokes_fill_their_regions_and_stop_at_the_edge() {
     let rgb = two_regions();
     let strokes = columns(24, 16, &[(3, 0), (20, 1)]);
-    let guide = Guide {
-        rgb: &rgb,
-        depth: None,
-        codes: None,
-    };
+    let guide = Guide::colour_only(&rgb);
     let map = propagate_frame(&strokes, 2, guide, None, &PropagationOptions::default());
     for y in 0..16 {
         for x in 0..24 {
@@ -157,17 +153,7 @@ fn depth_separates_regions_of_one_colour_and_without_it_the_walk_is_unsure() {
     assert_eq!(with_depth[8 * 24 + 13], 1);
     let labelled = |m: &[u16]| m.iter().filter(|&&c| c != UNLABELLED).count();
     assert_eq!(labelled(&with_depth), 24 * 16);
-    let without = propagate_frame(
-        &strokes,
-        2,
-        Guide {
-            rgb: &rgb,
-            depth: None,
-            codes: None,
-        },
-        None,
-        &options,
-    );
+    let without = propagate_frame(&strokes, 2, Guide::colour_only(&rgb), None, &options);
     for x in 9..15 {
         assert_eq!(
             without[8 * 24 + x],
@@ -181,11 +167,7 @@ fn depth_separates_regions_of_one_colour_and_without_it_the_walk_is_unsure() {
 #[test]
 fn one_class_or_disabled_keeps_the_strokes_and_unknown_classes_are_dropped() {
     let rgb = two_regions();
-    let guide = Guide {
-        rgb: &rgb,
-        depth: None,
-        codes: None,
-    };
+    let guide = Guide::colour_only(&rgb);
     let one = strokes_at(24, 16, &[(3, 8, 0), (4, 8, 0)]);
     assert_eq!(
         propagate_frame(&one, 2, guide, None, &PropagationOptions::default()),
@@ -237,11 +219,7 @@ fn pixels_beyond_the_reach_of_every_stroke_stay_unlabelled() {
         }
     });
     let strokes = strokes_at(96, 8, &[(2, 4, 0), (12, 4, 1)]);
-    let guide = Guide {
-        rgb: &rgb,
-        depth: None,
-        codes: None,
-    };
+    let guide = Guide::colour_only(&rgb);
     let short = propagate_frame(&strokes, 2, guide, None, &PropagationOptions::default());
     assert_eq!(short[4 * 96 + 20], 1, "near the stroke");
     assert_eq!(short[4 * 96 + 90], UNLABELLED, "48 pixels of reach do not get there");
@@ -413,11 +391,7 @@ fn codes_are_interpolated_between_cell_centres() {
 fn a_margin_leaves_the_pixels_along_the_walks_edge_to_the_field() {
     let rgb = two_regions();
     let strokes = columns(24, 16, &[(3, 0), (20, 1)]);
-    let guide = Guide {
-        rgb: &rgb,
-        depth: None,
-        codes: None,
-    };
+    let guide = Guide::colour_only(&rgb);
     // 0.035 of the 24 x 16 frame's diagonal is one pixel.
     let options = PropagationOptions {
         edge_margin: 0.035,
@@ -448,11 +422,7 @@ fn only_walks_on_colour_alone_among_three_classes_are_guarded_by_default() {
     // Unguarded, the defaults walk exactly as with both terms off.
     let rgb = two_regions();
     let strokes = columns(24, 16, &[(3, 0), (20, 1)]);
-    let guide = Guide {
-        rgb: &rgb,
-        depth: None,
-        codes: None,
-    };
+    let guide = Guide::colour_only(&rgb);
     let off = PropagationOptions {
         feature_sigma: 0.0,
         edge_margin: 0.0,

@@ -333,27 +333,12 @@ mod tests {
             votes: false,
             ..RefineOptions::default()
         };
-        f.refine(
-            Guide {
-                rgb: &rgb,
-                depth: None,
-                codes: None,
-            },
-            &probabilities,
-        )
-        .unwrap();
+        f.refine(Guide::colour_only(&rgb), &probabilities).unwrap();
         assert_eq!(f.classes, vec![1, 1]);
         assert!(f.refined);
         let wrong = image::RgbImage::new(3, 1);
         let err = f
-            .refine(
-                Guide {
-                    rgb: &wrong,
-                    depth: None,
-                    codes: None,
-                },
-                &RefineOptions::default(),
-            )
+            .refine(Guide::colour_only(&wrong), &RefineOptions::default())
             .unwrap_err();
         assert!(err.contains("3 x 1") && err.contains("2 x 1"), "{err}");
     }
