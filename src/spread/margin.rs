@@ -38,6 +38,67 @@ pub fn erode_walked(walked: &mut [u16], seeds: &[u16], width: usize, height: usi
     }
 }
 
+/// Window sums over a boolean mask (a summed-area table).
+struct WindowCounts {
+    width: usize,
+    height: usize,
+    table: Vec<u32>,
+}
+
+impl WindowCounts {
+    fn new(mask: &[bool], width: usize, height: usize) -> WindowCounts {
+        let stride = width + 1;
+        let mut table = vec![0u32; stride * (height + 1)];
+        for y in 0..height {
+            for x in 0..width {
+                table[(y + 1) * stride + x + 1] =
+                    u32::from(mask[y * width + x]) + table[y * stride + x + 1] + table[(y + 1) * stride + x]
+                        - table[y * stride + x];
+            }
+        }
+        WindowCounts { width, height, table }
+    }
+
+    /// True pixels within `radius` of (x, y) along both axes, the window clipped to the frame.
+    fn around(&self, x: usize, y: usize, radius: usize) -> u32 {
+        let stride = self.width + 1;
+        let (x0, y0) = (x.saturating_sub(radius), y.saturating_sub(radius));
+        let (x1, y1) = ((x + radius + 1).min(self.width), (y + radius + 1).min(self.height));
+        self.table[y1 * stride + x1] + self.table[y0 * stride + x0]
+            - self.table[y0 * stride + x1]
+            - self.table[y1 * stride + x0]
+    }
+}
+
+/// Drops each label of `map` within `margin` pixels of the edge of its class's footprint: the
+/// pixels with a label of that class within `gap` pixels. Sparse labels (a reconstruction's
+/// points in a photo) leave gaps that are not edges; `gap` bridges them.
+pub fn erode_footprints(map: &mut [u16], width: usize, height: usize, gap: usize, margin: usize) {
+    if margin == 0 || map.len() != width * height {
+        return;
+    }
+    let before = map.to_vec();
+    let mut classes: Vec<u16> = before.iter().copied().filter(|&c| c != UNLABELLED).collect();
+    classes.sort_unstable();
+    classes.dedup();
+    for class in classes {
+        let labelled: Vec<bool> = before.iter().map(|&c| c == class).collect();
+        let near = WindowCounts::new(&labelled, width, height);
+        let outside: Vec<bool> = (0..width * height)
+            .map(|i| {
+                let other = before[i] != class && before[i] != UNLABELLED;
+                other || near.around(i % width, i / width, gap) == 0
+            })
+            .collect();
+        let outside = WindowCounts::new(&outside, width, height);
+        for (i, m) in map.iter_mut().enumerate() {
+            if before[i] == class && outside.around(i % width, i / width, margin) > 0 {
+                *m = UNLABELLED;
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -69,5 +130,42 @@ mod tests {
         let mut walked = vec![0, 1, 0, 1];
         erode_walked(&mut walked, &seeds, 4, 1, 0);
         assert_eq!(walked, vec![0, 1, 0, 1]);
+    }
+
+    #[test]
+    fn sparse_labels_lose_a_margin_inside_their_footprint_and_keep_the_frame_border() {
+        // 10 x 1: class 1 at every other pixel of columns 0..6 (points with gaps of one pixel),
+        // then nothing. The footprint (gap 1) covers columns 0..7; a margin of 2 drops the labels
+        // within 2 pixels of what lies beyond it, none at the frame's border on the left.
+        let mut map = vec![1, U, 1, U, 1, U, 1, U, U, U];
+        erode_footprints(&mut map, 10, 1, 1, 2);
+        assert_eq!(map, vec![1, U, 1, U, 1, U, U, U, U, U]);
+    }
+
+    #[test]
+    fn a_footprint_edge_against_another_class_is_an_edge_for_both() {
+        // 6 x 1: class 0 then class 1, dense; margin 1 drops the pair at the meeting.
+        let mut map = vec![0, 0, 0, 1, 1, 1];
+        erode_footprints(&mut map, 6, 1, 1, 1);
+        assert_eq!(
+            map,
+            vec![0, 0, 0, 1, 1, 1]
+                .iter()
+                .enumerate()
+                .map(|(i, &c)| if i == 2 || i == 3 { U } else { c })
+                .collect::<Vec<_>>()
+        );
+        // Within 2 pixels of (1, 1) in a 4 x 4 frame: the window reaches the frame's border.
+        let mut map = vec![U; 16];
+        map[5] = 2;
+        erode_footprints(&mut map, 4, 4, 0, 1);
+        assert_eq!(map, vec![U; 16]);
+    }
+
+    #[test]
+    fn no_margin_keeps_every_label() {
+        let mut map = vec![0, U, 1, 1];
+        erode_footprints(&mut map, 4, 1, 1, 0);
+        assert_eq!(map, vec![0, U, 1, 1]);
     }
 }

@@ -52,6 +52,13 @@ pub struct PropagationOptions {
     /// stop it and carries a class wherever the colour lets it: onto what an object stands on,
     /// where the object's points meet it (docs/quality.md).
     pub undrawn_frames: UndrawnFrames,
+    /// On a frame nobody drew on, the labels the points carry within this share of the image
+    /// diagonal of the edge of their class's footprint (`spread::margin::erode_footprints`) are
+    /// left to the field. Such a frame's object is labelled at every point up to its outline,
+    /// while what surrounds it is labelled only far from every point: without a margin the field
+    /// learns the object's edge on one side only and grows the object (docs/quality.md). 0 keeps
+    /// every label.
+    pub undrawn_margin: f32,
     /// On a frame with dense depth and strokes of two or more classes, find the largest plane
     /// in its depth (the floor or table the objects stand on, `spread::support_plane`); where
     /// the strokes on it agree on one class, the plane's pixels the walk leaves unlabelled take
@@ -132,6 +139,7 @@ impl Default for PropagationOptions {
             inward_creases_only: true,
             across_views: true,
             undrawn_frames: UndrawnFrames::Points,
+            undrawn_margin: 0.0,
             support_plane: true,
             drawn_share: 0.0,
             feature_sigma: 0.5,
@@ -187,11 +195,13 @@ impl PropagationOptions {
                 self.feature_sigma
             ));
         }
-        if !(self.edge_margin.is_finite() && (0.0..=0.1).contains(&self.edge_margin)) {
-            return Err(format!(
-                "scribble_propagation: `edge_margin` = {}: must be in [0, 0.1]",
-                self.edge_margin
-            ));
+        for (name, v) in [
+            ("edge_margin", self.edge_margin),
+            ("undrawn_margin", self.undrawn_margin),
+        ] {
+            if !(v.is_finite() && (0.0..=0.1).contains(&v)) {
+                return Err(format!("scribble_propagation: `{name}` = {v}: must be in [0, 0.1]"));
+            }
         }
         for (name, v) in [
             ("min_probability", self.min_probability),

@@ -35,6 +35,10 @@ use crate::scene::{Intrinsics, Scene};
 /// drawn frame's walk labels a pixel whose points then seed the walk across views.
 const SEED_CERTAINTY: f32 = 0.7;
 
+/// Gaps between a reconstruction's points in a photo, as a share of the diagonal, that still
+/// belong to the footprint of their class (`spread::margin::erode_footprints`).
+const FOOTPRINT_GAP: f32 = 0.007;
+
 /// The label map a frame trains on: the strokes, plus (when `options` are enabled and the strokes
 /// hold at least two classes) the pixels the walk assigns with confidence. Class ids at or above
 /// `classes` are dropped (the model has no logit for them). `strokes` is the frame's rasterized
@@ -257,7 +261,15 @@ impl PropagationCache {
                     }
                     map
                 }
-                (Some(map), _) | (None, Some(Carried::AsIs(map))) => map,
+                (None, Some(Carried::AsIs(mut map))) => {
+                    let (width, height) = (scene.width as usize, scene.height as usize);
+                    let diagonal = (width as f32).hypot(height as f32);
+                    let margin_px = (options.undrawn_margin * diagonal).round() as usize;
+                    let gap = ((FOOTPRINT_GAP * diagonal).round() as usize).max(1);
+                    margin::erode_footprints(&mut map, width, height, gap, margin_px);
+                    map
+                }
+                (Some(map), _) => map,
                 (None, _) => continue,
             };
             maps.push((frame, map));
