@@ -24,7 +24,7 @@ pub enum ExportError {
     },
     #[error("{count} masks for a scene of {frames} frames")]
     FrameCount { count: usize, frames: usize },
-    #[error("objects per class: {0} would leave no object of any class but the first; give at least 1")]
+    #[error("objects per class (--objects): {0} keeps no region of any class but the first; give at least 1")]
     NoObjects(u32),
     #[error("point cloud (.ply): no frame of the scene has depth")]
     NoDepth,
