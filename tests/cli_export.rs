@@ -53,8 +53,9 @@ fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     out
 }
 
+/// The masks folders at `a` and `b` hold the same `count` files, byte for byte.
 #[track_caller]
-fn same_files(a: &Path, b: &Path) {
+fn same_files(a: &Path, b: &Path, count: usize) {
     let (fa, fb) = (files(a), files(b));
     assert_eq!(
         fa.keys().collect::<Vec<_>>(),
@@ -71,7 +72,7 @@ fn same_files(a: &Path, b: &Path) {
             b.display()
         );
     }
-    assert!(fa.len() == 2 * FRAMES as usize + 2, "{:?}", fa.keys());
+    assert!(fa.len() == count, "{:?}", fa.keys());
 }
 
 /// The folder a test works in: the capture, its archive and scribbles on frames 0 and 3.
@@ -182,18 +183,45 @@ fn export_writes_the_masks_segment_wrote() {
         t.contains("trained 15 steps on") && t.contains("(seed 3), 6 classes"),
         "{t}"
     );
-    same_files(&s.dir.join("seg"), &s.dir.join("exp"));
+    // Per frame: the mask by index, by name, its preview; classes.json, labels.json.
+    let plain = 3 * FRAMES as usize + 2;
+    same_files(&s.dir.join("seg"), &s.dir.join("exp"), plain);
+    assert!(s.dir.join("seg/by-name/00003.png").is_file());
     // The labels given again: the same files.
     ok(&s.export("a.safetensors", "exp-l", &["--labels", &s.path("l.json")]));
-    same_files(&s.dir.join("seg"), &s.dir.join("exp-l"));
+    same_files(&s.dir.join("seg"), &s.dir.join("exp-l"), plain);
 
-    // The same at the capture's resolution: segment --source, then export --source.
+    // The same at the capture's resolution with every format and the object cleanup:
+    // segment --source, then export --source.
     let cap = s.path("capture");
-    let t = segment("seg-src", "b.safetensors", &["--source", &cap]);
+    let formats = ["--format", "voc,coco", "--format", "ply", "--objects", "2"];
+    let t = segment(
+        "seg-src",
+        "b.safetensors",
+        &[&["--source", cap.as_str()][..], &formats].concat(),
+    );
     assert!(t.contains("wrote 6 masks of 64 x 48 (the capture's resolution"), "{t}");
-    let t = ok(&s.export("b.safetensors", "exp-src", &["--source", &cap]));
+    assert!(
+        t.contains("also by-name/") && t.contains("COCO JSON") && t.contains("(--objects)"),
+        "{t}"
+    );
+    let t = ok(&s.export(
+        "b.safetensors",
+        "exp-src",
+        &[&["--source", cap.as_str()][..], &formats].concat(),
+    ));
     assert!(t.contains("wrote 6 masks of 64 x 48 (the capture's resolution"), "{t}");
-    same_files(&s.dir.join("seg-src"), &s.dir.join("exp-src"));
+    // Plus a VOC mask per frame, labelmap.txt, the frame list, coco.json and points.ply.
+    same_files(
+        &s.dir.join("seg-src"),
+        &s.dir.join("exp-src"),
+        4 * FRAMES as usize + 2 + 4,
+    );
+    let coco: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(s.dir.join("seg-src/coco.json")).unwrap()).unwrap();
+    assert_eq!(coco["images"][5]["width"], 64);
+    let voc = image::open(s.dir.join("seg-src/voc/SegmentationClass/00005.png")).unwrap();
+    assert_eq!((voc.width(), voc.height()), (64, 48));
 
     // The first field at the capture's size without refinement: another resolution, no training.
     let t = ok(&s.export(
@@ -341,6 +369,31 @@ fn bad_checkpoints_archives_labels_and_captures_are_refused_by_name() {
             "coded.scene.zip's feature codes have",
             "dims",
         ],
+    );
+
+    // Formats that cannot be written, and no objects at all: refused before the GPU opens.
+    fails(
+        &s.export("good.safetensors", "x", &["--objects", "0"]),
+        &["--objects", "0 keeps no region"],
+    );
+    let mut shared = labels.clone();
+    shared.classes[3].color = shared.classes[1].color;
+    std::fs::write(s.dir.join("shared.json"), shared.to_json()).unwrap();
+    fails(
+        &s.export(
+            "good.safetensors",
+            "x",
+            &["--labels", &s.path("shared.json"), "--format", "coco,voc"],
+        ),
+        &[
+            "CVAT / PASCAL VOC",
+            &format!("{:?} and {:?}", labels.classes[1].name, labels.classes[3].name),
+            "share the colour",
+        ],
+    );
+    fails(
+        &s.export("good.safetensors", "x", &["--format", "voc,pdf"]),
+        &["--format", "pdf", "voc, coco, ply"],
     );
 
     // Labels with a class the field was not trained with.

@@ -20,7 +20,7 @@ pub struct ExportArgs {
     checkpoint: PathBuf,
     /// The scene archive it was trained on.
     archive: PathBuf,
-    // As `segment`'s: the output folder, refinement and `--source`.
+    // As `segment`'s: the output folder, formats, object cleanup, refinement and `--source`.
     #[command(flatten)]
     masks: MaskArgs,
     /// Annotations written as the masks' `labels.json` (and naming the classes: the same class
@@ -45,7 +45,7 @@ pub fn run(args: ExportArgs) -> CliResult {
         }
         None => trained_on.labels.clone(),
     };
-    let masks = args.masks.check(&scene, &args.archive)?;
+    let masks = args.masks.check(&scene, &args.archive, &labels.classes)?;
 
     let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
     eprintln!("rendering on {}", ctx.describe());

@@ -5,13 +5,13 @@ use clap::Args;
 use scribblefield::eval::Confusion;
 use scribblefield::eval::headless::{render_and_score, train_schedule};
 use scribblefield::eval::source_size::{SourceCapture, render_at_source};
-use scribblefield::export::{MaskDirWriter, MaskSet};
+use scribblefield::export::{ExportOptions, Format, MaskDirWriter};
 use scribblefield::field::checkpoint::TrainedOn;
 use scribblefield::field::gpu::scene_buffers::LabelIndex;
 use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::field::refine::RefineOptions;
 use scribblefield::gpu::{GpuContext, GpuOptions};
-use scribblefield::labels::LabelSet;
+use scribblefield::labels::{ClassInfo, LabelSet};
 use scribblefield::scene::import::Background;
 use scribblefield::scene::{Scene, read_archive_path};
 
@@ -47,9 +47,20 @@ pub struct SegmentArgs {
 /// Where and how `segment` and `export` write the masks.
 #[derive(Args)]
 pub(super) struct MaskArgs {
-    /// Output folder for the masks (class-id PNGs, previews, classes.json, labels.json).
+    /// Output folder for the masks (class-id PNGs by index and, under by-name/, by the frames'
+    /// names in their capture; previews, classes.json, labels.json).
     #[arg(short, long)]
     output: PathBuf,
+    /// Also write these formats (comma-separated): voc (the CVAT / PASCAL VOC segmentation
+    /// layout under voc/: palette PNGs, labelmap.txt), coco (coco.json: compressed RLE per
+    /// class per frame), ply (points.ply: a labelled point cloud from the frames' depth).
+    #[arg(long = "format", value_name = "FORMATS", value_enum, value_delimiter = ',')]
+    formats: Vec<FormatArg>,
+    /// Keep only the N largest 8-connected regions of each class but the first (class 0) in
+    /// every mask; the pixels of the others become class 0 (autolabel's `--objects`). Every
+    /// file written, and the scores printed, are of the cleaned masks.
+    #[arg(long, value_name = "N")]
+    objects: Option<u32>,
     /// Rounds of edge-aware refinement of each mask with its frame's colour and depth (0: the
     /// field's own argmax); default: 3 where the frames have dense depth, 10 where they do not
     /// (photo captures); see `field::refine`.
@@ -69,7 +80,7 @@ pub fn run(mut args: SegmentArgs) -> CliResult {
     if let Some(file) = &args.save_checkpoint {
         check_checkpoint_path(file)?;
     }
-    let masks = args.masks.check(&scene, &args.archive)?;
+    let masks = args.masks.check(&scene, &args.archive, &labels.classes)?;
 
     let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
     eprintln!("training on {}", ctx.describe());
@@ -158,10 +169,37 @@ pub(super) fn read_labels(path: Option<&Path>, scene: &Scene, archive: &Path) ->
     Ok(labels)
 }
 
+/// `--format`'s values.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum FormatArg {
+    Voc,
+    Coco,
+    Ply,
+}
+
+impl From<FormatArg> for Format {
+    fn from(f: FormatArg) -> Format {
+        match f {
+            FormatArg::Voc => Format::Voc,
+            FormatArg::Coco => Format::Coco,
+            FormatArg::Ply => Format::Ply,
+        }
+    }
+}
+
 impl MaskArgs {
-    /// Checks the refinement and finds the `--source` capture's frames for `scene` (read from
-    /// `archive`): before any GPU work, and before the output folder is created.
-    pub(super) fn check<'a>(&'a self, scene: &Scene, archive: &'a Path) -> Result<Masks<'a>, Box<dyn Error>> {
+    /// Checks the refinement and the formats (for `classes`), and finds the `--source`
+    /// capture's frames for `scene` (read from `archive`): before any GPU work, and before the
+    /// output folder is created.
+    pub(super) fn check<'a>(
+        &'a self,
+        scene: &Scene,
+        archive: &'a Path,
+        classes: &[ClassInfo],
+    ) -> Result<Masks<'a>, Box<dyn Error>> {
+        let formats: Vec<Format> = self.formats.iter().map(|&f| f.into()).collect();
+        let export = ExportOptions::with(&formats, self.objects);
+        export.check(classes, scene.has_depth())?;
         let defaults = RefineOptions::for_scene(scene);
         let refine = RefineOptions {
             iterations: self.refine_iterations.unwrap_or(defaults.iterations),
@@ -177,6 +215,7 @@ impl MaskArgs {
             output: &self.output,
             refine,
             source,
+            export,
         })
     }
 }
@@ -260,12 +299,14 @@ pub(super) struct Masks<'a> {
     refine: RefineOptions,
     /// Masks at this capture's resolution (`--source`), else the archive's.
     source: Option<SourceCapture>,
+    /// The formats asked for and the object-count cleanup.
+    export: ExportOptions,
 }
 
 /// Renders every frame of `scene` with `trainer`'s field and writes the masks folder (class-id
-/// PNGs, previews, classes.json, `labels` as labels.json; the classes are `labels`'), scored
-/// against the ground truth where there is some: what `segment` writes after training and
-/// `export` from a checkpoint.
+/// PNGs by index and by name, previews, classes.json, `labels` as labels.json, the formats
+/// asked for; the classes are `labels'`), scored against the ground truth where there is
+/// some: what `segment` writes after training and `export` from a checkpoint.
 pub(super) fn write_masks(trainer: &mut Trainer, scene: &Scene, labels: &LabelSet, masks: &Masks) -> CliResult {
     let names: Vec<String> = labels.classes.iter().map(|c| c.name.clone()).collect();
     if let Some(capture) = &masks.source {
@@ -273,25 +314,35 @@ pub(super) fn write_masks(trainer: &mut Trainer, scene: &Scene, labels: &LabelSe
     }
     let render = progress::bar("rendering");
     render.set_length(scene.frames.len() as u64);
-    let mut images = Vec::with_capacity(scene.frames.len());
-    let mut bad_size = false;
+    let mut writer = MaskDirWriter::new(masks.output, labels.classes.clone(), &masks.export, Some(scene))?;
+    let mut confusion = Confusion::new(names.len());
+    let mut scored = 0;
+    let mut failed: Option<Box<dyn Error>> = None;
     let frames = 0..scene.frames.len();
-    let report = render_and_score(trainer, scene, &names, frames, &masks.refine, |_, rendered| {
-        match image::GrayImage::from_raw(scene.width, scene.height, rendered.classes) {
-            Some(mask) => images.push(mask),
-            None => bad_size = true,
+    render_and_score(trainer, scene, &names, frames, &masks.refine, |i, rendered| {
+        if failed.is_some() {
+            return;
+        }
+        let Some(mut mask) = image::GrayImage::from_raw(scene.width, scene.height, rendered.classes) else {
+            failed = Some(format!("frame {i}: rendered class map has the wrong size").into());
+            return;
+        };
+        // Scored after the cleanup: the scores are of the masks written.
+        if let Err(e) = writer.frame(&mut mask) {
+            failed = Some(e.into());
+            return;
+        }
+        if let Some(gt) = &scene.frames[i].gt {
+            confusion.add(gt.as_raw(), mask.as_raw());
+            scored += 1;
         }
         render.inc(1);
     })?;
     render.finish_and_clear();
-    if bad_size {
-        return Err("rendered class map has the wrong size".into());
+    if let Some(e) = failed {
+        return Err(e);
     }
-    let set = MaskSet {
-        classes: labels.classes.clone(),
-        masks: images,
-    };
-    set.write_dir(masks.output, Some(labels))?;
+    writer.finish(Some(labels))?;
     println!(
         "wrote {} masks of {} x {} (the archive's resolution; --source CAPTURE for the capture's) to {}",
         scene.frames.len(),
@@ -300,10 +351,28 @@ pub(super) fn write_masks(trainer: &mut Trainer, scene: &Scene, labels: &LabelSe
         masks.output.display()
     );
     say_refinement(&masks.refine);
-    if scene.has_gt() {
-        print!("{}", report.table());
+    say_export(&masks.export, masks.output, &labels.classes);
+    if scored > 0 {
+        print!("{}", confusion.report(&names, scored).table());
     }
     Ok(())
+}
+
+/// What the folder holds beyond the masks by index: the masks by name, the formats, the
+/// cleanup.
+fn say_export(export: &ExportOptions, output: &Path, classes: &[ClassInfo]) {
+    let mut extra = vec!["by-name/ (the frames' names in their capture)".to_string()];
+    for f in Format::ALL.into_iter().filter(|&f| export.has(f)) {
+        extra.push(f.describe().to_string());
+    }
+    println!("{}: also {}", output.display(), extra.join(", "));
+    if let Some(n) = export.objects {
+        let first = classes.first().map_or("?", |c| c.name.as_str());
+        let regions = if n == 1 { "region" } else { "regions" };
+        println!(
+            "masks: the {n} largest {regions} of each class but the first kept (--objects), the others made {first:?}"
+        );
+    }
 }
 
 fn say_refinement(refine: &RefineOptions) {
@@ -332,19 +401,20 @@ fn write_at_source(
     let render = progress::bar("rendering");
     render.set_length(scene.frames.len() as u64);
     let quiet = render.is_hidden();
-    let mut writer = MaskDirWriter::new(masks.output, labels.classes.clone())?;
+    let mut writer = MaskDirWriter::new(masks.output, labels.classes.clone(), &masks.export, Some(scene))?;
     let mut confusion = Confusion::new(names.len());
     let mut scored = 0;
     let started = std::time::Instant::now();
     for frames in capture.chunks() {
         let source = capture.load(frames.clone(), &archive_name)?;
         for (k, i) in frames.enumerate() {
-            let mask = render_at_source(trainer, scene, i, &source, k, &masks.refine)?;
+            let mut mask = render_at_source(trainer, scene, i, &source, k, &masks.refine)?;
+            // Scored after the cleanup: the scores are of the masks written.
+            writer.frame(&mut mask)?;
             if let Some(gt) = &source.frames[k].gt {
                 confusion.add(gt.as_raw(), mask.as_raw());
                 scored += 1;
             }
-            writer.frame(&mask)?;
             render.inc(1);
             if quiet {
                 eprintln!(
@@ -371,6 +441,7 @@ fn write_at_source(
         started.elapsed().as_secs_f64()
     );
     say_refinement(&masks.refine);
+    say_export(&masks.export, masks.output, &labels.classes);
     if scored > 0 {
         println!(
             "scored against the capture's ground truth at {} x {}:",

@@ -1,16 +1,19 @@
 use std::io::{Cursor, Read, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use image::{DynamicImage, GrayImage, ImageFormat, RgbImage};
+use image::{DynamicImage, GrayImage, RgbImage};
 use serde::{Deserialize, Serialize};
 use zip::write::SimpleFileOptions;
 
+use super::error::ExportError;
+use super::options::ExportOptions;
+use super::writer::{ExportWriter, File, mask_name, preview_of};
 use crate::labels::{ClassInfo, LabelSet};
+use crate::scene::Scene;
 use crate::scene::error::{Result, SceneError};
 
 pub const MASKS_FORMAT: &str = "scribblefield-masks";
 pub const MASKS_VERSION: u32 = 1;
-const MANIFEST: &str = "classes.json";
 
 /// Dense predicted masks of every frame.
 #[derive(Clone, Debug, PartialEq)]
@@ -30,166 +33,145 @@ pub struct MasksManifest {
     pub classes: Vec<ClassInfo>,
     /// File of frame i is `files[i]`; previews are under `preview/` with the same names.
     pub files: Vec<String>,
-}
-
-fn mask_name(i: usize) -> String {
-    format!("{i:05}.png")
-}
-
-fn png(img: DynamicImage) -> Vec<u8> {
-    let mut out = Cursor::new(Vec::new());
-    img.write_to(&mut out, ImageFormat::Png)
-        .expect("PNG encoding into memory cannot fail");
-    out.into_inner()
+    /// The same masks named after the frames in their capture: frame i's is `by_name[i]`
+    /// (under `by-name/`). Empty when the export was made without the scene.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub by_name: Vec<String>,
+    /// The masks keep only this many largest regions of each class but the first.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub objects: Option<u32>,
 }
 
 impl MaskSet {
-    fn manifest(&self) -> MasksManifest {
-        let (width, height) = self.masks.first().map(|m| m.dimensions()).unwrap_or((0, 0));
-        MasksManifest {
-            format: MASKS_FORMAT.into(),
-            version: MASKS_VERSION,
-            frames: self.masks.len() as u32,
-            width,
-            height,
-            classes: self.classes.clone(),
-            files: (0..self.masks.len()).map(mask_name).collect(),
-        }
-    }
-
     /// The colour preview of frame `i`: class colours, black for unknown ids.
     pub fn preview(&self, i: usize) -> RgbImage {
         preview_of(&self.masks[i], &self.classes)
     }
 
-    /// Every file of the export as (relative path, bytes).
-    pub fn files(&self, labels: Option<&LabelSet>) -> Vec<(String, Vec<u8>)> {
-        let manifest = self.manifest();
-        let mut out = vec![(
-            MANIFEST.to_string(),
-            serde_json::to_vec_pretty(&manifest).expect("manifest serializes"),
-        )];
-        for (i, m) in self.masks.iter().enumerate() {
-            out.push((manifest.files[i].clone(), png(DynamicImage::ImageLuma8(m.clone()))));
-            out.push((
-                format!("preview/{}", manifest.files[i]),
-                png(DynamicImage::ImageRgb8(self.preview(i))),
-            ));
+    /// Every file of the export as (relative path, bytes): the frames' files in frame order,
+    /// then the manifest, the annotations and the files of the formats in `options`. `scene`
+    /// (the scene the masks are of, at any resolution) names the frames and gives the point
+    /// cloud its depth.
+    pub fn files(
+        &self,
+        labels: Option<&LabelSet>,
+        options: &ExportOptions,
+        scene: Option<&Scene>,
+    ) -> Result<Vec<File>, ExportError> {
+        let mut writer = ExportWriter::new(self.classes.clone(), options.clone(), scene)?;
+        let mut out = Vec::new();
+        for m in &self.masks {
+            out.extend(writer.frame(&mut m.clone())?);
         }
-        if let Some(l) = labels {
-            out.push(("labels.json".into(), l.to_json().into_bytes()));
-        }
-        out
+        out.extend(writer.finish(labels)?);
+        Ok(out)
     }
 
     /// The export as a zip in memory (what the browser downloads).
-    pub fn to_zip(&self, labels: Option<&LabelSet>) -> Vec<u8> {
-        let mut zip = zip::ZipWriter::new(Cursor::new(Vec::new()));
-        let stored = SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
-        for (name, bytes) in self.files(labels) {
-            zip.start_file(name, stored)
-                .expect("writing a zip into memory cannot fail");
-            zip.write_all(&bytes).expect("writing a zip into memory cannot fail");
-        }
-        zip.finish()
-            .expect("writing a zip into memory cannot fail")
-            .into_inner()
+    pub fn to_zip(
+        &self,
+        labels: Option<&LabelSet>,
+        options: &ExportOptions,
+        scene: Option<&Scene>,
+    ) -> Result<Vec<u8>, ExportError> {
+        Ok(zip_files(self.files(labels, options, scene)?))
     }
 
-    /// Writes the export into a folder, creating it (and `preview/`) as needed.
-    pub fn write_dir(&self, dir: &Path, labels: Option<&LabelSet>) -> Result<()> {
-        std::fs::create_dir_all(dir.join("preview")).map_err(|e| SceneError::io(dir, e))?;
-        for (name, bytes) in self.files(labels) {
-            let path = dir.join(&name);
-            std::fs::write(&path, bytes).map_err(|e| SceneError::io(path, e))?;
-        }
-        Ok(())
+    /// Writes the export into a folder, creating it (and the folders inside) as needed.
+    pub fn write_dir(
+        &self,
+        dir: &Path,
+        labels: Option<&LabelSet>,
+        options: &ExportOptions,
+        scene: Option<&Scene>,
+    ) -> Result<(), ExportError> {
+        write_files(dir, self.files(labels, options, scene)?)
     }
 }
 
-/// The colour preview of `mask`: class colours, black for unknown ids.
-fn preview_of(mask: &GrayImage, classes: &[ClassInfo]) -> RgbImage {
-    RgbImage::from_fn(mask.width(), mask.height(), |x, y| {
-        let c = mask.get_pixel(x, y).0[0] as usize;
-        image::Rgb(classes.get(c).map(|k| k.color).unwrap_or([0, 0, 0]))
-    })
+/// `files` as a zip in memory, in their order.
+pub fn zip_files(files: Vec<File>) -> Vec<u8> {
+    let mut zip = zip::ZipWriter::new(Cursor::new(Vec::new()));
+    let stored = SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    let deflated = SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+    for (name, bytes) in files {
+        // PNGs are compressed already; JSON, text and point clouds are not.
+        let how = if name.ends_with(".png") { stored } else { deflated };
+        zip.start_file(name, how)
+            .expect("writing a zip into memory cannot fail");
+        zip.write_all(&bytes).expect("writing a zip into memory cannot fail");
+    }
+    zip.finish()
+        .expect("writing a zip into memory cannot fail")
+        .into_inner()
+}
+
+/// Writes `files` under `dir`, creating the folders they need.
+fn write_files(dir: &Path, files: Vec<File>) -> Result<(), ExportError> {
+    for (name, bytes) in files {
+        let path = dir.join(&name);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).map_err(|e| SceneError::io(parent, e))?;
+        }
+        std::fs::write(&path, bytes).map_err(|e| SceneError::io(path, e))?;
+    }
+    Ok(())
 }
 
 /// Writes the same folder as [`MaskSet::write_dir`] one frame at a time, so that large masks
 /// (`segment --source` at a capture's full resolution) need not all be held: `frame` writes
-/// frame i's mask and preview as it comes, `finish` the manifest and the annotations.
-pub struct MaskDirWriter {
-    dir: std::path::PathBuf,
-    classes: Vec<ClassInfo>,
-    size: Option<(u32, u32)>,
-    frames: usize,
+/// frame i's files as it comes, `finish` the manifest, the annotations and the files that
+/// cover every frame.
+pub struct MaskDirWriter<'a> {
+    dir: PathBuf,
+    writer: ExportWriter<'a>,
 }
 
-impl MaskDirWriter {
-    /// Creates `dir` (and `preview/`) as needed.
-    pub fn new(dir: &Path, classes: Vec<ClassInfo>) -> Result<Self> {
-        std::fs::create_dir_all(dir.join("preview")).map_err(|e| SceneError::io(dir, e))?;
+impl<'a> MaskDirWriter<'a> {
+    /// Creates `dir` as needed; `options` and `scene` as for [`MaskSet::files`].
+    pub fn new(
+        dir: &Path,
+        classes: Vec<ClassInfo>,
+        options: &ExportOptions,
+        scene: Option<&'a Scene>,
+    ) -> Result<Self, ExportError> {
+        let writer = ExportWriter::new(classes, options.clone(), scene)?;
+        std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
         Ok(MaskDirWriter {
             dir: dir.to_path_buf(),
-            classes,
-            size: None,
-            frames: 0,
+            writer,
         })
     }
 
-    /// Writes the next frame's mask; every mask must have the first one's size.
-    pub fn frame(&mut self, mask: &GrayImage) -> Result<()> {
-        let name = mask_name(self.frames);
-        let size = *self.size.get_or_insert(mask.dimensions());
-        if mask.dimensions() != size {
-            return Err(SceneError::invalid(
-                self.dir.join(&name).display().to_string(),
-                format!(
-                    "mask is {} x {}, the first was {} x {}",
-                    mask.width(),
-                    mask.height(),
-                    size.0,
-                    size.1
-                ),
-            ));
-        }
-        for (path, img) in [
-            (self.dir.join(&name), DynamicImage::ImageLuma8(mask.clone())),
-            (
-                self.dir.join("preview").join(&name),
-                DynamicImage::ImageRgb8(preview_of(mask, &self.classes)),
-            ),
-        ] {
-            std::fs::write(&path, png(img)).map_err(|e| SceneError::io(path, e))?;
-        }
-        self.frames += 1;
-        Ok(())
+    /// Writes the next frame's mask (every mask must have the first one's size), cleaned in
+    /// place first when the options ask for it.
+    pub fn frame(&mut self, mask: &mut GrayImage) -> Result<(), ExportError> {
+        let files = self.writer.frame(mask).map_err(|e| match e {
+            // Name the file as it is on disk.
+            ExportError::MaskSize {
+                file,
+                got_width,
+                got_height,
+                width,
+                height,
+            } => ExportError::MaskSize {
+                file: self.dir.join(file).display().to_string(),
+                got_width,
+                got_height,
+                width,
+                height,
+            },
+            e => e,
+        })?;
+        write_files(&self.dir, files)
     }
 
-    /// Writes `classes.json` (and `labels.json`); returns the number of frames written.
-    pub fn finish(self, labels: Option<&LabelSet>) -> Result<usize> {
-        let (width, height) = self.size.unwrap_or((0, 0));
-        let manifest = MasksManifest {
-            format: MASKS_FORMAT.into(),
-            version: MASKS_VERSION,
-            frames: self.frames as u32,
-            width,
-            height,
-            classes: self.classes,
-            files: (0..self.frames).map(mask_name).collect(),
-        };
-        let mut files = vec![(
-            MANIFEST.to_string(),
-            serde_json::to_vec_pretty(&manifest).expect("manifest serializes"),
-        )];
-        if let Some(l) = labels {
-            files.push(("labels.json".into(), l.to_json().into_bytes()));
-        }
-        for (name, bytes) in files {
-            let path = self.dir.join(name);
-            std::fs::write(&path, bytes).map_err(|e| SceneError::io(path, e))?;
-        }
-        Ok(self.frames)
+    /// Writes `classes.json`, `labels.json` and the formats' files covering every frame;
+    /// returns the number of frames written.
+    pub fn finish(self, labels: Option<&LabelSet>) -> Result<usize, ExportError> {
+        let frames = self.writer.frames();
+        write_files(&self.dir, self.writer.finish(labels)?)?;
+        Ok(frames)
     }
 }
 
@@ -288,10 +270,11 @@ mod tests {
     #[test]
     fn zip_and_folder_round_trip() {
         let s = set();
-        let zip = s.to_zip(Some(&LabelSet::new(s.classes.clone())));
+        let none = ExportOptions::default();
+        let zip = s.to_zip(Some(&LabelSet::new(s.classes.clone())), &none, None).unwrap();
         assert_eq!(read_masks_zip(&zip, "m.zip", 3, 5, 4).unwrap(), s.masks);
         let dir = std::env::temp_dir().join(format!("sf-masks-{}", std::process::id()));
-        s.write_dir(&dir, None).unwrap();
+        s.write_dir(&dir, None, &none, None).unwrap();
         assert_eq!(read_masks(&dir, 3, 5, 4).unwrap(), s.masks);
         assert!(dir.join("preview/00002.png").is_file() && dir.join("classes.json").is_file());
         let err = read_masks(&dir, 4, 5, 4).unwrap_err().to_string();
@@ -303,23 +286,37 @@ mod tests {
 
     #[test]
     fn writing_frame_by_frame_makes_the_same_folder() {
-        let s = set();
+        let scene = crate::scene::demo::demo_scene(&crate::scene::demo::DemoOptions {
+            seed: 1,
+            width: 24,
+            height: 18,
+            frames: 24,
+        })
+        .unwrap();
+        let s = MaskSet {
+            classes: scene.classes.clone(),
+            masks: scene.frames.iter().map(|f| f.gt.clone().unwrap()).collect(),
+        };
+        let all = ExportOptions::with(&crate::export::Format::ALL, Some(2));
         let labels = LabelSet::new(s.classes.clone());
         let base = std::env::temp_dir().join(format!("sf-mask-writer-{}", std::process::id()));
         let (whole, streamed) = (base.join("whole"), base.join("streamed"));
-        s.write_dir(&whole, Some(&labels)).unwrap();
-        let mut w = MaskDirWriter::new(&streamed, s.classes.clone()).unwrap();
+        s.write_dir(&whole, Some(&labels), &all, Some(&scene)).unwrap();
+        let mut w = MaskDirWriter::new(&streamed, s.classes.clone(), &all, Some(&scene)).unwrap();
         for m in &s.masks {
-            w.frame(m).unwrap();
+            w.frame(&mut m.clone()).unwrap();
         }
-        let err = w.frame(&GrayImage::new(3, 3)).unwrap_err().to_string();
+        let err = w.frame(&mut GrayImage::new(3, 3)).unwrap_err().to_string();
         assert!(
-            err.contains("00003.png") && err.contains("3 x 3") && err.contains("5 x 4"),
+            err.contains("00024.png") && err.contains("3 x 3") && err.contains("24 x 18"),
             "{err}"
         );
-        assert_eq!(w.finish(Some(&labels)).unwrap(), 3);
-        for (name, bytes) in s.files(Some(&labels)) {
+        assert_eq!(w.finish(Some(&labels)).unwrap(), 24);
+        let files = s.files(Some(&labels), &all, Some(&scene)).unwrap();
+        assert!(files.iter().any(|(n, _)| n == "points.ply"));
+        for (name, bytes) in files {
             assert_eq!(std::fs::read(streamed.join(&name)).unwrap(), bytes, "{name}");
+            assert_eq!(std::fs::read(whole.join(&name)).unwrap(), bytes, "{name}");
         }
         std::fs::remove_dir_all(&base).unwrap();
     }

@@ -1,9 +1,25 @@
-//! Exporting masks: one class-id PNG per frame, colour previews, the class manifest and the
-//! annotations, as a folder (CLI) or a zip made in memory (browser download). Both have the same
-//! layout, and `read_masks` reads either back for evaluation.
+//! Exporting masks as a folder (CLI) or a zip made in memory (browser download), both with the
+//! same layout: one class-id PNG per frame by index and by the frame's name in its capture,
+//! colour previews, the class manifest and the annotations, and on request the CVAT / PASCAL
+//! VOC layout, COCO JSON with RLE, a labelled point cloud, and autolabel's object-count
+//! cleanup. `read_masks` reads either back for evaluation.
+pub mod coco;
+mod error;
 mod masks;
+pub mod names;
+pub mod objects;
+mod options;
+pub mod ply;
+pub mod rle;
+pub mod voc;
+mod writer;
 
-pub use masks::{MaskDirWriter, MaskSet, MasksManifest, read_masks, read_masks_zip};
+pub use error::ExportError;
+pub use masks::{MaskDirWriter, MaskSet, MasksManifest, read_masks, read_masks_zip, zip_files};
+pub use options::{ExportOptions, Format};
+pub use writer::{BY_NAME_DIR, ExportWriter, MANIFEST};
 
+#[cfg(test)]
+mod formats_tests;
 #[cfg(test)]
 mod zip_contents_tests;

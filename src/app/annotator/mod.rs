@@ -30,6 +30,7 @@ use super::palette::Palette;
 use super::persistence::{self, Origin};
 use super::side_panel;
 use super::store::Opened;
+use crate::export::ExportOptions;
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
 use crate::labels::autosave::SceneSource;
@@ -85,6 +86,8 @@ pub struct Annotator {
     /// The snapshots window is open.
     snapshots_open: bool,
     save_news: SaveNews,
+    /// What the masks download holds beyond the class-id PNGs.
+    export_options: ExportOptions,
 }
 
 impl Annotator {
@@ -110,6 +113,7 @@ impl Annotator {
             inbox: Inbox::default(),
             snapshots_open: false,
             save_news: SaveNews::default(),
+            export_options: ExportOptions::default(),
         };
         for w in opened.warnings {
             a.notify(&w, true);
@@ -367,7 +371,7 @@ impl Annotator {
     }
 
     fn download_masks(&mut self) {
-        if let Err(e) = self.training.export(&self.doc.labels) {
+        if let Err(e) = self.training.export(&self.doc.labels, &self.export_options) {
             self.notify(&e, true);
         }
     }

@@ -7,6 +7,7 @@ use super::super::palette::PaletteAction;
 use super::super::scene_panel;
 use super::super::training::Phase;
 use super::Annotator;
+use crate::export::Format;
 use crate::labels::brush::{MAX_RADIUS, MIN_RADIUS};
 use crate::labels::history::Edit;
 
@@ -115,6 +116,38 @@ impl Annotator {
         });
     }
 
+    /// What the masks download holds beyond the class-id PNGs: the formats, and autolabel's
+    /// object-count cleanup.
+    fn export_options_section(&mut self, ui: &mut egui::Ui, enabled: bool) {
+        let has_depth = self.doc.scene.has_depth();
+        ui.collapsing("download also holds", |ui| {
+            ui.add_enabled_ui(enabled, |ui| {
+                let options = &mut self.export_options;
+                for format in Format::ALL {
+                    let possible = format != Format::Ply || has_depth;
+                    let mut on = options.has(format) && possible;
+                    let response = ui
+                        .add_enabled(possible, egui::Checkbox::new(&mut on, format.describe()))
+                        .on_disabled_hover_text("this scene has no depth");
+                    if response.changed() {
+                        options.set(format, on);
+                    }
+                }
+                ui.horizontal(|ui| {
+                    let mut limit = options.objects.is_some();
+                    let mut n = options.objects.unwrap_or(1);
+                    ui.checkbox(&mut limit, "keep the largest").on_hover_text(
+                        "of each class but the first, only this many regions per frame are kept; the others \
+                             become the first class (autolabel's --objects)",
+                    );
+                    ui.add_enabled(limit, egui::DragValue::new(&mut n).range(1..=255));
+                    ui.label("per class");
+                    options.objects = limit.then_some(n);
+                });
+            });
+        });
+    }
+
     fn results_section(&mut self, ui: &mut egui::Ui) {
         let exporting = match self.training.phase() {
             Some(Phase::Exporting { done, total }) => Some((*done, *total)),
@@ -132,8 +165,9 @@ impl Annotator {
                 if ui
                     .add_enabled(running, egui::Button::new("⬇ download masks (D)"))
                     .on_hover_text(format!(
-                        "a zip with a class-id PNG per frame at the archive's {} x {}, colour previews and the \
-                         annotations; `scribblefield segment --source CAPTURE` makes them at the capture's resolution",
+                        "a zip with a class-id PNG per frame at the archive's {} x {}, by index and (by-name/) by \
+                         the frame's name in its capture, colour previews, the annotations and the formats ticked \
+                         below; `scribblefield segment --source CAPTURE` makes them at the capture's resolution",
                         self.doc.scene.width, self.doc.scene.height
                     ))
                     .clicked()
@@ -142,6 +176,7 @@ impl Annotator {
                 }
             }
         }
+        self.export_options_section(ui, exporting.is_none());
         if let Some(ms) = self.training.last_export_ms {
             ui.label(RichText::new(format!("last export took {:.1} s", ms / 1000.0)).small());
         }

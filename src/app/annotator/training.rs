@@ -8,6 +8,7 @@ use super::super::page_options::{Kernels, PageOptions};
 use super::super::training::scene::{auto_factor, downscale};
 use super::super::training::{Phase, Refresh, Training, TrainingOptions, TrainingSetup};
 use super::document::Document;
+use crate::export::ExportOptions;
 use crate::field::refine::RefineOptions;
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
@@ -134,11 +135,11 @@ impl TrainingControl {
     }
 
     /// Asks for the masks of every frame.
-    pub fn export(&mut self, labels: &LabelSet) -> Result<(), String> {
+    pub fn export(&mut self, labels: &LabelSet, options: &ExportOptions) -> Result<(), String> {
         let Some(t) = &self.handle else {
             return Err("No trained field to render masks from.".into());
         };
-        t.export(labels);
+        t.export(labels, options);
         self.export_started_ms = Some(browser::now_ms());
         Ok(())
     }

@@ -1,5 +1,6 @@
 //! What the page and its training task say to each other: [`TrainCommand`]s go to the task,
 //! [`TrainEvent`]s come back, each over its own channel. Neither side holds the other's state.
+use crate::export::{ExportError, ExportOptions};
 use crate::field::gpu::trainer::{RenderedFrame, StepLosses};
 use crate::gpu::GpuError;
 use crate::labels::LabelSet;
@@ -25,8 +26,9 @@ pub enum TrainCommand {
         until_ms: f64,
     },
     SetPaused(bool),
-    /// Render every frame into a masks zip with these labels (as drawn, full resolution).
-    Export(LabelSet),
+    /// Render every frame into a masks zip with these labels (as drawn, full resolution) and
+    /// these formats.
+    Export(LabelSet, ExportOptions),
     /// The page has taken the latest [`TrainEvent::Rendered`]: the next periodic render may
     /// follow. A hidden tab draws no frames, so renders would otherwise pile up in the queue.
     RenderTaken,
@@ -140,6 +142,9 @@ pub enum TrainError {
     /// The device reported a loss or an uncaptured error (the message says which).
     #[error("{0}")]
     Device(String),
+    /// The export's options or masks cannot be written (the message says which and why).
+    #[error("{0}")]
+    Export(#[source] ExportError),
     /// The page went away during an export.
     #[error("stopped")]
     Stopped,

@@ -18,6 +18,7 @@ use futures_channel::mpsc::{UnboundedReceiver, UnboundedSender, unbounded};
 
 pub use self::messages::{Phase, Progress, RefreshTimes, Rendered, Spread, TrainCommand, TrainError, TrainEvent};
 use super::browser::now_ms;
+use crate::export::ExportOptions;
 use crate::field::FieldConfig;
 use crate::field::refine::RefineOptions;
 use crate::gpu::GpuContext;
@@ -239,9 +240,9 @@ impl Training {
     }
 
     /// Asks for the masks of every frame; the zip comes back from [`Training::poll`].
-    pub fn export(&self, labels: &LabelSet) {
+    pub fn export(&self, labels: &LabelSet, options: &ExportOptions) {
         // The download carries the labels as drawn (full resolution); the task only needs their
         // classes.
-        self.send(TrainCommand::Export(labels.clone()));
+        self.send(TrainCommand::Export(labels.clone(), options.clone()));
     }
 }

@@ -14,7 +14,7 @@ use super::device::{GpuFaults, gpu_done};
 use super::messages::{Phase, Progress, RefreshTimes, Rendered, Spread, TrainCommand, TrainError, TrainEvent};
 use super::scene::upscale_mask;
 use super::{TrainingOptions, TrainingSetup};
-use crate::export::MaskSet;
+use crate::export::{ExportOptions, ExportWriter, zip_files};
 use crate::field::FieldConfig;
 use crate::field::gpu::refine::RefinePass;
 use crate::field::gpu::trainer::{DepthGuide, RenderedFrame, Trainer, ViewCamera};
@@ -75,7 +75,7 @@ struct Requests {
     render_soon: bool,
     /// When the latest refresh was asked for (page clock, ms): a frame shown or labels given.
     refresh_requested_ms: f64,
-    export: Option<LabelSet>,
+    export: Option<(LabelSet, ExportOptions)>,
     /// The page has not taken the latest render yet.
     render_untaken: bool,
 }
@@ -86,7 +86,7 @@ enum Action {
     Wait,
     /// Paused: look again in a while.
     Paused,
-    Export(LabelSet),
+    Export(LabelSet, ExportOptions),
     /// The mask shown is out of date: quick render first (when quicker), then the full one.
     RefreshStale,
     /// The full render after a quick one, asked for at `requested_ms`.
@@ -232,7 +232,7 @@ impl TrainingTask {
                 }
                 TrainCommand::UserActive { until_ms } => r.busy_until_ms = r.busy_until_ms.max(until_ms),
                 TrainCommand::SetPaused(paused) => r.paused = paused,
-                TrainCommand::Export(labels) => r.export = Some(labels),
+                TrainCommand::Export(labels, options) => r.export = Some((labels, options)),
                 TrainCommand::RenderTaken => r.render_untaken = false,
             }
         }
@@ -251,8 +251,8 @@ impl TrainingTask {
         if now_ms() < self.requests.busy_until_ms {
             return Action::Wait;
         }
-        if let Some(labels) = self.requests.export.take() {
-            return Action::Export(labels);
+        if let Some((labels, options)) = self.requests.export.take() {
+            return Action::Export(labels, options);
         }
         // A paused field still renders a frame the user steps to.
         if self.requests.render_soon || (self.labels_refresh && self.trained_since_labels) {
@@ -287,8 +287,8 @@ impl TrainingTask {
                     self.batches.rate.reset();
                     sleep_ms(100).await;
                 }
-                Action::Export(labels) => {
-                    let zip = self.export(trainer, &labels).await;
+                Action::Export(labels, options) => {
+                    let zip = self.export(trainer, &labels, options).await;
                     let _ = self.events.unbounded_send(TrainEvent::Exported(zip));
                     self.report(TrainEvent::Phase(Phase::Running));
                 }
@@ -488,10 +488,22 @@ impl TrainingTask {
         Ok(out.join(" "))
     }
 
-    /// Renders every frame into a masks zip (class ids, previews, labels, class manifest).
-    async fn export(&mut self, trainer: &mut Trainer, labels: &LabelSet) -> Result<Vec<u8>, TrainError> {
+    /// Renders every frame into a masks zip (class ids by index and by name, previews, labels,
+    /// class manifest, and the formats in `options`). The options are checked before the first
+    /// frame is rendered.
+    async fn export(
+        &mut self,
+        trainer: &mut Trainer,
+        labels: &LabelSet,
+        options: ExportOptions,
+    ) -> Result<Vec<u8>, TrainError> {
         let total = self.scene.frames.len() as u32;
-        let mut masks = Vec::with_capacity(total as usize);
+        let scene = Rc::clone(&self.scene);
+        // The training scene: the frames' names, and depth for the point cloud at its size
+        // (masks come at the full size; `ply` looks up each depth pixel's class in them).
+        let mut writer =
+            ExportWriter::new(labels.classes.clone(), options, Some(&scene)).map_err(TrainError::Export)?;
+        let mut files = Vec::new();
         for frame in 0..total {
             // Later commands wait for the export; a dropped handle ends it.
             if !self.take_commands() {
@@ -502,15 +514,13 @@ impl TrainingTask {
             let rendered = self.render_refined(trainer, frame).await?;
             let mask = GrayImage::from_raw(self.scene.width, self.scene.height, rendered.classes)
                 .ok_or(TrainError::MaskSize(frame))?;
-            masks.push(upscale_mask(mask, self.full_size.0, self.full_size.1));
+            let mut mask = upscale_mask(mask, self.full_size.0, self.full_size.1);
+            files.extend(writer.frame(&mut mask).map_err(TrainError::Export)?);
         }
         self.report(TrainEvent::Phase(Phase::Exporting { done: total, total }));
         // Let the page show "packing" before the zip takes the thread.
         sleep_ms(20).await;
-        let set = MaskSet {
-            classes: labels.classes.clone(),
-            masks,
-        };
-        Ok(set.to_zip(Some(labels)))
+        files.extend(writer.finish(Some(labels)).map_err(TrainError::Export)?);
+        Ok(zip_files(files))
     }
 }
