@@ -3,6 +3,7 @@
 //! cannot be used is reported ([`PageOptionError`], shown as a notice) and the default is used
 //! instead, so a typo never keeps the page from opening. Plain logic: tested natively.
 use super::model_size::ModelSize;
+use crate::export::{ExportOptions, Format};
 use crate::field::Preset;
 use crate::labels::share::{parse_fragment, percent_decode};
 use crate::scene::archive::limits;
@@ -61,6 +62,10 @@ pub struct PageOptions {
     /// `bench-inflight=N`: training batches the bench keeps in flight (1: wait for each batch
     /// before recording the next, as the page did before it kept two).
     pub bench_inflight: Option<u32>,
+    /// `export=voc,coco,ply`: the formats the masks download holds from the start (the
+    /// "download also holds" boxes ticked), and `objects=N`: keep the N largest regions of each
+    /// class but the first (`export::ExportOptions`).
+    pub export: ExportOptions,
 }
 
 /// A value in the address the page cannot use; the option keeps its default.
@@ -165,6 +170,25 @@ impl PageOptions {
                     Ok(n) if (1..=2).contains(&n) => options.bench_inflight = Some(n),
                     _ => bad("bench-inflight", "1 or 2 batches in flight"),
                 },
+                "export" => {
+                    let formats: Option<Vec<Format>> = value
+                        .split(',')
+                        .filter(|name| !name.is_empty())
+                        .map(|name| Format::ALL.into_iter().find(|f| f.name() == name))
+                        .collect();
+                    match formats {
+                        Some(formats) => {
+                            for f in formats {
+                                options.export.set(f, true);
+                            }
+                        }
+                        None => bad("export", "formats among voc, coco and ply, separated by commas"),
+                    }
+                }
+                "objects" => match value.parse::<u32>() {
+                    Ok(n) if (1..=255).contains(&n) => options.export.objects = Some(n),
+                    _ => bad("objects", "regions kept per class, 1 to 255"),
+                },
                 _ => {}
             }
         }
@@ -232,6 +256,17 @@ mod tests {
         assert_eq!((o.bench, o.bench_steps, o.bench_inflight), (None, None, None));
         let keys: Vec<_> = errors.iter().map(|e| e.key).collect();
         assert_eq!(keys, ["bench", "bench-steps", "bench-inflight"]);
+    }
+
+    #[test]
+    fn reads_what_the_download_holds() {
+        let (o, errors) = PageOptions::parse("export=voc,coco&objects=2");
+        assert!(errors.is_empty(), "{errors:?}");
+        assert_eq!(o.export, ExportOptions::with(&[Format::Voc, Format::Coco], Some(2)));
+        let (o, errors) = PageOptions::parse("export=voc,png&objects=0");
+        assert_eq!(o.export, ExportOptions::default());
+        let keys: Vec<_> = errors.iter().map(|e| e.key).collect();
+        assert_eq!(keys, ["export", "objects"]);
     }
 
     #[test]

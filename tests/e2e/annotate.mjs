@@ -107,7 +107,7 @@ await runBrowserTest("annotate", {
 }, async (context) => {
   const sceneUrl = new URL("demo.scene.zip", url).href;
   const pageUrl = new URL(url);
-  pageUrl.hash = `scene=demo.scene.zip&${PAGE_OPTIONS}`;
+  pageUrl.hash = `scene=demo.scene.zip&export=voc,coco&${PAGE_OPTIONS}`;
   const page = await openPage(context, pageUrl.href, "annotate", consoleLog);
   const loadStart = Date.now();
   let s = await settledStatus(page, LOAD_TIMEOUT_MS);
@@ -233,6 +233,19 @@ await runBrowserTest("annotate", {
     const strokes = labels.frames.reduce((n, f) => n + f.strokes.length, 0);
     assert(strokes === expectedStrokes, `labels.json has ${strokes} strokes, ${expectedStrokes} were drawn`);
     assert(files.has("preview/00000.png"), "no colour previews");
+    // The formats the address ticked (#export=voc,coco), and every mask by its frame's name.
+    const byName = [...files.keys()].filter((n) => n.startsWith("by-name/") && n.endsWith(".png"));
+    assert(byName.length === gt.length, `${byName.length} masks under by-name/, ${gt.length} frames`);
+    const labelmap = files.get("voc/labelmap.txt");
+    assert(labelmap, "no voc/labelmap.txt in the download");
+    const voc = [...files.keys()].filter((n) => n.startsWith("voc/SegmentationClass/"));
+    assert(voc.length === gt.length, `${voc.length} VOC masks, ${gt.length} frames`);
+    assert(files.has("coco.json"), "no coco.json in the download");
+    const coco = JSON.parse(files.get("coco.json").toString("utf8"));
+    assert(coco.images.length === gt.length && coco.annotations.length >= gt.length,
+      `coco.json has ${coco.images.length} images and ${coco.annotations.length} annotations`);
+    console.log(`     download: ${byName.length} masks by name, ${voc.length} VOC masks, ` +
+      `${coco.annotations.length} COCO annotations, labelmap of ${labelmap.toString("utf8").split("\n").length} lines`);
     const masks = manifest.files.map((name) => decodePng(files.get(name)));
     assert(masks.every((m) => m.width === W && m.height === H && m.channels === 1), "masks have the wrong format");
     const iou = meanIou(masks);

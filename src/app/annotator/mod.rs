@@ -102,6 +102,7 @@ impl Annotator {
         } = setup;
         let restored = persistence::initial_labels(&scene, &source, options.labels.take().as_deref(), opened.newest);
         let doc = Document::new(scene, source, restored.labels, opened.store);
+        let export_options = options.export.clone();
         let mut a = Annotator {
             view: View::new(&doc),
             doc,
@@ -113,7 +114,7 @@ impl Annotator {
             inbox: Inbox::default(),
             snapshots_open: false,
             save_news: SaveNews::default(),
-            export_options: ExportOptions::default(),
+            export_options,
         };
         for w in opened.warnings {
             a.notify(&w, true);
