@@ -73,7 +73,7 @@ impl WindowCounts {
 /// Drops each label of `map` within `margin` pixels of the edge of its class's footprint: the
 /// pixels with a label of that class within `gap` pixels. Sparse labels (a reconstruction's
 /// points in a photo) leave gaps that are not edges; `gap` bridges them.
-pub fn erode_footprints(map: &mut [u16], width: usize, height: usize, gap: usize, margin: usize) {
+pub fn erode_footprints(map: &mut [u16], width: usize, height: usize, gap: usize, margin: usize, kept: Option<u16>) {
     if margin == 0 || map.len() != width * height {
         return;
     }
@@ -81,7 +81,7 @@ pub fn erode_footprints(map: &mut [u16], width: usize, height: usize, gap: usize
     let mut classes: Vec<u16> = before.iter().copied().filter(|&c| c != UNLABELLED).collect();
     classes.sort_unstable();
     classes.dedup();
-    for class in classes {
+    for class in classes.into_iter().filter(|&c| Some(c) != kept) {
         let labelled: Vec<bool> = before.iter().map(|&c| c == class).collect();
         let near = WindowCounts::new(&labelled, width, height);
         let outside: Vec<bool> = (0..width * height)
@@ -138,7 +138,7 @@ mod tests {
         // then nothing. The footprint (gap 1) covers columns 0..7; a margin of 2 drops the labels
         // within 2 pixels of what lies beyond it, none at the frame's border on the left.
         let mut map = vec![1, U, 1, U, 1, U, 1, U, U, U];
-        erode_footprints(&mut map, 10, 1, 1, 2);
+        erode_footprints(&mut map, 10, 1, 1, 2, None);
         assert_eq!(map, vec![1, U, 1, U, 1, U, U, U, U, U]);
     }
 
@@ -146,19 +146,26 @@ mod tests {
     fn a_footprint_edge_against_another_class_is_an_edge_for_both() {
         // 6 x 1: class 0 then class 1, dense; margin 1 drops the pair at the meeting.
         let mut map = vec![0, 0, 0, 1, 1, 1];
-        erode_footprints(&mut map, 6, 1, 1, 1);
+        erode_footprints(&mut map, 6, 1, 1, 1, None);
         assert_eq!(map, vec![0, 0, U, U, 1, 1]);
         // A lone label with no gap bridged lies on its footprint's edge.
         let mut map = vec![U; 16];
         map[5] = 2;
-        erode_footprints(&mut map, 4, 4, 0, 1);
+        erode_footprints(&mut map, 4, 4, 0, 1, None);
         assert_eq!(map, vec![U; 16]);
     }
 
     #[test]
     fn no_margin_keeps_every_label() {
         let mut map = vec![0, U, 1, 1];
-        erode_footprints(&mut map, 4, 1, 1, 0);
+        erode_footprints(&mut map, 4, 1, 1, 0, None);
         assert_eq!(map, vec![0, U, 1, 1]);
+    }
+
+    #[test]
+    fn the_kept_class_keeps_every_label() {
+        let mut map = vec![0, 0, 0, 1, 1, 1];
+        erode_footprints(&mut map, 6, 1, 1, 1, Some(0));
+        assert_eq!(map, vec![0, 0, 0, U, 1, 1]);
     }
 }

@@ -266,7 +266,9 @@ impl PropagationCache {
                     let diagonal = (width as f32).hypot(height as f32);
                     let margin_px = (options.undrawn_margin * diagonal).round() as usize;
                     let gap = ((FOOTPRINT_GAP * diagonal).round() as usize).max(1);
-                    margin::erode_footprints(&mut map, width, height, gap, margin_px);
+                    // The far pixels' class is labelled only far from every point already
+                    // (`view_seeds::FAR_FROM_POINTS`): only the points' own labels keep a margin.
+                    margin::erode_footprints(&mut map, width, height, gap, margin_px, self.far_class);
                     map
                 }
                 (Some(map), _) => map,

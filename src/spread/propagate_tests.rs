@@ -257,6 +257,13 @@ fn bad_options_are_named() {
             },
             "edge_margin",
         ),
+        (
+            PropagationOptions {
+                undrawn_margin: -0.01,
+                ..PropagationOptions::default()
+            },
+            "undrawn_margin",
+        ),
     ] {
         assert!(bad.validate().unwrap_err().contains(name), "{name}");
     }

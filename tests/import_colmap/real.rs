@@ -254,6 +254,20 @@ fn strokes_on_two_photos_reach_the_others_through_the_points() {
     assert_eq!(frames_walked, FRAMES);
     assert!(labelled < labelled_walked, "{labelled} against {labelled_walked}");
     assert!(right > right_walked, "{right} against {right_walked}");
+    // With a margin on those points' labels (`undrawn_margin`, off by default) the labels along
+    // the head's outline are left to the field: fewer labels, righter, still in every photo.
+    let margined = PropagationOptions {
+        undrawn_margin: 0.02,
+        ..PropagationOptions::default()
+    };
+    let (frames_margined, labelled_margined, right_margined) = score(&margined);
+    eprintln!(
+        "undrawn photos with a margin: {frames_margined} frames, {labelled_margined} labelled pixels, \
+         {right_margined:.4} right"
+    );
+    assert_eq!(frames_margined, FRAMES);
+    assert!(labelled_margined < labelled, "{labelled_margined} against {labelled}");
+    assert!(right_margined > right, "{right_margined} against {right}");
 
     // Other strokes on the same photos, whose background strokes cover no point of the model:
     // the walk inside the drawn photos carries the background to the pedestal's points, so both
