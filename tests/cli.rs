@@ -64,6 +64,21 @@ fn demo_scene_then_info() {
         t.contains("frames:      24") && t.contains("64 x 48") && t.contains("ground truth: yes"),
         "{t}"
     );
+    // It ends with what to run next: strokes from the ground truth, then segment; and, since
+    // this archive has no feature codes, how the documented figures were packed.
+    let tail: Vec<&str> = t.lines().rev().take(3).collect();
+    assert!(
+        tail[2].starts_with("next:") && tail[2].contains("scribble-from-gt"),
+        "{t}"
+    );
+    assert!(
+        tail[1].starts_with("then:") && tail[1].contains("segment") && tail[1].contains("--labels labels.json"),
+        "{t}"
+    );
+    assert!(
+        tail[0].contains("no feature codes") && tail[0].contains("--features baseline"),
+        "{t}"
+    );
 }
 
 #[test]
