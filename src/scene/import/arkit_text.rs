@@ -43,7 +43,10 @@ fn finite_words(line: &str, index: usize, file: &str, names: &[&str], form: &str
         .zip(names)
         .map(|(word, name)| {
             let v: f64 = word.parse().map_err(|_| {
-                SceneError::invalid(file, format!("line {}: cannot read {name} {word:?} as a number", index + 1))
+                SceneError::invalid(
+                    file,
+                    format!("line {}: cannot read {name} {word:?} as a number", index + 1),
+                )
             })?;
             if !v.is_finite() {
                 return Err(SceneError::invalid(
@@ -191,7 +194,10 @@ mod tests {
     fn bad_traj_lines_name_the_file_line_and_value() {
         let f = "s/lowres_wide.traj";
         let e = err(parse_traj("1 0 0 0 0 0 0\n2 0 0 0 0 0\n", f));
-        assert!(e.contains(f) && e.contains("line 2") && e.contains("found 6 words"), "{e}");
+        assert!(
+            e.contains(f) && e.contains("line 2") && e.contains("found 6 words"),
+            "{e}"
+        );
         let e = err(parse_traj("1 0 0 0 0 0 0\n2 0 0 x 0 0 0\n", f));
         assert!(e.contains("line 2") && e.contains("rz \"x\""), "{e}");
         let e = err(parse_traj("1 0 nan 0 0 0 0\n", f));
@@ -211,7 +217,10 @@ mod tests {
         assert_eq!(p.size, (256, 192));
         assert_eq!((p.k.fx, p.k.fy, p.k.cx, p.k.cy), (211.5, 211.6, 127.9, 95.8));
         let e = err(parse_pincam("256 192 211 211 127\n", f));
-        assert!(e.contains(f) && e.contains("line 1") && e.contains("found 5 words"), "{e}");
+        assert!(
+            e.contains(f) && e.contains("line 1") && e.contains("found 5 words"),
+            "{e}"
+        );
         let e = err(parse_pincam("256 192 211 211 127 96\n256 192 211 211 127 96\n", f));
         assert!(e.contains("found 2 lines"), "{e}");
         let e = err(parse_pincam("256 192.5 211 211 127 96", f));

@@ -120,8 +120,7 @@ pub(super) async fn import(dir: &Path, opts: &ImportOptions, progress: &mut Prog
             pose,
         });
     }
-    let (pincam, pincam_path) =
-        camera.ok_or_else(|| SceneError::invalid(shown(dir), "no frames to import"))?;
+    let (pincam, pincam_path) = camera.ok_or_else(|| SceneError::invalid(shown(dir), "no frames to import"))?;
 
     let loaded = load_frames(files, opts, InvalidDepth::ZeroOnly, progress).await?;
     notes.extend(loaded.notes);
@@ -315,7 +314,10 @@ mod tests {
         let (a, b) = (Path::new("s/i/v_1.000.pincam"), Path::new("s/i/v_2.000.pincam"));
         assert!(check_same_camera(&k(211.0), a, &k(212.0), b).is_ok());
         let e = check_same_camera(&k(211.0), a, &k(250.0), b).unwrap_err().to_string();
-        assert!(e.starts_with("s/i/v_2.000.pincam") && e.contains("fx 250") && e.contains("v_1.000"), "{e}");
+        assert!(
+            e.starts_with("s/i/v_2.000.pincam") && e.contains("fx 250") && e.contains("v_1.000"),
+            "{e}"
+        );
         let e = native_intrinsics(&k(211.0), a, (300, 100)).unwrap_err().to_string();
         assert!(e.contains("256x192") && e.contains("300x100"), "{e}");
         let doubled = native_intrinsics(&k(211.0), a, (512, 384)).unwrap();
