@@ -124,7 +124,7 @@ pub(super) fn parse_pincam(text: &str, file: &str) -> Result<Pincam> {
     };
     let v = finite_words(line, i, file, &PINCAM_FIELDS, PINCAM_FORM)?;
     for (name, side) in [("width", v[0]), ("height", v[1])] {
-        if side < 1.0 || side > MAX_SIDE || side.fract() != 0.0 {
+        if !(1.0..=MAX_SIDE).contains(&side) || side.fract() != 0.0 {
             return Err(SceneError::invalid(
                 file,
                 format!("line {}: {name} = {side} is not an image side in pixels", i + 1),
