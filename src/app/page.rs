@@ -424,8 +424,9 @@ impl eframe::App for App {
                 pick_folder = ui
                     .button("pack capture folder…")
                     .on_hover_text(
-                        "a capture folder (COLMAP, transforms.json, NeRF splits, ScanNet, 7-Scenes, autolabel), \
-                         packed here into a scene archive as `scribblefield pack` would; or drop the folder on the page",
+                        "a capture folder (COLMAP, transforms.json, NeRF splits, ScanNet, ARKitScenes, 7-Scenes, \
+                         autolabel), packed here into a scene archive as `scribblefield pack` would; or drop the \
+                         folder on the page",
                     )
                     .clicked();
                 if let Stage::Annotating(a) = &self.stage {

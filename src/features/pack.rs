@@ -121,7 +121,7 @@ pub async fn pack_files<P: Pause>(
 
 /// Extensions of the files a capture is read from; anything else in the folder (COLMAP's
 /// `database.db`, meshes, videos) is never read into the page's memory.
-pub const CAPTURE_EXTENSIONS: &[&str] = &["jpg", "jpeg", "png", "txt", "json", "bin"];
+pub const CAPTURE_EXTENSIONS: &[&str] = &["jpg", "jpeg", "png", "txt", "json", "bin", "traj", "pincam"];
 
 /// Whether the importers may read `path` (by its extension, [`CAPTURE_EXTENSIONS`]).
 pub fn is_capture_file(path: &str) -> bool {
@@ -163,6 +163,7 @@ const NOT_COLOUR_DIRS: &[&str] = &[
     "normals",
     "pose",
     "intrinsic",
+    "confidence",
 ];
 
 /// Surveys a capture from its files' paths (`/`-separated, any prefix) and sizes.
@@ -190,14 +191,19 @@ pub fn survey_capture<'a>(files: impl IntoIterator<Item = (&'a str, u64)>) -> Ca
             n.rsplit_once('.').is_some_and(|(_, e)| IMAGE_EXTENSIONS.contains(&e)) && !n.starts_with('.')
         })
         .collect();
-    let dense_depth = images
-        .iter()
-        .any(|&i| dirs(files[i].0).iter().any(|d| d == "depth") || name(files[i].0).contains(".depth."));
+    let dense_depth = images.iter().any(|&i| {
+        dirs(files[i].0).iter().any(|d| d == "depth" || d == "lowres_depth") || name(files[i].0).contains(".depth.")
+    });
     // The colour folder of each layout, most specific first (ScanNet, autolabel, COLMAP and most
-    // transforms.json captures, 7-Scenes); else every image that is not depth, a mask or ground truth.
+    // transforms.json captures, ARKitScenes, 7-Scenes); else every image that is not depth, a mask or ground truth.
     let in_dir = |i: usize, dir: &str| dirs(files[i].0).iter().any(|d| d == dir);
     let mut found = None;
-    for (label, dir) in [("color/", "color"), ("rgb/", "rgb"), ("images/", "images")] {
+    for (label, dir) in [
+        ("color/", "color"),
+        ("rgb/", "rgb"),
+        ("images/", "images"),
+        ("lowres_wide/", "lowres_wide"),
+    ] {
         let chosen: Vec<usize> = images.iter().copied().filter(|&i| in_dir(i, dir)).collect();
         if !chosen.is_empty() {
             found = Some((label.to_string(), chosen));

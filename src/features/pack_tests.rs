@@ -117,6 +117,19 @@ fn a_survey_counts_each_layouts_colour_images() {
     ];
     let s = survey_capture(scannet);
     assert_eq!((s.images, s.found_in.as_str(), s.dense_depth), (2, "color/", true));
+    let arkit = [
+        ("a/lowres_wide/v_1.000.png", 1),
+        ("a/lowres_depth/v_1.000.png", 1),
+        ("a/confidence/v_1.000.png", 1),
+        ("a/lowres_wide_intrinsics/v_1.000.pincam", 1),
+        ("a/lowres_wide.traj", 1),
+        ("a/mesh.ply", 1),
+    ];
+    let s = survey_capture(arkit);
+    assert_eq!(
+        (s.images, s.found_in.as_str(), s.dense_depth, s.model_bytes),
+        (1, "lowres_wide/", true, 2)
+    );
     let seven = [("f/frame-000000.color.png", 1), ("f/frame-000000.depth.png", 1)];
     assert_eq!(survey_capture(seven).images, 1);
     let lego = [

@@ -1,6 +1,6 @@
 //! Importers: build a Scene from captures in other layouts (autolabel scene directories,
 //! 7-Scenes folders, NeRF-style `transforms.json` and NeRF-synthetic split folders, COLMAP sparse
-//! models, ScanNet SensReader exports). Each layout has its own module; they share decoding,
+//! models, ScanNet SensReader exports, ARKitScenes raw scenes). Each layout has its own module; they share decoding,
 //! resizing, frame selection and bounds estimation.
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -13,6 +13,8 @@ use crate::scene::manifest::Provenance;
 use files::CapturePath;
 
 mod alpha;
+mod arkit_text;
+mod arkitscenes;
 mod autolabel;
 mod bounds;
 mod classes;
@@ -97,6 +99,8 @@ pub enum Layout {
     NerfSplits,
     /// ScanNet SensReader export: color/ depth/ pose/ intrinsic/.
     ScanNet,
+    /// ARKitScenes raw scene: lowres_wide/ lowres_depth/ lowres_wide_intrinsics/ lowres_wide.traj.
+    ArkitScenes,
 }
 
 impl Layout {
@@ -108,6 +112,7 @@ impl Layout {
             Layout::Colmap => "colmap",
             Layout::NerfSplits => "nerf-splits",
             Layout::ScanNet => "scannet",
+            Layout::ArkitScenes => "arkitscenes",
         }
     }
 }
@@ -152,6 +157,9 @@ pub fn detect_layout(input: &Path) -> Result<Layout> {
     if scannet::looks_like(input) {
         return Ok(Layout::ScanNet);
     }
+    if arkitscenes::looks_like(input) {
+        return Ok(Layout::ArkitScenes);
+    }
     if input.join(transforms::FILE).is_capture_file() {
         return Ok(Layout::Transforms);
     }
@@ -170,8 +178,9 @@ pub fn detect_layout(input: &Path) -> Result<Layout> {
          (rgb/, depth/, pose/, intrinsics.txt, bbox.txt), a 7-Scenes folder (frame-000000.color.jpg, \
          frame-000000.depth.png, frame-000000.pose.txt, ...), a folder with a transforms.json, a NeRF-synthetic \
          folder (transforms_train.json, transforms_val.json, transforms_test.json), a COLMAP folder (images/ and \
-         sparse/0/ with cameras, images and points3D .txt or .bin), or a ScanNet export (color/, depth/, pose/, \
-         intrinsic/intrinsic_color.txt)",
+         sparse/0/ with cameras, images and points3D .txt or .bin), a ScanNet export (color/, depth/, pose/, \
+         intrinsic/intrinsic_color.txt), or an ARKitScenes scene (lowres_wide/, lowres_depth/, \
+         lowres_wide_intrinsics/, lowres_wide.traj)",
     ))
 }
 
@@ -202,6 +211,7 @@ pub async fn import_pausing<P: Pause>(
         Layout::Colmap => colmap::import(input, opts, progress).await?,
         Layout::NerfSplits => nerf_splits::import(input, opts, progress).await?,
         Layout::ScanNet => scannet::import(input, opts, progress).await?,
+        Layout::ArkitScenes => arkitscenes::import(input, opts, progress).await?,
     };
     check_scene(&built.scene, input)?;
     Ok(built.finish(input))

@@ -12,14 +12,19 @@ pub(super) const MAX_TEXT_BYTES: u64 = 1 << 20;
 const K_TOLERANCE: f64 = 1e-6;
 
 pub(super) fn read_text(path: &Path) -> Result<String> {
+    read_text_up_to(path, MAX_TEXT_BYTES)
+}
+
+/// [`read_text`] of a file that may be larger than a matrix (a trajectory of every frame).
+pub(super) fn read_text_up_to(path: &Path, cap: u64) -> Result<String> {
     let meta = super::files::metadata(path).map_err(|e| SceneError::io(path, e))?;
-    if meta.len() > MAX_TEXT_BYTES {
+    if meta.len() > cap {
         return Err(SceneError::invalid(
             path.display().to_string(),
             format!("{} bytes is far too large for this text file", meta.len()),
         ));
     }
-    let bytes = super::files::read(path, MAX_TEXT_BYTES).map_err(|e| SceneError::io(path, e))?;
+    let bytes = super::files::read(path, cap).map_err(|e| SceneError::io(path, e))?;
     String::from_utf8(bytes).map_err(|_| SceneError::invalid(path.display().to_string(), "not a text file (not UTF-8)"))
 }
 
