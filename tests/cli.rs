@@ -114,7 +114,7 @@ fn pack_real_colmap_capture() {
         |extra: &[&str]| run(&[&["pack", src, "-o", out_s, "--max-size", "64", "--every", "13"], extra].concat());
     let o = pack(&["--mask-classes", "room,head"]);
     assert!(o.status.success(), "{}", text(&o));
-    assert!(text(&o).contains("Colmap layout"), "{}", text(&o));
+    assert!(text(&o).contains("(colmap layout)"), "{}", text(&o));
     let t = text(&run(&["info", out_s]));
     assert!(t.contains("frames:      4") && t.contains("64 x 64"), "{t}");
     assert!(t.contains("0:room, 1:head") && t.contains("depth:       yes"), "{t}");
@@ -249,7 +249,7 @@ fn pack_nerf_split_folders_and_scannet_exports() {
     let t = text(&o);
     assert!(o.status.success(), "{t}");
     assert!(
-        t.contains("ScanNet layout") && t.contains("skipped 1 of 3 frames whose pose is invalid"),
+        t.contains("(scannet layout)") && t.contains("skipped 1 of 3 frames whose pose is invalid"),
         "{t}"
     );
     assert!(

@@ -85,9 +85,9 @@ pub fn run(args: PackArgs) -> CliResult {
     args.features.apply(&mut imported.scene)?;
     write_archive_path(&imported.scene, &args.output)?;
     println!(
-        "packed {} ({:?} layout) into {}",
+        "packed {} ({} layout) into {}",
         args.input.display(),
-        imported.layout,
+        imported.layout.name(),
         args.output.display()
     );
     print!("{}", imported.scene.summary());
