@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use super::arkit_text::{Pincam, frame_time, parse_pincam, parse_traj};
 use super::bounds::{FROM_DEPTH_NOTE, from_required_depth};
 use super::files::CapturePath;
-use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, Progress, files_by_stem, load_frames, scene_of, select};
+use super::frames::{DEPTH_SCALE, FrameFiles, InvalidDepth, Progress, frames_in, load_frames, scene_of, select};
 use super::resize::same_aspect;
 use super::text::{read_text, read_text_up_to};
 use super::{Built, ImportOptions, Layout, shown};
@@ -22,6 +22,8 @@ const DEPTH_DIR: &str = "lowres_depth";
 const INTRINSICS_DIR: &str = "lowres_wide_intrinsics";
 const TRAJ_FILE: &str = "lowres_wide.traj";
 const COLOR_EXTS: &[&str] = &["png", "jpg", "jpeg"];
+/// What the folders are, for a missing one's message.
+const LAYOUT: &str = "an ARKitScenes scene (lowres_wide/, lowres_depth/, lowres_wide_intrinsics/, lowres_wide.traj)";
 /// A frame takes the trajectory's pose nearest its timestamp when it is this close (seconds):
 /// ARKitScenes' own loader (`tenFpsDataLoader.py`) accepts a pose within 5 ms of a frame's
 /// name. Farther means tracking had not started or had stopped: the frame has no pose.
@@ -43,7 +45,7 @@ pub(super) fn looks_like(dir: &Path) -> bool {
 }
 
 pub(super) async fn import(dir: &Path, opts: &ImportOptions, progress: &mut Progress<'_>) -> Result<Built> {
-    let color = frames_in(dir, WIDE_DIR, COLOR_EXTS)?;
+    let color = frames_in(dir, WIDE_DIR, COLOR_EXTS, LAYOUT)?;
     let timed = timed_frames(&color)?;
     if timed.is_empty() {
         return Err(SceneError::invalid(
@@ -51,7 +53,7 @@ pub(super) async fn import(dir: &Path, opts: &ImportOptions, progress: &mut Prog
             "no colour frames (<video_id>_<timestamp>.png): no frames",
         ));
     }
-    let depth = frames_in(dir, DEPTH_DIR, &["png"])?;
+    let depth = frames_in(dir, DEPTH_DIR, &["png"], LAYOUT)?;
     check_matched(dir, &color, &depth)?;
     let traj_path = dir.join(TRAJ_FILE);
     if !traj_path.is_capture_file() {
@@ -145,20 +147,6 @@ pub(super) async fn import(dir: &Path, opts: &ImportOptions, progress: &mut Prog
     })
 }
 
-/// The frames in `dir/sub` by file stem; a missing folder is named.
-fn frames_in(dir: &Path, sub: &str, exts: &[&str]) -> Result<BTreeMap<String, PathBuf>> {
-    let folder = dir.join(sub);
-    if !folder.is_capture_dir() {
-        return Err(SceneError::missing(
-            shown(&folder),
-            format!(
-                "the {sub}/ folder of an ARKitScenes scene ({WIDE_DIR}/, {DEPTH_DIR}/, {INTRINSICS_DIR}/, {TRAJ_FILE})"
-            ),
-        ));
-    }
-    files_by_stem(&folder, exts, "")
-}
-
 /// The colour frames by timestamp (then name); a name without one is an error naming the file.
 fn timed_frames(color: &BTreeMap<String, PathBuf>) -> Result<Vec<(f64, String)>> {
     let mut timed = Vec::with_capacity(color.len());
@@ -211,7 +199,7 @@ struct Pincams {
 
 impl Pincams {
     fn in_dir(dir: &Path) -> Result<Pincams> {
-        let by_stem = frames_in(dir, INTRINSICS_DIR, &["pincam"])?;
+        let by_stem = frames_in(dir, INTRINSICS_DIR, &["pincam"], LAYOUT)?;
         let mut by_time: Vec<(f64, PathBuf)> = by_stem
             .iter()
             .filter_map(|(stem, path)| frame_time(stem).map(|t| (t, path.clone())))

@@ -28,6 +28,19 @@ pub(super) struct FrameFiles {
     pub pose: Pose,
 }
 
+/// [`files_by_stem`] of the folder `dir/sub`; a missing folder is named as part of `layout`
+/// (what the capture's folders are, for the message).
+pub(super) fn frames_in(dir: &Path, sub: &str, exts: &[&str], layout: &str) -> Result<BTreeMap<String, PathBuf>> {
+    let folder = dir.join(sub);
+    if !folder.is_capture_dir() {
+        return Err(SceneError::missing(
+            super::shown(&folder),
+            format!("the {sub}/ folder of {layout}"),
+        ));
+    }
+    files_by_stem(&folder, exts, "")
+}
+
 /// The files directly in `dir` whose extension is one of `exts` (lower case; matched ignoring
 /// case), keyed by the rest of the name. Two files for the same frame are an error.
 pub(super) fn files_by_stem(dir: &Path, exts: &[&str], suffix: &str) -> Result<BTreeMap<String, PathBuf>> {

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use super::bounds::{FROM_DEPTH_NOTE, from_required_depth};
 use super::files::CapturePath;
 use super::frames::{
-    DEPTH_SCALE, FrameFiles, InvalidDepth, Progress, files_by_stem, frame_order, load_frames, scene_of, select,
+    DEPTH_SCALE, FrameFiles, InvalidDepth, Progress, frame_order, frames_in, load_frames, scene_of, select,
 };
 use super::images::load_depth;
 use super::register::register_depth;
@@ -25,6 +25,8 @@ const INTRINSIC_DIR: &str = "intrinsic";
 const COLOR_INTRINSICS: &str = "intrinsic/intrinsic_color.txt";
 const DEPTH_INTRINSICS: &str = "intrinsic/intrinsic_depth.txt";
 const COLOR_EXTS: &[&str] = &["jpg", "jpeg", "png"];
+/// What the folders are, for a missing one's message.
+const LAYOUT: &str = "a ScanNet export (color/, depth/, pose/, intrinsic/)";
 
 /// Whether `dir` is a SensReader export: colour frames and the intrinsics folder.
 pub(super) fn looks_like(dir: &Path) -> bool {
@@ -32,9 +34,9 @@ pub(super) fn looks_like(dir: &Path) -> bool {
 }
 
 pub(super) async fn import(dir: &Path, opts: &ImportOptions, progress: &mut Progress<'_>) -> Result<Built> {
-    let color = frames_in(dir, COLOR_DIR, COLOR_EXTS)?;
-    let depth = frames_in(dir, DEPTH_DIR, &["png"])?;
-    let pose = frames_in(dir, POSE_DIR, &["txt"])?;
+    let color = frames_in(dir, COLOR_DIR, COLOR_EXTS, LAYOUT)?;
+    let depth = frames_in(dir, DEPTH_DIR, &["png"], LAYOUT)?;
+    let pose = frames_in(dir, POSE_DIR, &["txt"], LAYOUT)?;
     let names = frame_order(color.keys());
     if names.is_empty() {
         return Err(SceneError::invalid(
@@ -154,18 +156,6 @@ pub(super) async fn import(dir: &Path, opts: &ImportOptions, progress: &mut Prog
         notes,
         report,
     })
-}
-
-/// The frames in `dir/sub`, by number; a missing folder is named.
-fn frames_in(dir: &Path, sub: &str, exts: &[&str]) -> Result<BTreeMap<String, PathBuf>> {
-    let folder = dir.join(sub);
-    if !folder.is_capture_dir() {
-        return Err(SceneError::missing(
-            shown(&folder),
-            format!("the {sub}/ folder of a ScanNet export (color/, depth/, pose/, intrinsic/)"),
-        ));
-    }
-    files_by_stem(&folder, exts, "")
 }
 
 fn file_name(path: &Path) -> String {
