@@ -3,6 +3,7 @@
 //! for the field to decide.
 
 use crate::labels::UNLABELLED;
+use crate::spread::box_counts::BoxCounts;
 
 /// Drops each label of `walked` (`width` x `height`, row-major) that the walk added (`seeds` has
 /// no label there) and that has, within `radius` pixels (a square window, clipped to the frame),
@@ -38,38 +39,6 @@ pub fn erode_walked(walked: &mut [u16], seeds: &[u16], width: usize, height: usi
     }
 }
 
-/// Window sums over a boolean mask (a summed-area table).
-struct WindowCounts {
-    width: usize,
-    height: usize,
-    table: Vec<u32>,
-}
-
-impl WindowCounts {
-    fn new(mask: &[bool], width: usize, height: usize) -> WindowCounts {
-        let stride = width + 1;
-        let mut table = vec![0u32; stride * (height + 1)];
-        for y in 0..height {
-            for x in 0..width {
-                table[(y + 1) * stride + x + 1] =
-                    u32::from(mask[y * width + x]) + table[y * stride + x + 1] + table[(y + 1) * stride + x]
-                        - table[y * stride + x];
-            }
-        }
-        WindowCounts { width, height, table }
-    }
-
-    /// True pixels within `radius` of (x, y) along both axes, the window clipped to the frame.
-    fn around(&self, x: usize, y: usize, radius: usize) -> u32 {
-        let stride = self.width + 1;
-        let (x0, y0) = (x.saturating_sub(radius), y.saturating_sub(radius));
-        let (x1, y1) = ((x + radius + 1).min(self.width), (y + radius + 1).min(self.height));
-        self.table[y1 * stride + x1] + self.table[y0 * stride + x0]
-            - self.table[y0 * stride + x1]
-            - self.table[y1 * stride + x0]
-    }
-}
-
 /// Drops each label of `map` within `margin` pixels of the edge of its class's footprint: the
 /// pixels with a label of that class within `gap` pixels. Sparse labels (a reconstruction's
 /// points in a photo) leave gaps that are not edges; `gap` bridges them.
@@ -82,15 +51,18 @@ pub fn erode_footprints(map: &mut [u16], width: usize, height: usize, gap: usize
     classes.sort_unstable();
     classes.dedup();
     for class in classes.into_iter().filter(|&c| Some(c) != kept) {
-        let labelled: Vec<bool> = before.iter().map(|&c| c == class).collect();
-        let near = WindowCounts::new(&labelled, width, height);
-        let outside: Vec<bool> = (0..width * height)
-            .map(|i| {
+        let labelled: Vec<u32> = (0..before.len() as u32)
+            .filter(|&i| before[i as usize] == class)
+            .collect();
+        let near = BoxCounts::new(&labelled, width, height);
+        let outside: Vec<u32> = (0..before.len() as u32)
+            .filter(|&i| {
+                let i = i as usize;
                 let other = before[i] != class && before[i] != UNLABELLED;
                 other || near.around(i % width, i / width, gap) == 0
             })
             .collect();
-        let outside = WindowCounts::new(&outside, width, height);
+        let outside = BoxCounts::new(&outside, width, height);
         for (i, m) in map.iter_mut().enumerate() {
             if before[i] == class && outside.around(i % width, i / width, margin) > 0 {
                 *m = UNLABELLED;

@@ -4,6 +4,7 @@
 //! `propagate` puts the pieces together per frame; `check` holds part of the strokes back to
 //! see whether the spread can be trusted. Nothing here touches the model: the field trains on
 //! the maps this layer writes (docs/quality.md has the rules and what each was measured to do).
+pub mod box_counts;
 pub mod check;
 pub mod colour;
 pub mod margin;

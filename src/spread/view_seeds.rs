@@ -12,6 +12,7 @@ use glam::{DMat4, DVec3};
 
 use crate::labels::UNLABELLED;
 use crate::scene::Scene;
+use crate::spread::box_counts::BoxCounts;
 
 /// A pixel is far from the points when no projected point lies within this share of the image
 /// diagonal.
@@ -87,11 +88,12 @@ impl View {
             .filter(|&&(_, _, point)| labels[point as usize] != class)
             .map(|&(pixel, _, _)| pixel)
             .collect();
-        let neighbours = BoxCounts::new(&landed, self.width, self.height, self.far_radius() as usize);
+        let neighbours = BoxCounts::new(&landed, self.width, self.height);
+        let radius = self.far_radius() as usize;
         let mut corners: Vec<(i64, i64)> = landed
             .iter()
             .map(|&pixel| (pixel as usize % self.width, pixel as usize / self.width))
-            .filter(|&(x, y)| neighbours.around(x, y) > OUTLINE_NEIGHBOURS)
+            .filter(|&(x, y)| neighbours.around(x, y, radius) > OUTLINE_NEIGHBOURS)
             .map(|(x, y)| (x as i64, y as i64))
             .collect();
         let hull = convex_hull(&mut corners);
@@ -160,51 +162,6 @@ pub fn region_class(strokes: &[(&[u16], &[bool])], classes: usize) -> Option<u16
     let total: usize = counts.iter().sum();
     let (best, &count) = counts.iter().enumerate().max_by_key(|(_, n)| **n)?;
     (count >= REGION_PIXELS && count as f64 >= REGION_SHARE * total as f64).then_some(best as u16)
-}
-
-/// How many of a set of pixels lie in each square window of an image, by a summed-area table.
-struct BoxCounts {
-    width: usize,
-    height: usize,
-    radius: usize,
-    /// `(width + 1) x (height + 1)`: the count over the rectangle above and left of each corner.
-    table: Vec<u32>,
-}
-
-impl BoxCounts {
-    fn new(pixels: &[u32], width: usize, height: usize, radius: usize) -> BoxCounts {
-        let stride = width + 1;
-        let mut table = vec![0u32; stride * (height + 1)];
-        for &pixel in pixels {
-            let (x, y) = (pixel as usize % width, pixel as usize / width);
-            table[(y + 1) * stride + x + 1] += 1;
-        }
-        for y in 1..=height {
-            for x in 1..=width {
-                table[y * stride + x] +=
-                    table[(y - 1) * stride + x] + table[y * stride + x - 1] - table[(y - 1) * stride + x - 1];
-            }
-        }
-        BoxCounts {
-            width,
-            height,
-            radius,
-            table,
-        }
-    }
-
-    /// The pixels within `radius` of (x, y) along both axes.
-    fn around(&self, x: usize, y: usize) -> u32 {
-        let stride = self.width + 1;
-        let (x0, y0) = (x.saturating_sub(self.radius), y.saturating_sub(self.radius));
-        let (x1, y1) = (
-            (x + self.radius + 1).min(self.width),
-            (y + self.radius + 1).min(self.height),
-        );
-        self.table[y1 * stride + x1] + self.table[y0 * stride + x0]
-            - self.table[y0 * stride + x1]
-            - self.table[y1 * stride + x0]
-    }
 }
 
 /// The convex hull of `points`, counter-clockwise in image coordinates (x right, y down), by
