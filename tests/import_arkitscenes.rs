@@ -9,8 +9,8 @@ use std::rc::Rc;
 use glam::{DMat3, DQuat};
 use import_common::*;
 use scribblefield::pause::{NoPause, run_to_end};
-use scribblefield::scene::import::{ImportOptions, Layout, MemoryFiles, detect_layout, import, import_files};
-use scribblefield::scene::{Pose, Scene};
+use scribblefield::scene::Scene;
+use scribblefield::scene::import::{ImportOptions, Layout, detect_layout, import, import_files};
 
 const YCB: &str = "ycb-video-0000";
 const VIDEO: &str = "ycb0000";
@@ -46,7 +46,7 @@ fn write_arkit(ycb: &Path, to: &Path) {
             &to.join(format!("lowres_wide_intrinsics/{s}.pincam")),
             "640 480 1066.778 1067.487 312.9869 241.3109\n",
         );
-        let m = world_to_camera(&ycb.join(format!("pose/{from}.txt")));
+        let m = read_matrix(&ycb.join(format!("pose/{from}.txt")));
         let (axis, angle) = DQuat::from_mat3(&DMat3::from_mat4(m.0)).normalize().to_axis_angle();
         let r = axis * angle;
         let t = m.translation();
@@ -63,20 +63,6 @@ fn write_arkit(ycb: &Path, to: &Path) {
         traj += &format!("{:.6} 0 0 0 0 0 0\n", time(i) + 0.05);
     }
     write(&to.join("lowres_wide.traj"), traj);
-}
-
-fn copy_file(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to.parent().unwrap()).unwrap();
-    std::fs::copy(from, to).unwrap_or_else(|e| panic!("copy {}: {e}", from.display()));
-}
-
-fn world_to_camera(path: &Path) -> Pose {
-    let v: Vec<f64> = std::fs::read_to_string(path)
-        .unwrap()
-        .split_whitespace()
-        .map(|w| w.parse().unwrap())
-        .collect();
-    Pose::from_row_major(&v.try_into().unwrap())
 }
 
 fn imported(dir: &Path, opts: &ImportOptions) -> scribblefield::scene::import::Imported {
@@ -141,7 +127,7 @@ fn the_ycb_clip_packs_the_same_from_arkitscenes_layout() {
 
     // The page reads the same folder from memory into the same scene.
     let memory = run_to_end(import_files(
-        Rc::new(in_memory(&dir)),
+        Rc::new(folder_in_memory(&dir)),
         &opts,
         &mut |_, _| {},
         &mut NoPause,
@@ -149,25 +135,6 @@ fn the_ycb_clip_packs_the_same_from_arkitscenes_layout() {
     .unwrap();
     assert_eq!(memory.layout, Layout::ArkitScenes);
     assert_same_frames(&memory.scene, &own.scene);
-}
-
-/// Every file under `dir` by its path from `dir`'s parent, as the page holds a picked folder.
-fn in_memory(dir: &Path) -> MemoryFiles {
-    let root = dir.file_name().unwrap().to_string_lossy().into_owned();
-    let mut files = MemoryFiles::new();
-    let mut stack = vec![(dir.to_path_buf(), root)];
-    while let Some((folder, prefix)) = stack.pop() {
-        for entry in std::fs::read_dir(&folder).unwrap() {
-            let path = entry.unwrap().path();
-            let name = format!("{prefix}/{}", path.file_name().unwrap().to_string_lossy());
-            if path.is_dir() {
-                stack.push((path, name));
-            } else {
-                files.add(&name, std::fs::read(&path).unwrap()).unwrap();
-            }
-        }
-    }
-    files
 }
 
 /// Frame 0's ground truth carried to frames 1-9 through each packing's depth, intrinsics and
@@ -189,42 +156,7 @@ fn frame_0_carried_to_the_other_frames_agrees_with_the_clip_packed_from_its_fold
     let arkit = imported(&dir, &opts).scene;
     let classes = own.classes.len();
     let source = own.frames[0].gt.as_ref().unwrap();
-    let miou = |scene: &Scene| {
-        let (w, h) = (scene.width, scene.height);
-        let k = scene.intrinsics;
-        let depth = scene.frames[0].depth.as_ref().unwrap();
-        let mut counts = vec![(0usize, 0usize); classes];
-        for j in 1..scene.frames.len() {
-            let to_camera = scene.frames[j].pose.inverse();
-            let mut carried = vec![(f64::INFINITY, u8::MAX); (w * h) as usize];
-            for (x, y, d) in depth.enumerate_pixels() {
-                if d.0[0] == 0 {
-                    continue;
-                }
-                let world = scene.frames[0]
-                    .pose
-                    .transform_point(k.ray_dir(x as f64, y as f64) * (d.0[0] as f64 * scene.depth_scale));
-                let p = to_camera.transform_point(world);
-                let (u, v) = ((k.fx * p.x / p.z + k.cx).round(), (k.fy * p.y / p.z + k.cy).round());
-                if p.z <= 0.0 || u < 0.0 || v < 0.0 || u >= w as f64 || v >= h as f64 {
-                    continue;
-                }
-                let at = &mut carried[(v as u32 * w + u as u32) as usize];
-                if p.z < at.0 {
-                    *at = (p.z, source.get_pixel(x, y).0[0]);
-                }
-            }
-            let truth = own.frames[j].gt.as_ref().unwrap();
-            for ((_, label), t) in carried.iter().zip(truth.pixels()) {
-                for (c, (hit, union)) in counts.iter_mut().enumerate() {
-                    let (l, t) = (*label as usize == c, t.0[0] as usize == c);
-                    *hit += usize::from(l && t);
-                    *union += usize::from(l || t);
-                }
-            }
-        }
-        counts.iter().map(|(h, u)| *h as f64 / (*u).max(1) as f64).sum::<f64>() / classes as f64
-    };
+    let miou = |scene: &Scene| carried_ground_truth_iou(scene, source, &own, classes);
     let (a, o) = (miou(&arkit), miou(&own));
     eprintln!("mean IoU of frame 0's ground truth carried to frames 1-9: ARKitScenes layout {a:.4}, own folder {o:.4}");
     assert!(o > 0.5, "frame 0 carries too little to compare: {o}");
@@ -336,7 +268,7 @@ fn bad_scenes_are_refused_naming_the_file() {
     let dir = fresh("memory");
     std::fs::remove_file(dir.join("lowres_wide.traj")).unwrap();
     let e = run_to_end(import_files(
-        Rc::new(in_memory(&dir)),
+        Rc::new(folder_in_memory(&dir)),
         &ImportOptions::default(),
         &mut |_, _| {},
         &mut NoPause,

@@ -2,7 +2,6 @@
 //! zip of them) give the scene, and the errors, they give reading the same capture from disk.
 mod import_common;
 
-use std::path::Path;
 use std::rc::Rc;
 
 use import_common::*;
@@ -10,26 +9,6 @@ use scribblefield::pause::{NoPause, run_to_end};
 use scribblefield::scene::Scene;
 use scribblefield::scene::import::{ImportOptions, MemoryFiles, import, import_files};
 use tempfile::TempDir;
-
-/// Every file under `dir`, by its path from `dir`'s parent (`capture/images/a.jpg`), as a
-/// browser hands over a picked folder.
-fn folder_in_memory(dir: &Path) -> MemoryFiles {
-    let root = dir.file_name().unwrap().to_string_lossy().into_owned();
-    let mut files = MemoryFiles::new();
-    let mut stack = vec![(dir.to_path_buf(), root)];
-    while let Some((folder, prefix)) = stack.pop() {
-        for entry in std::fs::read_dir(&folder).unwrap() {
-            let path = entry.unwrap().path();
-            let name = format!("{prefix}/{}", path.file_name().unwrap().to_string_lossy());
-            if path.is_dir() {
-                stack.push((path, name));
-            } else {
-                files.add(&name, std::fs::read(&path).unwrap()).unwrap();
-            }
-        }
-    }
-    files
-}
 
 fn from_memory(files: MemoryFiles, opts: &ImportOptions) -> Result<Scene, String> {
     run_to_end(import_files(Rc::new(files), opts, &mut |_, _| {}, &mut NoPause))

@@ -33,7 +33,7 @@ pub struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Pack a capture (autolabel scene, 7-Scenes/TUM, NeRF transforms.json or split folder, COLMAP, ScanNet export, ARKitScenes scene) into a scene archive.
+    /// Pack a capture (autolabel scene, 7-Scenes/TUM, NeRF transforms.json or split folder, COLMAP, ScanNet export, ARKitScenes scene, Stray Scanner capture) into a scene archive.
     Pack(pack::PackArgs),
     /// Print what a scene archive holds.
     Info {

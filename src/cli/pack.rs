@@ -9,7 +9,8 @@ use super::{CliResult, check_output, progress};
 #[derive(Args)]
 pub struct PackArgs {
     /// Capture folder (autolabel scene, 7-Scenes/TUM, COLMAP, ScanNet export, ARKitScenes scene,
-    /// NeRF-synthetic split folder) or a NeRF `transforms.json` (or its folder).
+    /// Stray Scanner capture, NeRF-synthetic split folder) or a NeRF `transforms.json` (or its
+    /// folder).
     input: PathBuf,
     /// Output archive, e.g. `scene.scene.zip`.
     #[arg(short, long)]

@@ -120,8 +120,12 @@ pub async fn pack_files<P: Pause>(
 }
 
 /// Extensions of the files a capture is read from; anything else in the folder (COLMAP's
-/// `database.db`, meshes, videos) is never read into the page's memory.
-pub const CAPTURE_EXTENSIONS: &[&str] = &["jpg", "jpeg", "png", "txt", "json", "bin", "traj", "pincam"];
+/// `database.db`, meshes, `imu.csv` is read but ignored) is never read into the page's memory.
+/// A Stray Scanner capture's `rgb.mp4` is read so that the importer, not a missing file, says
+/// what the page cannot do with it.
+pub const CAPTURE_EXTENSIONS: &[&str] = &[
+    "jpg", "jpeg", "png", "txt", "json", "bin", "traj", "pincam", "csv", "mp4",
+];
 
 /// Whether the importers may read `path` (by its extension, [`CAPTURE_EXTENSIONS`]).
 pub fn is_capture_file(path: &str) -> bool {

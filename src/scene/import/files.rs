@@ -113,6 +113,12 @@ fn with_source<R>(f: impl FnOnce(&dyn CaptureFiles) -> R) -> R {
     }
 }
 
+/// Whether the capture's files are read from the disk rather than a set held in memory.
+#[cfg(not(target_arch = "wasm32"))]
+pub(super) fn on_disk() -> bool {
+    CURRENT.with(|c| c.borrow().is_none())
+}
+
 pub(super) fn metadata(path: &Path) -> io::Result<Meta> {
     with_source(|f| f.metadata(path))
 }

@@ -15,7 +15,7 @@ use crate::pause::Pause;
 use crate::scene::archive::limits;
 use crate::scene::camera::{Bounds, Intrinsics, Pose};
 use crate::scene::error::{Result, SceneError};
-use crate::scene::{Frame, Scene};
+use crate::scene::{DepthImage, Frame, Scene};
 
 /// The files and pose of one frame of a capture.
 pub(super) struct FrameFiles {
@@ -239,14 +239,29 @@ pub(super) async fn load_frames(
     load_frames_prepared(files, opts, invalid, &AsStored, progress).await
 }
 
-/// What an importer does to a frame's images at their native size, before they are downscaled:
-/// the COLMAP importer undistorts them there, since resampling twice would blur twice.
+/// How an importer reads a frame's images and what it does to them at their native size, before
+/// they are downscaled: the COLMAP importer undistorts them there, since resampling twice would
+/// blur twice; a video capture takes its colour from the video and drops depth readings of low
+/// confidence. The reading methods read the files by default.
 pub(super) trait Prepare {
     /// The colour image of the `frame`-th file.
     fn rgb(&self, frame: usize, rgb: RgbImage) -> Result<RgbImage>;
     /// The ground truth of the `frame`-th file, read from `path`, at `native` size or another
     /// size of the same aspect ratio (it is resampled to the frame size afterwards).
     fn gt(&self, frame: usize, path: &Path, native: (u32, u32)) -> Result<GrayImage>;
+    /// The size of the first frame's colour image (`path`), without decoding it.
+    fn colour_size(&self, path: &Path) -> Result<(u32, u32)> {
+        dimensions(path)
+    }
+    /// The `frame`-th colour image as stored at `path`, and whether it had an alpha channel
+    /// (composited on `background`).
+    fn read_rgb(&self, _frame: usize, path: &Path, background: Background) -> Result<(RgbImage, bool)> {
+        load_rgb(path, background)
+    }
+    /// The `frame`-th depth image as stored at `path` (millimetres, 0 = no reading).
+    fn read_depth(&self, _frame: usize, path: &Path) -> Result<DepthImage> {
+        load_depth(path)
+    }
 }
 
 /// Images as the capture stores them.
@@ -280,7 +295,7 @@ pub(super) async fn load_frames_prepared(
         // From the first image's header, before any frame is decoded: every frame must have its
         // size, and the frames the scene would hold must fit the archive's budget.
         let name = first.rgb.display().to_string();
-        let size = target_size(dimensions(&first.rgb)?, opts.max_size);
+        let size = target_size(prepare.colour_size(&first.rgb)?, opts.max_size);
         check_pixel_budget(size, total, &name)?;
         check_decoded_budget(size, &files, &name)?;
     }
@@ -291,7 +306,7 @@ pub(super) async fn load_frames_prepared(
     let mut with_alpha = 0;
     let max_size = opts.max_size;
     for (i, f) in files.into_iter().enumerate() {
-        let (rgb, alpha) = load_rgb(&f.rgb, opts.background)?;
+        let (rgb, alpha) = prepare.read_rgb(i, &f.rgb, opts.background)?;
         with_alpha += usize::from(alpha);
         let (native, size) = match sizes {
             Some(s) => s,
@@ -328,7 +343,7 @@ pub(super) async fn load_frames_prepared(
         let rgb = resize_rgb(&prepare.rgb(i, rgb)?, size);
         let depth = match &f.depth {
             Some(path) => {
-                let mut d = load_depth(path)?;
+                let mut d = prepare.read_depth(i, path)?;
                 if d.dimensions() != native {
                     check_resamplable(d.dimensions(), native, &path.display().to_string(), "depth")?;
                     resampled_depth = true;

@@ -1,6 +1,6 @@
 //! Importers: build a Scene from captures in other layouts (autolabel scene directories,
 //! 7-Scenes folders, NeRF-style `transforms.json` and NeRF-synthetic split folders, COLMAP sparse
-//! models, ScanNet SensReader exports, ARKitScenes raw scenes). Each layout has its own module; they share decoding,
+//! models, ScanNet SensReader exports, ARKitScenes raw scenes, Stray Scanner phone captures). Each layout has its own module; they share decoding,
 //! resizing, frame selection and bounds estimation.
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -29,8 +29,11 @@ mod resize;
 pub use resize::target_size;
 mod scannet;
 mod seven_scenes;
+mod stray;
+mod stray_text;
 mod text;
 mod transforms;
+mod video;
 
 use crate::scene::private_paths::{folder_name, scrub};
 pub use files::{CaptureFiles, MAX_CAPTURE_BYTES, MemoryFiles, reading_from};
@@ -101,6 +104,8 @@ pub enum Layout {
     ScanNet,
     /// ARKitScenes raw scene: lowres_wide/ lowres_depth/ lowres_wide_intrinsics/ lowres_wide.traj.
     ArkitScenes,
+    /// Stray Scanner (iOS) capture: rgb.mp4 depth/ confidence/ odometry.csv camera_matrix.csv.
+    StrayScanner,
 }
 
 impl Layout {
@@ -113,6 +118,7 @@ impl Layout {
             Layout::NerfSplits => "nerf-splits",
             Layout::ScanNet => "scannet",
             Layout::ArkitScenes => "arkitscenes",
+            Layout::StrayScanner => "stray-scanner",
         }
     }
 }
@@ -160,6 +166,9 @@ pub fn detect_layout(input: &Path) -> Result<Layout> {
     if arkitscenes::looks_like(input) {
         return Ok(Layout::ArkitScenes);
     }
+    if stray::looks_like(input) {
+        return Ok(Layout::StrayScanner);
+    }
     if input.join(transforms::FILE).is_capture_file() {
         return Ok(Layout::Transforms);
     }
@@ -179,8 +188,9 @@ pub fn detect_layout(input: &Path) -> Result<Layout> {
          frame-000000.depth.png, frame-000000.pose.txt, ...), a folder with a transforms.json, a NeRF-synthetic \
          folder (transforms_train.json, transforms_val.json, transforms_test.json), a COLMAP folder (images/ and \
          sparse/0/ with cameras, images and points3D .txt or .bin), a ScanNet export (color/, depth/, pose/, \
-         intrinsic/intrinsic_color.txt), or an ARKitScenes scene (lowres_wide/, lowres_depth/, \
-         lowres_wide_intrinsics/, lowres_wide.traj)",
+         intrinsic/intrinsic_color.txt), an ARKitScenes scene (lowres_wide/, lowres_depth/, \
+         lowres_wide_intrinsics/, lowres_wide.traj), or a Stray Scanner capture (rgb.mp4, depth/, \
+         odometry.csv, camera_matrix.csv)",
     ))
 }
 
@@ -212,6 +222,7 @@ pub async fn import_pausing<P: Pause>(
         Layout::NerfSplits => nerf_splits::import(input, opts, progress).await?,
         Layout::ScanNet => scannet::import(input, opts, progress).await?,
         Layout::ArkitScenes => arkitscenes::import(input, opts, progress).await?,
+        Layout::StrayScanner => stray::import(input, opts, progress).await?,
     };
     check_scene(&built.scene, input)?;
     Ok(built.finish(input))
