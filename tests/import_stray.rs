@@ -28,7 +28,18 @@ enum Video {
     AsRecorded,
     /// Lossless HEVC of the RGB planes: decodes to the PNGs' exact pixels.
     Lossless,
+    /// H.264, which every browser decodes, with each frame's number drawn in its corner
+    /// ([`marker`]) so that a browser test can tell which frame it was given.
+    Marked,
 }
+
+/// The colour of the block in the top-left corner of frame `i` of a [`Video::Marked`] video.
+fn marker(i: usize) -> [u8; 3] {
+    [(i * 25) as u8, 255 - (i * 25) as u8, 128]
+}
+
+/// Side of the corner block, pixels.
+const MARKER: u32 = 48;
 
 /// The YCB clip (and ffmpeg to encode it), or None with a loud message.
 fn setup() -> Option<std::path::PathBuf> {
@@ -97,6 +108,8 @@ fn write_stray(ycb: &Path, to: &Path, video: Video) {
     );
     let codec: &[&str] = match video {
         Video::AsRecorded => &[
+            "-c:v",
+            "libx265",
             "-crf",
             "18",
             "-x265-params",
@@ -106,12 +119,35 @@ fn write_stray(ycb: &Path, to: &Path, video: Video) {
             "-tag:v",
             "hvc1",
         ],
-        Video::Lossless => &["-x265-params", "lossless=1:log-level=error", "-pix_fmt", "gbrp"],
+        Video::Lossless => &[
+            "-c:v",
+            "libx265",
+            "-x265-params",
+            "lossless=1:log-level=error",
+            "-pix_fmt",
+            "gbrp",
+        ],
+        Video::Marked => &["-c:v", "libx264", "-crf", "18", "-pix_fmt", "yuv420p"],
+    };
+    let frames = match video {
+        Video::Marked => {
+            let marked = to.with_extension("frames");
+            for i in 0..FRAMES {
+                let mut rgb = image::open(ycb.join(format!("rgb/{i:05}.png"))).unwrap().into_rgb8();
+                for y in 0..MARKER {
+                    for x in 0..MARKER {
+                        rgb.put_pixel(x, y, image::Rgb(marker(i)));
+                    }
+                }
+                save_rgb(&marked.join(format!("{i:05}.png")), &rgb);
+            }
+            marked
+        }
+        _ => ycb.join("rgb"),
     };
     let status = Command::new("ffmpeg")
         .args(["-v", "error", "-y", "-framerate", "60", "-i"])
-        .arg(ycb.join("rgb/%05d.png"))
-        .args(["-c:v", "libx265"])
+        .arg(frames.join("%05d.png"))
         .args(codec)
         .arg(to.join("rgb.mp4"))
         .status()
@@ -362,6 +398,20 @@ fn bad_captures_are_refused_naming_the_file() {
     assert!(got.warnings.join("\n").contains("skipped 2 depth images with no pose"));
 }
 
+/// The browser test's captures (tests/e2e/run.sh): the YCB clip in Stray Scanner's layout as
+/// `$STRAY_FIXTURE/ycb-stray` with an H.264 video whose frames carry their number in a corner
+/// block of colour (R, 255 - R, 128), R = 25 x the frame's number, which every browser decodes,
+/// and as `$STRAY_FIXTURE/ycb-stray-hevc` as the app records it (HEVC).
+#[test]
+#[ignore = "writes the browser test's captures; run by tests/e2e/run.sh"]
+fn write_browser_fixture() {
+    let Some(ycb) = setup() else { return };
+    let out = std::path::PathBuf::from(std::env::var("STRAY_FIXTURE").expect("STRAY_FIXTURE: where to write"));
+    write_stray(&ycb, &out.join("ycb-stray"), Video::Marked);
+    write_stray(&ycb, &out.join("ycb-stray-hevc"), Video::AsRecorded);
+    assert_eq!(marker(3), [75, 180, 128], "tests/e2e/stray.mjs expects these colours");
+}
+
 /// Without ffmpeg on PATH, `pack` says what it needs and how to get it.
 #[test]
 fn packing_without_ffmpeg_names_it() {
@@ -383,6 +433,61 @@ fn packing_without_ffmpeg_names_it() {
         e.contains("rgb.mp4") && e.contains("needs ffmpeg and ffprobe on PATH") && e.contains("apt-get install ffmpeg"),
         "{e}"
     );
+}
+
+/// The page seeks frame `n` by the time the MP4's index gives it: those times must be where
+/// ffmpeg shows each frame, B-frames and edit lists included, for H.264 (what the browser test
+/// encodes) and HEVC (what the app records).
+#[test]
+fn mp4_frame_times_agree_with_ffprobe() {
+    let Some(ycb) = setup() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    for (codec, params) in [("libx264", "-x264-params"), ("libx265", "-x265-params")] {
+        let video = tmp.path().join(format!("{codec}.mp4"));
+        let status = Command::new("ffmpeg")
+            .args(["-v", "error", "-y", "-framerate", "30", "-i"])
+            .arg(ycb.join("rgb/%05d.png"))
+            .args([
+                "-c:v",
+                codec,
+                params,
+                "log-level=error:bframes=3",
+                "-pix_fmt",
+                "yuv420p",
+            ])
+            .arg(&video)
+            .status()
+            .unwrap();
+        assert!(status.success());
+        let out = Command::new("ffprobe")
+            .args([
+                "-v",
+                "error",
+                "-select_streams",
+                "v:0",
+                "-show_entries",
+                "frame=best_effort_timestamp_time",
+            ])
+            .args(["-of", "csv=p=0"])
+            .arg(&video)
+            .output()
+            .unwrap();
+        let shown: Vec<f64> = String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .filter_map(|l| l.trim().trim_end_matches(',').parse().ok())
+            .collect();
+        let (size, times) =
+            scribblefield::scene::import::text_checks::mp4_video(&std::fs::read(&video).unwrap()).unwrap();
+        assert_eq!(size, (640, 480), "{codec}");
+        assert_eq!(times.len(), FRAMES, "{codec}");
+        assert_eq!(shown.len(), FRAMES, "{codec}: {shown:?}");
+        for (i, (t, s)) in times.iter().zip(&shown).enumerate() {
+            assert!(
+                (t - s).abs() < 1e-3,
+                "{codec} frame {i}: {t} s from the index, {s} s by ffprobe"
+            );
+        }
+    }
 }
 
 fn copy_tree(from: &Path, to: &Path) {

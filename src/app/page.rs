@@ -425,7 +425,7 @@ impl eframe::App for App {
                     .button("pack capture folder…")
                     .on_hover_text(
                         "a capture folder (COLMAP, transforms.json, NeRF splits, ScanNet, ARKitScenes, 7-Scenes, \
-                         autolabel; Stray Scanner on the command line), packed here into a scene archive as `scribblefield pack` would; or drop the \
+                         autolabel, Stray Scanner), packed here into a scene archive as `scribblefield pack` would; or drop the \
                          folder on the page",
                     )
                     .clicked();

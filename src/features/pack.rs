@@ -119,10 +119,9 @@ pub async fn pack_files<P: Pause>(
     })
 }
 
-/// Extensions of the files a capture is read from; anything else in the folder (COLMAP's
-/// `database.db`, meshes, `imu.csv` is read but ignored) is never read into the page's memory.
-/// A Stray Scanner capture's `rgb.mp4` is read so that the importer, not a missing file, says
-/// what the page cannot do with it.
+/// Extensions of the files a capture is read from (a Stray Scanner capture's video and CSV files
+/// among them); anything else in the folder (COLMAP's `database.db`, meshes) is never read into
+/// the page's memory.
 pub const CAPTURE_EXTENSIONS: &[&str] = &[
     "jpg", "jpeg", "png", "txt", "json", "bin", "traj", "pincam", "csv", "mp4",
 ];
@@ -139,11 +138,14 @@ pub fn is_capture_file(path: &str) -> bool {
 /// `transforms.json` may list fewer frames than its folder has images).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct CaptureSurvey {
-    /// Colour images found.
+    /// Colour images found (for a video capture: its frames, one depth image each).
     pub images: usize,
     /// Index (in the list surveyed) of the first colour image by path: its header gives the
     /// frames' size.
     pub first_image: Option<usize>,
+    /// Index of a video capture's video (Stray Scanner's `rgb.mp4`), whose MP4 index gives the
+    /// frames' size; the frames are counted by their depth images.
+    pub video: Option<usize>,
     /// Bytes of the files the page reads (images and model files, [`is_capture_file`]).
     pub capture_bytes: u64,
     /// Of those, the bytes of files that are not images (camera, pose and model files), which
@@ -198,6 +200,37 @@ pub fn survey_capture<'a>(files: impl IntoIterator<Item = (&'a str, u64)>) -> Ca
     let dense_depth = images.iter().any(|&i| {
         dirs(files[i].0).iter().any(|d| d == "depth" || d == "lowres_depth") || name(files[i].0).contains(".depth.")
     });
+    // A Stray Scanner capture: its colour is a video, one depth image a frame.
+    let video = (0..files.len()).find(|&i| {
+        name(files[i].0) == "rgb.mp4" && {
+            let folder = &files[i].0[..files[i].0.len() - "rgb.mp4".len()];
+            files.iter().any(|(p, _)| {
+                p.strip_prefix(folder)
+                    .is_some_and(|r| r.eq_ignore_ascii_case("odometry.csv"))
+            })
+        }
+    });
+    if let Some(v) = video {
+        let folder = &files[v].0[..files[v].0.len() - "rgb.mp4".len()];
+        let frames = images
+            .iter()
+            .filter(|&&i| {
+                files[i]
+                    .0
+                    .strip_prefix(folder)
+                    .is_some_and(|r| r.to_ascii_lowercase().starts_with("depth/"))
+            })
+            .count();
+        return CaptureSurvey {
+            images: frames,
+            first_image: None,
+            video: Some(v),
+            capture_bytes,
+            model_bytes,
+            found_in: "rgb.mp4".into(),
+            dense_depth: true,
+        };
+    }
     // The colour folder of each layout, most specific first (ScanNet, autolabel, COLMAP and most
     // transforms.json captures, ARKitScenes, 7-Scenes); else every image that is not depth, a mask or ground truth.
     let in_dir = |i: usize, dir: &str| dirs(files[i].0).iter().any(|d| d == dir);
@@ -239,6 +272,7 @@ pub fn survey_capture<'a>(files: impl IntoIterator<Item = (&'a str, u64)>) -> Ca
     CaptureSurvey {
         images: chosen.len(),
         first_image: chosen.first().copied(),
+        video: None,
         capture_bytes,
         model_bytes,
         found_in,

@@ -142,6 +142,24 @@ fn a_survey_counts_each_layouts_colour_images() {
     let s = survey_capture(lego);
     assert_eq!((s.images, s.found_in.as_str()), (2, "the folder"));
     assert_eq!(survey_capture([("x/notes.md", 3)]).images, 0);
+    let stray = [
+        ("71de12f9/rgb.mp4", 100),
+        ("71de12f9/odometry.csv", 3),
+        ("71de12f9/camera_matrix.csv", 1),
+        ("71de12f9/imu.csv", 5),
+        ("71de12f9/depth/000000.png", 2),
+        ("71de12f9/depth/000001.png", 2),
+        ("71de12f9/confidence/000000.png", 1),
+        ("71de12f9/confidence/000001.png", 1),
+    ];
+    let s = survey_capture(stray);
+    assert_eq!(
+        (s.images, s.first_image, s.video, s.found_in.as_str(), s.dense_depth),
+        (2, None, Some(0), "rgb.mp4", true)
+    );
+    assert_eq!((s.capture_bytes, s.model_bytes), (115, 109));
+    // A video beside no poses is not a capture's colour.
+    assert_eq!(survey_capture([("x/rgb.mp4", 1), ("x/a.png", 1)]).video, None);
 }
 
 #[test]
@@ -149,6 +167,7 @@ fn the_estimate_follows_the_settings() {
     let survey = CaptureSurvey {
         images: 52,
         first_image: Some(0),
+        video: None,
         capture_bytes: 9_000_000,
         model_bytes: 4_000_000,
         found_in: "images/".into(),

@@ -1,9 +1,9 @@
 // Shared pieces of the browser tests: Chromium's flags, the run of one test script, a tiny
 // check runner, PNG and zip decoding (node has zlib but no image or archive reader), and reading
 // the page's status.
-import { mkdtempSync, rmSync } from "node:fs";
+import { mkdtempSync, readdirSync, readFileSync, rmSync } from "node:fs";
 import { tmpdir } from "node:os";
-import { join } from "node:path";
+import { basename, join } from "node:path";
 import { crc32, inflateRawSync, inflateSync } from "node:zlib";
 import { chromium } from "playwright-core";
 
@@ -433,4 +433,57 @@ export async function startPack(page, timeoutMs) {
       if (attempt === 3) throw e;
     }
   }
+}
+
+/// Every file below `dir`, named by its path from `dir`'s parent (`prefix/...`), for a zip.
+export function filesUnder(dir, prefix) {
+  return readdirSync(dir, { withFileTypes: true }).flatMap((e) => e.isDirectory()
+    ? filesUnder(join(dir, e.name), `${prefix}/${e.name}`)
+    : [[`${prefix}/${e.name}`, readFileSync(join(dir, e.name))]]);
+}
+
+/// Drops a zip of the folder `dir` on the page's canvas, as a user drops a file; returns the zip.
+export async function dropZip(page, dir) {
+  const zip = writeZip(filesUnder(dir, basename(dir)));
+  const canvas = await page.$("#scribblefield");
+  const dataTransfer = await page.evaluateHandle(([name, base64]) => {
+    const bytes = Uint8Array.from(atob(base64), (c) => c.charCodeAt(0));
+    const transfer = new DataTransfer();
+    transfer.items.add(new File([bytes], name, { type: "application/zip" }));
+    return transfer;
+  }, [`${basename(dir)}.zip`, zip.toString("base64")]);
+  await canvas.dispatchEvent("dragenter", { dataTransfer });
+  await canvas.dispatchEvent("dragover", { dataTransfer });
+  await canvas.dispatchEvent("drop", { dataTransfer });
+  return zip;
+}
+
+/// What the latest pack took and its settings estimated (`data-pack-result`), or null.
+export async function packResult(page) {
+  return page.evaluate(() => JSON.parse(document.body.dataset.packResult || "null"));
+}
+
+/// Waits until a pack started on `page` (a page of its own: the scene open before is ready too)
+/// has finished and its scene is open.
+export async function waitForPacked(page, what, timeoutMs) {
+  const start = Date.now();
+  while (!(await packResult(page))) {
+    const t = await status(page);
+    if (t.state === "error" || t.state === "crashed") throw new Error(`waiting for ${what}: the page says ${show(t)}`);
+    assert(Date.now() - start < timeoutMs, `waiting for ${what}: not packed after ${timeoutMs / 1000} s`);
+    await new Promise((r) => setTimeout(r, 250));
+  }
+  return waitForStatus(page, (t) => t.state === "ready", what, timeoutMs);
+}
+
+/// Waits until the page shows an error (not waitForStatus, which stops at one); returns the status.
+export async function waitForError(page, timeoutMs) {
+  await page.waitForFunction(() => {
+    try {
+      return ["error", "crashed"].includes(JSON.parse(document.body.dataset.status).state);
+    } catch {
+      return false;
+    }
+  }, null, { timeout: timeoutMs, polling: 100 });
+  return status(page);
 }

@@ -21,8 +21,9 @@ import { mkdirSync, mkdtempSync, readdirSync, readFileSync, rmSync, writeFileSyn
 import { tmpdir } from "node:os";
 import { basename, join, resolve } from "node:path";
 import {
-  assert, cancelPackSetup, Checks, clickPackControl, decodePng, drawFrameStroke, openPage, packSetup, planFrameStrokes, readZip,
-  runBrowserTest, setPackField, settledStatus, show, startPack, status, waitForPackSetup, waitForStatus, writeZip,
+  assert, cancelPackSetup, Checks, clickPackControl, decodePng, drawFrameStroke, dropZip, openPage, packResult, packSetup,
+  planFrameStrokes, readZip, runBrowserTest, setPackField, settledStatus, show, startPack, status, waitForError,
+  waitForPackSetup, waitForPacked, waitForStatus,
 } from "./lib.mjs";
 
 const url = process.env.E2E_URL;
@@ -69,18 +70,6 @@ mkdirSync(notCapture);
 writeFileSync(join(notCapture, "notes.txt"), "not a capture\n");
 writeFileSync(join(notCapture, "photo.jpg"), readFileSync(join(capturePath, "images", "DSC05083.JPG")));
 
-/// Every file below `dir`, named by its path from `dir`'s parent (`prefix/...`), for a zip.
-function filesUnder(dir, prefix) {
-  return readdirSync(dir, { withFileTypes: true }).flatMap((e) => e.isDirectory()
-    ? filesUnder(join(dir, e.name), `${prefix}/${e.name}`)
-    : [[`${prefix}/${e.name}`, readFileSync(join(dir, e.name))]]);
-}
-
-/// How long the latest pack took and what its settings estimated (`data-pack-result`).
-async function packResult(page) {
-  return page.evaluate(() => JSON.parse(document.body.dataset.packResult || "null"));
-}
-
 /// Prints the estimate beside what packing took, for the record (docs/web-app.md).
 function reportEstimate(r) {
   assert(r && r.estimate, `no pack result with an estimate: ${JSON.stringify(r)}`);
@@ -106,19 +95,6 @@ async function dropFolder(context, page, folder) {
   await cdp.detach();
 }
 
-/// Waits until a pack started on `page` (a page of its own: the scene open before is ready too)
-/// has finished and its scene is open.
-async function waitForPacked(page, what) {
-  const start = Date.now();
-  while (!(await packResult(page))) {
-    const t = await status(page);
-    if (t.state === "error" || t.state === "crashed") throw new Error(`waiting for ${what}: the page says ${show(t)}`);
-    assert(Date.now() - start < PACK_TIMEOUT_MS, `waiting for ${what}: not packed after ${PACK_TIMEOUT_MS / 1000} s`);
-    await new Promise((r) => setTimeout(r, 250));
-  }
-  return waitForStatus(page, (t) => t.state === "ready", what, PACK_TIMEOUT_MS);
-}
-
 let pickedSceneJson = null;
 
 await runBrowserTest("pack", {
@@ -137,15 +113,7 @@ await runBrowserTest("pack", {
   await checks.check("a folder that is no capture gets the command line's error", async () => {
     await page.setInputFiles("#capture-folder", notCapture);
     await startPack(page, PACK_TIMEOUT_MS);
-    // Not waitForStatus: it stops at an error, which is what is awaited here.
-    await page.waitForFunction(() => {
-      try {
-        return ["error", "crashed"].includes(JSON.parse(document.body.dataset.status).state);
-      } catch {
-        return false;
-      }
-    }, null, { timeout: PACK_TIMEOUT_MS, polling: 100 });
-    s = await status(page);
+    s = await waitForError(page, PACK_TIMEOUT_MS);
     assert(s.state === "error", `status is ${show(s)}`);
     assert(s.message.startsWith("holiday: not a capture layout scribblefield knows; expected one of: an autolabel"),
       `the message is ${JSON.stringify(s.message)}`);
@@ -268,19 +236,9 @@ await runBrowserTest("pack", {
     await page.close();
     const dropPage = await openPage(context, pageUrl.href, "drop", consoleLog);
     await settledStatus(dropPage, PACK_TIMEOUT_MS);
-    const zip = writeZip(filesUnder(capturePath, basename(capturePath)));
-    const canvas = await dropPage.$("#scribblefield");
-    const dataTransfer = await dropPage.evaluateHandle(([name, base64]) => {
-      const bytes = Uint8Array.from(atob(base64), (c) => c.charCodeAt(0));
-      const transfer = new DataTransfer();
-      transfer.items.add(new File([bytes], name, { type: "application/zip" }));
-      return transfer;
-    }, [`${basename(capturePath)}.zip`, zip.toString("base64")]);
-    await canvas.dispatchEvent("dragenter", { dataTransfer });
-    await canvas.dispatchEvent("dragover", { dataTransfer });
-    await canvas.dispatchEvent("drop", { dataTransfer });
+    const zip = await dropZip(dropPage, capturePath);
     await startPack(dropPage, PACK_TIMEOUT_MS);
-    s = await waitForPacked(dropPage, "the dropped capture to open");
+    s = await waitForPacked(dropPage, "the dropped capture to open", PACK_TIMEOUT_MS);
     assert(s.frames === sceneJson.frames.length && s.size[0] === W && s.size[1] === H,
       `the dropped zip gave ${s.frames} frames of ${s.size}, the command line ${sceneJson.frames.length} of ${W}x${H}`);
     console.log(`     ${(zip.length / 1e6).toFixed(1)} MB zip dropped; ${s.frames} frames of ${s.size} (${elapsed()})`);
@@ -294,7 +252,7 @@ await runBrowserTest("pack", {
     const setup = await startPack(dropPage, PACK_TIMEOUT_MS);
     assert(setup.name === basename(capturePath) && setup.images === 52,
       `the dropped folder is ${setup.name} with ${setup.images} images`);
-    s = await waitForPacked(dropPage, "the dropped folder to open");
+    s = await waitForPacked(dropPage, "the dropped folder to open", PACK_TIMEOUT_MS);
     assert(s.frames === sceneJson.frames.length && s.size[0] === W && s.size[1] === H,
       `the dropped folder gave ${s.frames} frames of ${s.size}, the command line ${sceneJson.frames.length} of ${W}x${H}`);
     // The very archive the folder picked with the input gave.
@@ -381,7 +339,7 @@ await runBrowserTest("pack", {
       t = await waitForPackSetup(setPage, (x) => x && !x.values.features, "features off", 60_000);
       assert(t.estimate && t.estimate.grid === null, `without features the estimate has ${JSON.stringify(t.estimate)}`);
       await startPack(setPage, PACK_TIMEOUT_MS);
-      s = await waitForPacked(setPage, "the capture packed with the changed settings");
+      s = await waitForPacked(setPage, "the capture packed with the changed settings", PACK_TIMEOUT_MS);
       assert(s.frames === 4 && s.size[0] === size[0] && s.size[1] === size[1],
         `packed ${s.frames} frames of ${s.size}, the settings asked for 4 of ${size}`);
       const result = await packResult(setPage);

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Browser end-to-end test: builds the web app, serves it on a free localhost port, and runs
 # smoke.mjs, annotate.mjs, durable.mjs and (with ../shared/data beside the repository)
-# spread.mjs and pack.mjs in headless Chromium (WebGPU on SwiftShader), then bench.mjs (the page's
+# spread.mjs, pack.mjs and stray.mjs in headless Chromium (WebGPU on SwiftShader), then bench.mjs (the page's
 # training bench, its report checked, no timings asserted) with the kernels of a CPU device and
 # with those of a GPU. Installs Chromium (apt) and the node
 # modules (npm ci) when they are missing. Screenshots go to $E2E_OUT (default /tmp/e2e).
@@ -52,12 +52,25 @@ elif [ ! -d "$SPARSE_CAPTURE" ]; then
   echo "(no $SPARSE_CAPTURE: skipping spread.mjs and pack.mjs)"
 fi
 
+# stray.mjs: the YCB clip written as a Stray Scanner capture (H.264 and HEVC videos, encoded by
+# ffmpeg), and the first packed by the command line as the page must pack it.
+STRAY_DIR=""
+if [ -d "$ROOT/../shared/data/ycb-video-0000" ] && command -v ffmpeg >/dev/null 2>&1 && wanted stray; then
+  STRAY_DIR="$(mktemp -d)"
+  STRAY_FIXTURE="$STRAY_DIR" cargo test --release --quiet --test import_stray write_browser_fixture -- --ignored \
+    >/dev/null
+  target/release/scribblefield pack "$STRAY_DIR/ycb-stray" -o "$STRAY_DIR/reference.scene.zip" --max-size 160 \
+    --every 3 >/dev/null
+elif wanted stray; then
+  echo "(no ../shared/data/ycb-video-0000 or no ffmpeg: skipping stray.mjs)"
+fi
+
 # A free port: bind port 0, note what the kernel chose, release it for the server.
 PORT=$(node -e 'const s=require("net").createServer().listen(0,"127.0.0.1",()=>{console.log(s.address().port);s.close()})')
 LOG=$(mktemp)
 target/release/scribblefield serve www --port "$PORT" >"$LOG" 2>&1 &
 SERVER=$!
-trap 'kill "$SERVER" 2>/dev/null || true; wait "$SERVER" 2>/dev/null || true; rm -f "$LOG" ${SPARSE:+"$SPARSE"}; [ -z "${PACK_REFERENCE:-}" ] || rm -rf "$(dirname "$PACK_REFERENCE")"' EXIT
+trap 'kill "$SERVER" 2>/dev/null || true; wait "$SERVER" 2>/dev/null || true; rm -f "$LOG" ${SPARSE:+"$SPARSE"}; [ -z "${PACK_REFERENCE:-}" ] || rm -rf "$(dirname "$PACK_REFERENCE")"; [ -z "$STRAY_DIR" ] || rm -rf "$STRAY_DIR"' EXIT
 
 URL="http://127.0.0.1:$PORT/"
 for _ in $(seq 1 100); do
@@ -91,6 +104,10 @@ if [ -n "$SPARSE" ]; then
     E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_CAPTURE="$SPARSE_CAPTURE" E2E_REFERENCE="$PACK_REFERENCE" \
       node "$HERE/pack.mjs" || STATUS=1
   fi
+fi
+if [ -n "$STRAY_DIR" ]; then
+  E2E_URL="$URL" CHROMIUM="$CHROMIUM" E2E_STRAY="$STRAY_DIR/ycb-stray" E2E_STRAY_HEVC="$STRAY_DIR/ycb-stray-hevc" \
+    E2E_STRAY_REFERENCE="$STRAY_DIR/reference.scene.zip" node "$HERE/stray.mjs" || STATUS=1
 fi
 if wanted bench; then
   E2E_URL="$URL" CHROMIUM="$CHROMIUM" node "$HERE/bench.mjs" || STATUS=1

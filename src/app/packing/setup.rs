@@ -74,9 +74,10 @@ impl PackSetup {
         let survey = match &input {
             CaptureInput::Files(files) => {
                 let survey = survey_capture(files.iter().map(|(p, f)| (p.as_str(), f.size() as u64)));
-                match survey.first_image {
-                    Some(i) => read_size_of_file(files[i].1.clone(), size.clone(), ctx.clone()),
-                    None => *size.borrow_mut() = SourceSize::Unknown("no images found".into()),
+                match (survey.video, survey.first_image) {
+                    (Some(i), _) => read_size_of_video(files[i].1.clone(), size.clone(), ctx.clone()),
+                    (None, Some(i)) => read_size_of_file(files[i].1.clone(), size.clone(), ctx.clone()),
+                    (None, None) => *size.borrow_mut() = SourceSize::Unknown("no images found".into()),
                 }
                 survey
             }
@@ -274,8 +275,9 @@ impl PackSetup {
             );
         }
         let mut text = format!(
-            "{} images{size} in {} ({:.1} MB of images and model files to read).",
+            "{} {}{size} in {} ({:.1} MB of images and model files to read).",
             s.images,
+            if s.video.is_some() { "frames" } else { "images" },
             s.found_in,
             s.capture_bytes as f64 / 1e6
         );
@@ -419,7 +421,7 @@ fn survey_zip(bytes: &[u8]) -> (CaptureSurvey, SourceSize) {
         .filter(|(name, _)| !name.ends_with('/'))
         .collect();
     let survey = survey_capture(entries.iter().map(|(n, s)| (n.as_str(), *s)));
-    let first = match survey.first_image {
+    let first = match survey.video.or(survey.first_image) {
         None => none(),
         Some(i) => {
             let (name, size) = &entries[i];
@@ -428,7 +430,12 @@ fn survey_zip(bytes: &[u8]) -> (CaptureSurvey, SourceSize) {
                 && zip
                     .by_name(name)
                     .is_ok_and(|mut f| std::io::Read::read_to_end(&mut f, &mut data).is_ok());
-            match image_size(&data).filter(|_| read) {
+            let sized = if survey.video.is_some() {
+                video_size(&data)
+            } else {
+                image_size(&data)
+            };
+            match sized.filter(|_| read) {
                 Some(s) => SourceSize::Known(s),
                 None => SourceSize::Unknown(format!("cannot read the size of {name}")),
             }
@@ -460,6 +467,33 @@ fn read_size_of_file(file: web_sys::File, slot: Rc<RefCell<SourceSize>>, ctx: eg
         };
         ctx.request_repaint();
     });
+}
+
+/// Reads the size of a video's frames from its MP4 index, in the background: the whole file,
+/// since the index may lie at its end (packing reads it anyway).
+fn read_size_of_video(file: web_sys::File, slot: Rc<RefCell<SourceSize>>, ctx: egui::Context) {
+    wasm_bindgen_futures::spawn_local(async move {
+        let bytes = if file.size() <= MAX_CAPTURE_BYTES as f64 {
+            JsFuture::from(file.array_buffer())
+                .await
+                .ok()
+                .map(|b| js_sys::Uint8Array::new(&b).to_vec())
+        } else {
+            None
+        };
+        *slot.borrow_mut() = match bytes.as_deref().and_then(video_size) {
+            Some(s) => SourceSize::Known(s),
+            None => SourceSize::Unknown(format!("cannot read the size of {}", file.name())),
+        };
+        ctx.request_repaint();
+    });
+}
+
+/// A video's frame size from its MP4 index.
+fn video_size(bytes: &[u8]) -> Option<(u32, u32)> {
+    crate::scene::import::text_checks::mp4_video(bytes)
+        .ok()
+        .map(|(size, _)| size)
 }
 
 /// An image's size from its first bytes (PNG, JPEG).

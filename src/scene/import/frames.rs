@@ -239,6 +239,9 @@ pub(super) async fn load_frames(
     load_frames_prepared(files, opts, invalid, &AsStored, progress).await
 }
 
+/// A frame's image being read (see [`Prepare::read_rgb`]).
+pub(super) type Reading<'a, T> = Pin<Box<dyn Future<Output = Result<T>> + 'a>>;
+
 /// How an importer reads a frame's images and what it does to them at their native size, before
 /// they are downscaled: the COLMAP importer undistorts them there, since resampling twice would
 /// blur twice; a video capture takes its colour from the video and drops depth readings of low
@@ -254,9 +257,10 @@ pub(super) trait Prepare {
         dimensions(path)
     }
     /// The `frame`-th colour image as stored at `path`, and whether it had an alpha channel
-    /// (composited on `background`).
-    fn read_rgb(&self, _frame: usize, path: &Path, background: Background) -> Result<(RgbImage, bool)> {
-        load_rgb(path, background)
+    /// (composited on `background`). A future: the page decodes a video's frames with the
+    /// browser, which answers later.
+    fn read_rgb<'a>(&'a self, _frame: usize, path: &'a Path, background: Background) -> Reading<'a, (RgbImage, bool)> {
+        Box::pin(async move { load_rgb(path, background) })
     }
     /// The `frame`-th depth image as stored at `path` (millimetres, 0 = no reading).
     fn read_depth(&self, _frame: usize, path: &Path) -> Result<DepthImage> {
@@ -306,7 +310,7 @@ pub(super) async fn load_frames_prepared(
     let mut with_alpha = 0;
     let max_size = opts.max_size;
     for (i, f) in files.into_iter().enumerate() {
-        let (rgb, alpha) = prepare.read_rgb(i, &f.rgb, opts.background)?;
+        let (rgb, alpha) = prepare.read_rgb(i, &f.rgb, opts.background).await?;
         with_alpha += usize::from(alpha);
         let (native, size) = match sizes {
             Some(s) => s,

@@ -22,6 +22,7 @@ mod colmap;
 mod files;
 mod frames;
 mod images;
+mod mp4;
 mod nerf_splits;
 mod options;
 mod register;
@@ -350,14 +351,14 @@ fn capture_path(base: &Path, relative: &str, field: &str, file: &str, opts: &Imp
     Ok(base.join(path))
 }
 
-/// The importers' parsers of a capture's own text files, run on text in memory (no file is read,
-/// no image decoded): everything each importer decides from that text alone. The fuzz targets
-/// (`fuzz/`) and their corpus replay (`tests/fuzz_corpus.rs`) call these, through
-/// `scribblefield::fuzzing`.
+/// The importers' parsers of a capture's own text files (and of a video's MP4 index), run on
+/// bytes in memory (no file is read, no image decoded): everything each importer decides from
+/// them alone. The fuzz targets (`fuzz/`) and their corpus replay (`tests/fuzz_corpus.rs`) call
+/// these, through `scribblefield::fuzzing`, and the tests compare them with other tools.
 pub mod text_checks {
     use std::path::Path;
 
-    use super::{ImportOptions, colmap, scannet, text, transforms};
+    use super::{ImportOptions, colmap, mp4, scannet, stray_text, text, transforms};
     use crate::scene::camera::{Intrinsics, Pose};
     use crate::scene::error::{Result, SceneError};
 
@@ -374,6 +375,28 @@ pub mod text_checks {
     /// A COLMAP binary model (`cameras.bin`, `images.bin`, `points3D.bin`); returns its image count.
     pub fn colmap_binary(cameras: &[u8], images: &[u8], points: &[u8]) -> Result<usize> {
         colmap::check_binary_model([cameras, images, points])
+    }
+
+    /// A Stray Scanner `odometry.csv`: its frame numbers and camera-to-world poses (OpenCV axes).
+    pub fn stray_odometry(bytes: &[u8]) -> Result<Vec<(u32, Pose)>> {
+        let file = "odometry.csv";
+        Ok(stray_text::parse_odometry(text_of(bytes, file)?, file)?
+            .into_iter()
+            .map(|r| (r.frame, r.pose))
+            .collect())
+    }
+
+    /// A Stray Scanner `camera_matrix.csv`.
+    pub fn stray_camera_matrix(bytes: &[u8]) -> Result<Intrinsics> {
+        let file = "camera_matrix.csv";
+        stray_text::parse_camera_matrix(text_of(bytes, file)?, file)
+    }
+
+    /// An MP4's video track as the page seeks in it: the frame size and, in presentation order,
+    /// the second at which each frame starts.
+    pub fn mp4_video(bytes: &[u8]) -> Result<((u32, u32), Vec<f64>)> {
+        let v = mp4::parse(bytes, "rgb.mp4")?;
+        Ok((v.size, v.frame_times))
     }
 
     /// A ScanNet pose file (`pose/N.txt`): `None` where it marks a lost frame (non-finite).

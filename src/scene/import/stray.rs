@@ -14,7 +14,8 @@ use image::{DynamicImage, GrayImage, RgbImage};
 use super::bounds::{FROM_DEPTH_NOTE, from_required_depth};
 use super::files::CapturePath;
 use super::frames::{
-    DEPTH_SCALE, FrameFiles, InvalidDepth, Prepare, Progress, files_by_stem, load_frames_prepared, scene_of, select,
+    DEPTH_SCALE, FrameFiles, InvalidDepth, Prepare, Progress, Reading, files_by_stem, load_frames_prepared, scene_of,
+    select,
 };
 use super::images::{decode, load_depth, load_gt};
 use super::stray_text::{OdometryRow, parse_camera_matrix, parse_odometry};
@@ -100,7 +101,7 @@ pub(super) async fn import(dir: &Path, opts: &ImportOptions, progress: &mut Prog
         })
         .collect();
     let source = FromVideo {
-        decoder: RefCell::new(Decoder::start(&video_path, info, &frames)?),
+        decoder: RefCell::new(Some(Decoder::start(&video_path, info, &frames)?)),
         info,
         confidence: confidences,
     };
@@ -207,7 +208,7 @@ fn check_camera(path: &Path, k: crate::scene::camera::Intrinsics, info: VideoInf
 /// Colour from the video, in the order the frames are loaded; depth with its low-confidence
 /// readings dropped.
 struct FromVideo {
-    decoder: RefCell<Decoder>,
+    decoder: RefCell<Option<Decoder>>,
     info: VideoInfo,
     /// The confidence image of each kept frame, when the capture has them.
     confidence: Vec<Option<PathBuf>>,
@@ -226,8 +227,17 @@ impl Prepare for FromVideo {
         Ok(self.info.size)
     }
 
-    fn read_rgb(&self, _frame: usize, _path: &Path, _background: Background) -> Result<(RgbImage, bool)> {
-        Ok((self.decoder.borrow_mut().next()?, false))
+    fn read_rgb<'a>(&'a self, _frame: usize, path: &'a Path, _background: Background) -> Reading<'a, (RgbImage, bool)> {
+        Box::pin(async move {
+            // Out of its cell while it decodes, so no borrow is held across the wait.
+            let mut decoder = self
+                .decoder
+                .take()
+                .ok_or_else(|| SceneError::invalid(shown(path), "frames read out of order"))?;
+            let frame = decoder.next().await;
+            self.decoder.replace(Some(decoder));
+            Ok((frame?, false))
+        })
     }
 
     fn read_depth(&self, frame: usize, path: &Path) -> Result<DepthImage> {

@@ -1,10 +1,13 @@
 //! Frames of a capture's video (Stray Scanner records its colour as `rgb.mp4`, HEVC), decoded by
 //! `ffmpeg` from PATH: the phone's codecs (HEVC, H.264) have no mature pure-Rust decoder, and
 //! ffmpeg is one Debian package. Only the frames kept are converted and handed over, one at a time,
-//! so a minute of 1920x1440 video never sits in memory decoded. The page has no ffmpeg: there a
-//! video capture is refused with a message that says how to pack it.
+//! so a minute of 1920x1440 video never sits in memory decoded. The page has no ffmpeg: there the
+//! browser decodes, a `<video>` element sought frame by frame by the times the MP4's index gives
+//! (`mp4.rs`); which codecs it can decode is the browser's (H.264 everywhere, HEVC where the
+//! hardware decodes it: Safari, and Chrome on such machines).
 use std::path::Path;
 
+use crate::scene::archive::limits;
 use crate::scene::error::{Result, SceneError};
 
 /// What a video holds, from its header.
@@ -26,6 +29,23 @@ fn video_error(path: &Path, why: impl Into<String>) -> SceneError {
     SceneError::invalid(path.display().to_string(), why)
 }
 
+/// A probed size an image of the capture could have: within the archive's side limit, as an
+/// image file's header is checked.
+fn check_size(path: &Path, size: (u32, u32)) -> Result<()> {
+    if size.0 == 0 || size.1 == 0 || size.0 > limits::MAX_SIDE || size.1 > limits::MAX_SIDE {
+        return Err(video_error(
+            path,
+            format!(
+                "video frames of {}x{} are outside the sizes a capture's images may have (1 to {} a side)",
+                size.0,
+                size.1,
+                limits::MAX_SIDE
+            ),
+        ));
+    }
+    Ok(())
+}
+
 #[cfg(not(target_arch = "wasm32"))]
 mod native {
     use std::io::Read;
@@ -34,8 +54,7 @@ mod native {
 
     use image::RgbImage;
 
-    use super::{VideoInfo, video_error};
-    use crate::scene::archive::limits;
+    use super::{VideoInfo, check_size, video_error};
     use crate::scene::error::{Result, SceneError};
 
     /// How to get the tools, for the message when they are missing.
@@ -44,23 +63,6 @@ mod native {
     /// A video read from memory (the page's path, natively) is written here for ffmpeg, which
     /// needs to seek in an MP4.
     const LARGEST_IN_MEMORY: u64 = crate::scene::import::files::MAX_CAPTURE_BYTES;
-
-    /// A probed size an image of the capture could have: within the archive's side limit, as an
-    /// image file's header is checked.
-    fn check_size(path: &Path, size: (u32, u32)) -> Result<()> {
-        if size.0 == 0 || size.1 == 0 || size.0 > limits::MAX_SIDE || size.1 > limits::MAX_SIDE {
-            return Err(video_error(
-                path,
-                format!(
-                    "video frames of {}x{} are outside the sizes a capture's images may have (1 to {} a side)",
-                    size.0,
-                    size.1,
-                    limits::MAX_SIDE
-                ),
-            ));
-        }
-        Ok(())
-    }
 
     /// The video's frame size and frame count, from `ffprobe`.
     pub(in crate::scene::import) fn probe(path: &Path) -> Result<VideoInfo> {
@@ -189,7 +191,7 @@ mod native {
         }
 
         /// The next kept frame.
-        pub(in crate::scene::import) fn next(&mut self) -> Result<RgbImage> {
+        pub(in crate::scene::import) async fn next(&mut self) -> Result<RgbImage> {
             let Some(index) = self.left.pop_front() else {
                 return Err(video_error(&self.name, "asked for more frames than were kept"));
             };
@@ -230,31 +232,184 @@ mod page {
     use std::path::Path;
 
     use image::RgbImage;
+    use wasm_bindgen::{JsCast, JsValue};
+    use wasm_bindgen_futures::JsFuture;
+    use web_sys::{AddEventListenerOptions, CanvasRenderingContext2d, HtmlCanvasElement, HtmlVideoElement};
 
-    use super::{VideoInfo, video_error};
-    use crate::scene::error::Result;
+    use super::{VideoInfo, check_size, video_error};
+    use crate::scene::error::{Result, SceneError};
+    use crate::scene::import::files::{MAX_CAPTURE_BYTES, read};
+    use crate::scene::import::mp4;
 
-    /// The page has no video decoder of its own yet.
-    pub(in crate::scene::import) fn probe(path: &Path) -> Result<VideoInfo> {
-        Err(video_error(
-            path,
-            "this page cannot decode a capture's video yet: pack the capture with the command line \
-             (`scribblefield pack CAPTURE -o scene.scene.zip`, which needs ffmpeg) and open the archive here",
-        ))
+    fn bytes(path: &Path) -> Result<Vec<u8>> {
+        read(path, MAX_CAPTURE_BYTES).map_err(|e| SceneError::io(path, e))
     }
 
-    pub(in crate::scene::import) struct Decoder;
+    /// The video's frame size and frame count, from its MP4 index.
+    pub(in crate::scene::import) fn probe(path: &Path) -> Result<VideoInfo> {
+        let video = mp4::parse(&bytes(path)?, &path.display().to_string())?;
+        check_size(path, video.size)?;
+        Ok(VideoInfo {
+            size: video.size,
+            frames: video.frame_times.len() as u32,
+        })
+    }
+
+    /// The kept frames of one video, decoded by the browser: a `<video>` element sought to each
+    /// frame's time and drawn onto a canvas.
+    pub(in crate::scene::import) struct Decoder {
+        name: std::path::PathBuf,
+        bytes: Option<Vec<u8>>,
+        /// Where to seek for each kept frame, in order: the middle of the time it is shown, so
+        /// rounding in the player's clock lands on it.
+        targets: std::collections::VecDeque<(u32, f64)>,
+        size: (u32, u32),
+        player: Option<Player>,
+    }
+
+    struct Player {
+        video: HtmlVideoElement,
+        url: String,
+        context: CanvasRenderingContext2d,
+    }
+
+    impl Drop for Player {
+        fn drop(&mut self) {
+            self.video.remove_attribute("src").ok();
+            web_sys::Url::revoke_object_url(&self.url).ok();
+        }
+    }
+
+    /// What the browser said, as text.
+    fn said(e: JsValue) -> String {
+        e.dyn_ref::<js_sys::Error>()
+            .map(|e| String::from(e.message()))
+            .or_else(|| e.as_string())
+            .unwrap_or_else(|| {
+                "the browser cannot decode it (Chrome and Safari decode HEVC only where the hardware does)".into()
+            })
+    }
+
+    /// Waits for `event` on `video`; its `error` event instead is an error.
+    async fn event(video: &HtmlVideoElement, event: &str) -> std::result::Result<(), JsValue> {
+        let promise = js_sys::Promise::new(&mut |resolve, reject| {
+            let once = AddEventListenerOptions::new();
+            once.set_once(true);
+            video
+                .add_event_listener_with_callback_and_add_event_listener_options(event, &resolve, &once)
+                .ok();
+            video
+                .add_event_listener_with_callback_and_add_event_listener_options("error", &reject, &once)
+                .ok();
+        });
+        JsFuture::from(promise).await.map(|_| ())
+    }
 
     impl Decoder {
-        pub(in crate::scene::import) fn start(path: &Path, _info: VideoInfo, _keep: &[u32]) -> Result<Decoder> {
-            probe(path).map(|_| Decoder)
+        /// Prepares decoding frames `keep` (ascending indices) of the video at `path`.
+        pub(in crate::scene::import) fn start(path: &Path, info: VideoInfo, keep: &[u32]) -> Result<Decoder> {
+            let bytes = bytes(path)?;
+            let video = mp4::parse(&bytes, &path.display().to_string())?;
+            let times = &video.frame_times;
+            let targets = keep
+                .iter()
+                .map(|&n| {
+                    let i = n as usize;
+                    let start = times.get(i).copied().unwrap_or(0.0);
+                    let end = times.get(i + 1).copied().unwrap_or(start + video.last_duration);
+                    (n, (start + end) / 2.0)
+                })
+                .collect();
+            Ok(Decoder {
+                name: path.to_path_buf(),
+                bytes: Some(bytes),
+                targets,
+                size: info.size,
+                player: None,
+            })
         }
 
-        pub(in crate::scene::import) fn next(&mut self) -> Result<RgbImage> {
-            Err(video_error(
-                Path::new("rgb.mp4"),
-                "this page cannot decode a capture's video yet",
-            ))
+        fn failed(&self, why: impl std::fmt::Display) -> SceneError {
+            video_error(&self.name, format!("the browser could not decode this video: {why}"))
+        }
+
+        async fn player(&mut self) -> Result<&Player> {
+            if self.player.is_none() {
+                let bytes = self.bytes.take().ok_or_else(|| self.failed("it was already opened"))?;
+                let player = self.open(bytes).await?;
+                self.player = Some(player);
+            }
+            self.player.as_ref().ok_or_else(|| self.failed("no player"))
+        }
+
+        async fn open(&self, bytes: Vec<u8>) -> Result<Player> {
+            let document = web_sys::window()
+                .and_then(|w| w.document())
+                .ok_or_else(|| self.failed("no document"))?;
+            let parts = js_sys::Array::of1(&js_sys::Uint8Array::from(&bytes[..]));
+            drop(bytes);
+            let options = web_sys::BlobPropertyBag::new();
+            options.set_type("video/mp4");
+            let blob = web_sys::Blob::new_with_u8_array_sequence_and_options(&parts, &options)
+                .map_err(|e| self.failed(said(e)))?;
+            let url = web_sys::Url::create_object_url_with_blob(&blob).map_err(|e| self.failed(said(e)))?;
+            let video: HtmlVideoElement = document
+                .create_element("video")
+                .map_err(|e| self.failed(said(e)))?
+                .unchecked_into();
+            video.set_muted(true);
+            video.set_preload("auto");
+            let loaded = event(&video, "loadeddata");
+            video.set_src(&url);
+            loaded.await.map_err(|e| self.failed(said(e)))?;
+            let shown = (video.video_width(), video.video_height());
+            if shown != self.size {
+                return Err(self.failed(format!(
+                    "the browser shows its frames as {}x{}, its index says {}x{} (turned by rotation metadata?); \
+                     pack the capture on the command line",
+                    shown.0, shown.1, self.size.0, self.size.1
+                )));
+            }
+            let canvas: HtmlCanvasElement = document
+                .create_element("canvas")
+                .map_err(|e| self.failed(said(e)))?
+                .unchecked_into();
+            canvas.set_width(self.size.0);
+            canvas.set_height(self.size.1);
+            let context: CanvasRenderingContext2d = canvas
+                .get_context("2d")
+                .ok()
+                .flatten()
+                .ok_or_else(|| self.failed("no 2D canvas"))?
+                .unchecked_into();
+            Ok(Player { video, url, context })
+        }
+
+        /// The next kept frame.
+        pub(in crate::scene::import) async fn next(&mut self) -> Result<RgbImage> {
+            let (index, time) = self
+                .targets
+                .pop_front()
+                .ok_or_else(|| self.failed("asked for more frames than were kept"))?;
+            let (w, h) = self.size;
+            let name = self.name.clone();
+            let player = self.player().await?;
+            let sought = event(&player.video, "seeked");
+            player.video.set_current_time(time);
+            let fail = |why: String| video_error(&name, format!("the browser could not show frame {index}: {why}"));
+            sought.await.map_err(|e| fail(said(e)))?;
+            player
+                .context
+                .draw_image_with_html_video_element(&player.video, 0.0, 0.0)
+                .map_err(|e| fail(said(e)))?;
+            let rgba = player
+                .context
+                .get_image_data(0.0, 0.0, w as f64, h as f64)
+                .map_err(|e| fail(said(e)))?
+                .data()
+                .0;
+            let rgb: Vec<u8> = rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
+            RgbImage::from_raw(w, h, rgb).ok_or_else(|| fail("a frame of the wrong size".into()))
         }
     }
 }
