@@ -12,7 +12,7 @@ seconds="${1:-600}"
 shift || true
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(archive archive_entries labels_json share_link npy safetensors transforms_json colmap_text seven_scenes_text pth pickle colmap_binary scannet_text checkpoint field_config pack_zip)
+    targets=(archive archive_entries labels_json share_link npy safetensors transforms_json colmap_text seven_scenes_text pth pickle colmap_binary scannet_text checkpoint field_config pack_zip stray_text mp4)
 fi
 work="${FUZZ_WORK:-/tmp/scribblefield-fuzz}"
 runs=()

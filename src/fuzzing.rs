@@ -17,7 +17,9 @@ use crate::scene::label_set::{LabelSet, limits as label_limits};
 use crate::scene::{GT_VOID, Scene, read_archive};
 
 mod parsers;
-pub use parsers::{NEXT_FILE, checkpoint, colmap_binary, field_config, pack_zip, pickle, pth, scannet_text};
+pub use parsers::{
+    NEXT_FILE, checkpoint, colmap_binary, field_config, mp4, pack_zip, pickle, pth, scannet_text, stray_text,
+};
 
 /// What a target did with one input: accepted, or refused with the crate's message.
 pub type Outcome = Result<(), String>;
@@ -44,6 +46,8 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("checkpoint", checkpoint),
     ("field_config", field_config),
     ("pack_zip", pack_zip),
+    ("stray_text", stray_text),
+    ("mp4", mp4),
 ];
 
 /// Frames the scene of a fuzzed `labels.json` has: enough for any frame index the corpus uses,

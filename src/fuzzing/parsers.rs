@@ -110,6 +110,40 @@ pub fn scannet_text(data: &[u8]) -> Outcome {
     }
 }
 
+/// A Stray Scanner text file, read as `odometry.csv` and as `camera_matrix.csv`.
+pub fn stray_text(data: &[u8]) -> Outcome {
+    let rows = text_checks::stray_odometry(data).map_err(|e| e.to_string());
+    if let Ok(rows) = &rows {
+        for (_, pose) in rows {
+            assert!(
+                pose.check().is_ok(),
+                "accepted a pose that is not rigid or not finite as f32"
+            );
+        }
+    }
+    let k = text_checks::stray_camera_matrix(data).map_err(|e| e.to_string());
+    if let Ok(k) = &k {
+        for v in [k.fx, k.fy, k.cx, k.cy] {
+            assert!((v as f32).is_finite(), "intrinsics {v} not finite as f32");
+        }
+    }
+    match (rows, k) {
+        (Err(a), Err(b)) => Err(format!("{a}; {b}")),
+        _ => Ok(()),
+    }
+}
+
+/// An MP4's index as the page reads it to seek a capture's video: the frame size and the time
+/// of each frame, in order.
+pub fn mp4(data: &[u8]) -> Outcome {
+    let (size, times) = text_checks::mp4_video(data).map_err(|e| e.to_string())?;
+    assert!(size.0 > 0 && size.1 > 0, "accepted frames of {size:?}");
+    // Run-length coding lets a few bytes claim many frames: the index's frame cap bounds them.
+    assert!(times.len() <= 2_000_000, "{} frames accepted", times.len());
+    assert!(times.windows(2).all(|w| w[0] <= w[1]), "frame times out of order");
+    Ok(())
+}
+
 /// A trainer checkpoint as `export` reads it: the safetensors file, its metadata (config, what
 /// it was trained on) and every tensor.
 pub fn checkpoint(data: &[u8]) -> Outcome {
