@@ -62,7 +62,7 @@ pub struct PageOptions {
     /// `bench-inflight=N`: training batches the bench keeps in flight (1: wait for each batch
     /// before recording the next, as the page did before it kept two).
     pub bench_inflight: Option<u32>,
-    /// `export=voc,coco,ply`: the formats the masks download holds from the start (the
+    /// `export=voc,coco,ply,apng`: the formats the masks download holds from the start (the
     /// "download also holds" boxes ticked), and `objects=N`: keep the N largest regions of each
     /// class but the first (`export::ExportOptions`).
     pub export: ExportOptions,

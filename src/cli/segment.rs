@@ -53,7 +53,8 @@ pub(super) struct MaskArgs {
     output: PathBuf,
     /// Also write these formats (comma-separated): voc (the CVAT / PASCAL VOC segmentation
     /// layout under voc/: palette PNGs, labelmap.txt), coco (coco.json: compressed RLE per
-    /// class per frame), ply (points.ply: a labelled point cloud from the frames' depth).
+    /// class per frame), ply (points.ply: a labelled point cloud from the frames' depth), apng
+    /// (masks.apng: the masks over the frames, animated).
     #[arg(long = "format", value_name = "FORMATS", value_enum, value_delimiter = ',')]
     formats: Vec<FormatArg>,
     /// Keep only the N largest 8-connected regions of each class but the first (class 0) in
@@ -175,6 +176,7 @@ enum FormatArg {
     Voc,
     Coco,
     Ply,
+    Apng,
 }
 
 impl From<FormatArg> for Format {
@@ -183,6 +185,7 @@ impl From<FormatArg> for Format {
             FormatArg::Voc => Format::Voc,
             FormatArg::Coco => Format::Coco,
             FormatArg::Ply => Format::Ply,
+            FormatArg::Apng => Format::Animation,
         }
     }
 }

@@ -30,6 +30,8 @@ pub enum ExportError {
     NoDepth,
     #[error("point cloud (.ply): needs the scene the masks are of (its depth, poses and intrinsics)")]
     NoScene,
+    #[error("animation (.apng): needs the scene the masks are of (its frames' colour)")]
+    NoFrames,
     #[error(
         "CVAT / PASCAL VOC: classes {first:?} and {second:?} share the colour {color:?}, and the layout tells classes apart by colour; give one of them another colour"
     )]

@@ -189,6 +189,35 @@ fn wall() -> (Scene, GrayImage) {
     (scene, mask)
 }
 
+/// The animation has a frame per mask, each the frame's colour with its mask over it: read back,
+/// the demo's ground truth blended over its frames.
+#[test]
+fn the_animation_shows_every_mask_over_its_frame() {
+    let scene = demo();
+    let set = gt_masks(&scene);
+    let files = export(&set, &ExportOptions::with(&[Format::Animation], None), &scene);
+    let mut reader = png::Decoder::new(std::io::Cursor::new(files["masks.apng"].clone()))
+        .read_info()
+        .unwrap();
+    let (w, h) = (reader.info().width, reader.info().height);
+    assert_eq!((w, h), (scene.width, scene.height), "the demo is smaller than the cap");
+    let frames = reader.info().animation_control.map(|c| c.num_frames);
+    assert_eq!(frames, Some(scene.frames.len() as u32));
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    for (i, (frame, mask)) in scene.frames.iter().zip(&set.masks).enumerate() {
+        reader.next_frame(&mut buf).unwrap();
+        for (x, y) in [(3, 4), (w / 2, h / 2), (w - 1, h - 1)] {
+            let at = ((y * w + x) * 3) as usize;
+            let colour = set.classes[mask.get_pixel(x, y).0[0] as usize].color;
+            let p = frame.rgb.get_pixel(x, y).0;
+            for c in 0..3 {
+                let want = ((p[c] as f32 + colour[c] as f32) / 2.0).round() as i32;
+                assert!((buf[at + c] as i32 - want).abs() <= 1, "frame {i} at ({x}, {y})");
+            }
+        }
+    }
+}
+
 #[test]
 fn the_point_cloud_puts_each_depth_pixel_where_it_is_with_its_class() {
     let (scene, mask) = wall();
@@ -333,6 +362,8 @@ fn what_cannot_be_written_is_refused_by_name() {
     );
     let e = err(ExportOptions::with(&[Format::Ply], None), &set, None);
     assert!(e.contains("needs the scene"), "{e}");
+    let e = err(ExportOptions::with(&[Format::Animation], None), &set, None);
+    assert!(e.contains("animation (.apng): needs the scene"), "{e}");
     let mut flat = scene.clone();
     flat.frames.iter_mut().for_each(|f| f.depth = None);
     let e = err(ExportOptions::with(&[Format::Ply], None), &set, Some(&flat));

@@ -1,8 +1,10 @@
 //! Exporting masks as a folder (CLI) or a zip made in memory (browser download), both with the
 //! same layout: one class-id PNG per frame by index and by the frame's name in its capture,
 //! colour previews, the class manifest and the annotations, and on request the CVAT / PASCAL
-//! VOC layout, COCO JSON with RLE, a labelled point cloud, and autolabel's object-count
-//! cleanup. `read_masks` reads either back for evaluation.
+//! VOC layout, COCO JSON with RLE, a labelled point cloud, the masks over their frames as an
+//! animated PNG, and autolabel's object-count cleanup. `read_masks` reads either back for
+//! evaluation.
+pub mod animation;
 pub mod coco;
 mod error;
 mod masks;

@@ -12,10 +12,12 @@ pub enum Format {
     Coco,
     /// `points.ply`: the labelled point cloud from the frames' depth.
     Ply,
+    /// `masks.apng`: the masks over their frames as an animated PNG.
+    Animation,
 }
 
 impl Format {
-    pub const ALL: [Format; 3] = [Format::Voc, Format::Coco, Format::Ply];
+    pub const ALL: [Format; 4] = [Format::Voc, Format::Coco, Format::Ply, Format::Animation];
 
     /// The name the command line and the page's options use.
     pub fn name(self) -> &'static str {
@@ -23,6 +25,7 @@ impl Format {
             Format::Voc => "voc",
             Format::Coco => "coco",
             Format::Ply => "ply",
+            Format::Animation => "apng",
         }
     }
 
@@ -32,6 +35,7 @@ impl Format {
             Format::Voc => "CVAT / PASCAL VOC (palette PNGs + labelmap.txt)",
             Format::Coco => "COCO JSON (RLE per class per frame)",
             Format::Ply => "labelled point cloud (.ply, from depth)",
+            Format::Animation => "the masks over the frames, animated (.apng)",
         }
     }
 }
@@ -41,6 +45,7 @@ pub struct ExportOptions {
     pub voc: bool,
     pub coco: bool,
     pub ply: bool,
+    pub animation: bool,
     /// Keep only this many largest regions of each class but the first (autolabel's
     /// `--objects`; `super::objects`).
     pub objects: Option<u32>,
@@ -63,6 +68,7 @@ impl ExportOptions {
             Format::Voc => self.voc,
             Format::Coco => self.coco,
             Format::Ply => self.ply,
+            Format::Animation => self.animation,
         }
     }
 
@@ -71,6 +77,7 @@ impl ExportOptions {
             Format::Voc => self.voc = on,
             Format::Coco => self.coco = on,
             Format::Ply => self.ply = on,
+            Format::Animation => self.animation = on,
         }
     }
 

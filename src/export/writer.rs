@@ -4,6 +4,7 @@
 //! the class manifest, the annotations and the formats' files that cover every frame.
 use image::{DynamicImage, GrayImage, ImageFormat};
 
+use super::animation::{self, Animation};
 use super::coco::{self, CocoBuilder};
 use super::error::ExportError;
 use super::masks::{MASKS_FORMAT, MASKS_VERSION, MasksManifest};
@@ -51,6 +52,7 @@ pub struct ExportWriter<'a> {
     frames: usize,
     coco: Option<CocoBuilder>,
     points: Option<PointCloud<'a>>,
+    animation: Option<Animation>,
 }
 
 impl<'a> ExportWriter<'a> {
@@ -58,6 +60,9 @@ impl<'a> ExportWriter<'a> {
     pub fn new(classes: Vec<ClassInfo>, options: ExportOptions, scene: Option<&'a Scene>) -> Result<Self, ExportError> {
         if options.ply && scene.is_none() {
             return Err(ExportError::NoScene);
+        }
+        if options.animation && scene.is_none() {
+            return Err(ExportError::NoFrames);
         }
         options.check(&classes, scene.is_some_and(Scene::has_depth))?;
         let names = scene.map_or_else(Vec::new, |s| {
@@ -72,6 +77,7 @@ impl<'a> ExportWriter<'a> {
             CocoBuilder::new(&classes, format!("segmentation masks{of}, made with scribblefield"))
         });
         let points = if options.ply { scene.map(PointCloud::new) } else { None };
+        let animation = options.animation.then(Animation::new);
         Ok(ExportWriter {
             classes,
             options,
@@ -81,6 +87,7 @@ impl<'a> ExportWriter<'a> {
             frames: 0,
             coco,
             points,
+            animation,
         })
     }
 
@@ -141,6 +148,9 @@ impl<'a> ExportWriter<'a> {
         }
         if let Some(points) = &mut self.points {
             points.add_frame(i, mask);
+        }
+        if let (Some(animation), Some(scene)) = (&mut self.animation, self.scene) {
+            animation.add_frame(&scene.frames[i].rgb, mask, &self.classes);
         }
         self.frames += 1;
         Ok(files)
@@ -213,6 +223,9 @@ impl<'a> ExportWriter<'a> {
         }
         if let Some(points) = &self.points {
             files.push((ply::FILE.into(), points.to_ply(&self.classes)));
+        }
+        if let Some(apng) = self.animation.as_ref().and_then(Animation::to_apng) {
+            files.push((animation::FILE.into(), apng));
         }
         Ok(files)
     }

@@ -117,7 +117,8 @@ fn the_download_holds_masks_previews_manifest_and_labels() {
             "voc/labelmap.txt",
             "voc/ImageSets/Segmentation/default.txt",
             "coco.json",
-            "points.ply"
+            "points.ply",
+            "masks.apng"
         ]
     );
 }
