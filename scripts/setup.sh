@@ -8,14 +8,21 @@ need_apt=()
 command -v chromium >/dev/null 2>&1 || need_apt+=(chromium)
 [ -e /usr/share/vulkan/icd.d/lvp_icd.x86_64.json ] || ls /usr/share/vulkan/icd.d/lvp_icd*.json >/dev/null 2>&1 || need_apt+=(mesa-vulkan-drivers)
 command -v node >/dev/null 2>&1 || need_apt+=(nodejs npm)
-# Stray Scanner captures record their colour as a video: packing one decodes it with ffmpeg, and
-# the tests encode the YCB clip into one.
-command -v ffmpeg >/dev/null 2>&1 || need_apt+=(ffmpeg)
 if [ ${#need_apt[@]} -gt 0 ]; then
   echo "setup: installing ${need_apt[*]}"
   SUDO=""; [ "$(id -u)" = 0 ] || SUDO=sudo
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need_apt[@]}" >/dev/null
+fi
+# Stray Scanner captures record their colour as a video: packing one decodes it with ffmpeg, and
+# the tests encode the YCB clip into one. Without its recommends: they pull in video drivers whose
+# newer mesa can replace the installed lavapipe, and a new lavapipe starts with a cold shader
+# cache (the GPU tests then spend minutes compiling).
+if ! command -v ffmpeg >/dev/null 2>&1; then
+  echo "setup: installing ffmpeg"
+  SUDO=""; [ "$(id -u)" = 0 ] || SUDO=sudo
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends ffmpeg >/dev/null
 fi
 
 rustup target list --installed | grep -q '^wasm32-unknown-unknown$' || rustup target add wasm32-unknown-unknown
