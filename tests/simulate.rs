@@ -9,11 +9,10 @@ use std::process::{Command, Output};
 
 use half::f16;
 use scribblefield::eval::curves::{parse_ablation_csv, parse_curve_csv};
-use scribblefield::eval::headless::budget_config;
 use scribblefield::eval::simulate::{
     self, Click, FrameSplit, RunOptions, SceneId, SimEvent, SimulateError, SimulateSettings,
 };
-use scribblefield::field::FieldConfig;
+use scribblefield::field::{FieldConfig, Preset};
 use scribblefield::gpu::test_support::gpu_for_tests;
 use scribblefield::labels::LabelSet;
 use scribblefield::scene::archive::{write_archive_bytes, write_archive_path};
@@ -36,7 +35,8 @@ fn tiny_config(classes: usize) -> FieldConfig {
         batch_rays: 128,
         samples_coarse: 4,
         samples_fine: 8,
-        ..budget_config(classes as u32)
+        num_classes: classes as u32,
+        ..Preset::Budget.config()
     }
 }
 

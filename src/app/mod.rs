@@ -3,7 +3,7 @@
 //! (`training`). The modules below each draw or do one thing; the plain logic they use (undo,
 //! share codec, autosave entries and snapshots, brush and view maths) is in `crate::labels`, tested natively.
 //!
-//! `page_options`, `status` and `model_size` are plain data and build natively too (their tests
+//! `page_options` and `status` are plain data and build natively too (their tests
 //! run with `cargo test --lib`); the rest needs the browser. docs/architecture.md ("The web
 //! app") shows how the parts talk.
 #[cfg(target_arch = "wasm32")]
@@ -20,7 +20,6 @@ pub mod frame_strip;
 pub mod frame_view;
 #[cfg(target_arch = "wasm32")]
 pub mod loading;
-pub mod model_size;
 #[cfg(target_arch = "wasm32")]
 pub mod overlays;
 #[cfg(target_arch = "wasm32")]

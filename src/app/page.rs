@@ -7,12 +7,12 @@ use egui::RichText;
 use super::annotator::{Annotator, AnnotatorSetup};
 use super::browser::FolderFiles;
 use super::loading::{self, LoadPhase, Loaded, SceneLoad};
-use super::model_size::ModelSize;
 use super::packing::{self, CaptureInput, PackSetup, PackStart, ScenePack, SetupOutcome};
 use super::page_options::{PageOptionError, PageOptions};
 use super::status::PageStatus;
 use super::store::{self, Opened};
 use super::{browser, page_status, repaint_interval_ms};
+use crate::field::{Preset, Runner};
 use crate::gpu::GpuContext;
 use crate::labels::autosave::SceneSource;
 use crate::labels::snapshots::SceneShape;
@@ -25,7 +25,7 @@ pub struct App {
     gpu_name: String,
     /// eframe's device, shared with the trainer; `None` without WebGPU.
     gpu: Option<GpuContext>,
-    model: ModelSize,
+    model: Preset,
     /// The page's options, read once at the start.
     options: PageOptions,
     /// Values in the address that could not be used, for the first annotator to show.
@@ -99,9 +99,9 @@ impl App {
                     info.backend
                 );
                 let ctx = GpuContext::from_device(rs.device.clone(), rs.queue.clone());
-                (name, Some(ctx), ModelSize::for_adapter(&info))
+                (name, Some(ctx), Preset::for_adapter(&info, Runner::Page).0)
             }
-            None => ("none".into(), None, ModelSize::Small),
+            None => ("none".into(), None, Preset::Small),
         };
         for e in &option_errors {
             web_sys::console::warn_1(&e.to_string().into());
@@ -447,7 +447,7 @@ impl eframe::App for App {
                 }
                 ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
                     ui.label(RichText::new(format!("model: {}", self.model.name())).small())
-                        .on_hover_text("#model=tiny|small|full in the address picks another");
+                        .on_hover_text("#model=tiny|small|budget|full in the address picks another");
                 });
             });
         });

@@ -2,7 +2,6 @@
 //! when the page starts. Every key is listed in docs/web-app.md ("Page options"). A value that
 //! cannot be used is reported ([`PageOptionError`], shown as a notice) and the default is used
 //! instead, so a typo never keeps the page from opening. Plain logic: tested natively.
-use super::model_size::ModelSize;
 use crate::export::{ExportOptions, Format};
 use crate::field::Preset;
 use crate::labels::share::{parse_fragment, percent_decode};
@@ -25,8 +24,8 @@ pub struct PageOptions {
     pub scene: Option<String>,
     /// `labels=`: annotations from a share link (the raw share code).
     pub labels: Option<String>,
-    /// `model=tiny|small|full`.
-    pub model: Option<ModelSize>,
+    /// `model=tiny|small|budget|full` (`field::Preset`).
+    pub model: Option<Preset>,
     /// `res=N`: train and render at 1/N of the frames' resolution (1 to 16).
     pub res: Option<u32>,
     /// `rays=N`: rays per training batch and per render tile.
@@ -111,9 +110,9 @@ impl PageOptions {
                 })
             };
             match key {
-                "model" => match ModelSize::parse(&value) {
+                "model" => match Preset::parse(&value) {
                     Some(m) => options.model = Some(m),
-                    None => bad("model", "tiny, small or full"),
+                    None => bad("model", "tiny, small, budget or full"),
                 },
                 "res" => match value.parse::<u32>() {
                     Ok(n) if (1..=MAX_RES).contains(&n) => options.res = Some(n),
@@ -217,7 +216,7 @@ mod tests {
             PageOptions {
                 scene: Some("a b.zip".into()),
                 labels: Some("xyz".into()),
-                model: Some(ModelSize::Tiny),
+                model: Some(Preset::Tiny),
                 res: Some(4),
                 rays: Some(1200),
                 coarse: Some(4),
@@ -299,7 +298,7 @@ mod tests {
             PageOptions::parse("future=1&profile&model=full"),
             (
                 PageOptions {
-                    model: Some(ModelSize::Full),
+                    model: Some(Preset::Full),
                     ..PageOptions::default()
                 },
                 vec![]

@@ -45,7 +45,7 @@ pub fn run(mut args: AblateArgs) -> CliResult {
     let mut runs = Vec::new();
     let mut notes = Vec::new();
     for (name, path, scene, id) in &scenes {
-        let base = base_config(&args.sim, scene).map_err(|e| format!("{}: {e}", path.display()))?;
+        let base = base_config(&args.sim, scene, path).map_err(|e| format!("{}: {e}", path.display()))?;
         let extractor = scene.features.as_ref().map(|f| f.extractor.as_str());
         let (methods, note) = ablation::methods(&base, extractor);
         if let Some(note) = note {

@@ -41,7 +41,7 @@ pub fn run(mut args: BenchArgs) -> CliResult {
         println!("adapter:          {}", ctx.describe());
     }
     args.field.settle(&ctx);
-    let mut cfg = args.field.resolve(0, None)?;
+    let mut cfg = args.field.resolve()?;
     if let Some(r) = args.rays {
         cfg.batch_rays = r;
     }

@@ -4,9 +4,9 @@ use std::path::{Path, PathBuf};
 
 use clap::Args;
 use scribblefield::bounded_read::read_regular_text;
-use scribblefield::field::{FieldConfig, Preset};
+use scribblefield::field::{FieldConfig, Preset, Runner, finish};
 use scribblefield::gpu::GpuContext;
-use scribblefield::scene::{FeatureCodes, Scene};
+use scribblefield::scene::Scene;
 
 #[derive(Args, Clone, Debug)]
 pub struct FieldConfigArgs {
@@ -31,7 +31,7 @@ impl FieldConfigArgs {
         let (preset, why) = match self.preset {
             Some(p) => (p, "--preset".to_string()),
             None => {
-                let (p, why) = Preset::for_adapter(&ctx.adapter_info);
+                let (p, why) = Preset::for_adapter(&ctx.adapter_info, Runner::Headless);
                 (p, format!("{why} (--preset to choose)"))
             }
         };
@@ -52,19 +52,14 @@ impl FieldConfigArgs {
             preset: Some(self.preset.unwrap_or(Preset::Full)),
             config: self.config.clone(),
         };
-        probe.resolve(0, None).map(|_| ())
+        probe.resolve().map(|_| ())
     }
 
-    /// The preset with `--config` applied, for `classes` classes and, when the archive has
-    /// feature codes, their width (the rendered feature f is compared with them). Not validated:
-    /// callers may change more fields first.
-    pub fn resolve(
-        &self,
-        classes: u32,
-        codes: Option<&FeatureCodes>,
-    ) -> Result<FieldConfig, Box<dyn std::error::Error>> {
+    /// The preset with `--config` applied, not yet finished for a scene ([`Self::resolve_for`])
+    /// nor validated: callers may change more fields first.
+    pub fn resolve(&self) -> Result<FieldConfig, Box<dyn std::error::Error>> {
         let preset = self.preset()?.config();
-        let mut cfg = match &self.config {
+        let cfg = match &self.config {
             Some(arg) => {
                 let (text, source) = config_text(arg)?;
                 let changes: serde_json::Value =
@@ -73,11 +68,22 @@ impl FieldConfigArgs {
             }
             None => preset,
         };
-        cfg.num_classes = classes;
-        if let Some(codes) = codes {
-            cfg.feature_dim = codes.dim;
-        }
         Ok(cfg)
+    }
+
+    /// [`Self::resolve`] finished for `scene` (from `archive`) and `classes` classes
+    /// (`field::finish`); what the scene changed is said on stderr. Not validated.
+    pub fn resolve_for(
+        &self,
+        scene: &Scene,
+        classes: usize,
+        archive: &Path,
+    ) -> Result<FieldConfig, Box<dyn std::error::Error>> {
+        let finished = finish(self.resolve()?, scene, classes);
+        for note in &finished.notes {
+            eprintln!("note: {}: {note}", archive.display());
+        }
+        Ok(finished.config)
     }
 
     /// How the config was chosen, for reports: `budget` or `budget with cfg.json`.
@@ -96,18 +102,6 @@ fn parse_preset(name: &str) -> Result<Preset, String> {
         let names: Vec<&str> = Preset::ALL.iter().map(|p| p.name()).collect();
         format!("unknown preset {name:?}: one of {}", names.join(", "))
     })
-}
-
-/// Turns feature supervision off, with a note naming `archive`, when the scene has no codes to
-/// supervise with (`segment` and `simulate` train what they can rather than refuse).
-pub fn without_missing_codes(cfg: &mut FieldConfig, scene: &Scene, archive: &Path) {
-    if scene.features.is_none() && cfg.feature_supervision {
-        eprintln!(
-            "note: {} has no feature codes; training without feature supervision",
-            archive.display()
-        );
-        cfg.feature_supervision = false;
-    }
 }
 
 /// A `--config` argument that is JSON itself rather than a file name.
@@ -155,7 +149,10 @@ mod tests {
 
     #[test]
     fn config_changes_replace_fields_of_the_preset() {
-        let base = scribblefield::eval::headless::budget_config(6);
+        let base = FieldConfig {
+            num_classes: 6,
+            ..Preset::Budget.config()
+        };
         let changes =
             serde_json::json!({"batch_rays": 128, "adam": {"lr_warmup": 1e-2}, "encoding": {"kind": "hash_only"}});
         let c = apply_config_changes(&base, &changes).unwrap();
@@ -176,7 +173,7 @@ mod tests {
             config: Some(config.into()),
         };
         let inline = args(r#" {"feature_supervision": true, "scribble_propagation": {"min_margin": 0.9}}"#);
-        let cfg = inline.resolve(3, None).unwrap();
+        let cfg = inline.resolve().unwrap();
         assert!(cfg.feature_supervision);
         assert_eq!(cfg.scribble_propagation.min_margin, 0.9);
         assert_eq!(
@@ -187,13 +184,13 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let file = dir.path().join("c.json");
         std::fs::write(&file, r#"{"batch_rays": 64}"#).unwrap();
-        assert_eq!(args(file.to_str().unwrap()).resolve(3, None).unwrap().batch_rays, 64);
-        let missing = args("nope.json").resolve(3, None).unwrap_err().to_string();
+        assert_eq!(args(file.to_str().unwrap()).resolve().unwrap().batch_rays, 64);
+        let missing = args("nope.json").resolve().unwrap_err().to_string();
         assert!(
             missing.contains("--config nope.json") && missing.contains("the JSON itself"),
             "{missing}"
         );
-        let broken = args(r#"{"batch_rays": }"#).resolve(3, None).unwrap_err().to_string();
+        let broken = args(r#"{"batch_rays": }"#).resolve().unwrap_err().to_string();
         assert!(broken.contains("(inline JSON)"), "{broken}");
         // Before the adapter chose a preset, a typo is still found; resolving is refused.
         let unsettled = FieldConfigArgs {
@@ -201,6 +198,6 @@ mod tests {
             config: Some(r#"{"batch_ray": 1}"#.into()),
         };
         assert!(unsettled.check().unwrap_err().to_string().contains("batch_ray"));
-        assert!(unsettled.resolve(3, None).is_err());
+        assert!(unsettled.resolve().is_err());
     }
 }

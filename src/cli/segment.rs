@@ -15,7 +15,7 @@ use scribblefield::labels::{ClassInfo, LabelSet};
 use scribblefield::scene::import::Background;
 use scribblefield::scene::{Scene, read_archive_path};
 
-use super::field_config::{FieldConfigArgs, without_missing_codes};
+use super::field_config::FieldConfigArgs;
 use super::{CliResult, progress};
 
 #[derive(Args)]
@@ -86,10 +86,7 @@ pub fn run(mut args: SegmentArgs) -> CliResult {
     let ctx = GpuContext::new_blocking(&GpuOptions::from_env())?;
     eprintln!("training on {}", ctx.describe());
     args.field.settle(&ctx);
-    let mut cfg = args
-        .field
-        .resolve(labels.classes.len() as u32, scene.features.as_ref())?;
-    without_missing_codes(&mut cfg, &scene, &args.archive);
+    let cfg = args.field.resolve_for(&scene, labels.classes.len(), &args.archive)?;
     cfg.validate()?;
     scene.labels = None;
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, args.seed))?;

@@ -6,7 +6,7 @@ use scribblefield::field::FieldConfig;
 use scribblefield::gpu::GpuContext;
 use scribblefield::scene::Scene;
 
-use super::field_config::{FieldConfigArgs, without_missing_codes};
+use super::field_config::FieldConfigArgs;
 use super::{CliResult, progress};
 
 /// The simulated user's schedule, shared by `simulate` and `ablate`.
@@ -63,8 +63,7 @@ pub fn run(mut args: SimulateArgs) -> CliResult {
     let ctx = GpuContext::new_blocking(&scribblefield::gpu::GpuOptions::from_env())?;
     eprintln!("training on {}", ctx.describe());
     args.sim.field.settle(&ctx);
-    let mut cfg = base_config(&args.sim, &scene)?;
-    without_missing_codes(&mut cfg, &scene, &args.archive);
+    let cfg = base_config(&args.sim, &scene, &args.archive)?;
     let settings = settings(&args.sim, &scene, id, cfg).map_err(|e| format!("{}: {e}", args.archive.display()))?;
     let state = run_one(&ctx, &scene, &settings, &args.sim, &args.output)?;
     if let Some(why) = &state.stopped {
@@ -96,9 +95,9 @@ pub fn read_scene(archive: &Path) -> Result<(Scene, SceneId), Box<dyn std::error
     Ok((scene, id))
 }
 
-/// The preset with `--config` applied, `num_classes` and `feature_dim` from the scene.
-pub fn base_config(sim: &SimArgs, scene: &Scene) -> Result<FieldConfig, Box<dyn std::error::Error>> {
-    let cfg = sim.field.resolve(scene.classes.len() as u32, scene.features.as_ref())?;
+/// The preset with `--config` applied, finished for the scene (from `archive`).
+pub fn base_config(sim: &SimArgs, scene: &Scene, archive: &Path) -> Result<FieldConfig, Box<dyn std::error::Error>> {
+    let cfg = sim.field.resolve_for(scene, scene.classes.len(), archive)?;
     cfg.validate()?;
     Ok(cfg)
 }

@@ -16,12 +16,12 @@ use crate::scene::demo::{DemoOptions, demo_scene};
 pub const SCRIBBLED_FRAMES: [u32; 2] = [0, 12];
 
 /// The demo scene (default options: no feature codes) with synthetic scribbles on
-/// [`SCRIBBLED_FRAMES`], and `cfg` fitted to it: its classes, no feature supervision.
+/// [`SCRIBBLED_FRAMES`], and `cfg` finished for it (`field::finish`): its classes, no feature
+/// supervision.
 pub fn bench_scene(cfg: &mut FieldConfig) -> Result<Scene, Box<dyn std::error::Error>> {
     let mut scene = demo_scene(&DemoOptions::default())?;
     scene.labels = Some(scribble_frames(&scene, &SCRIBBLED_FRAMES, &ScribbleOptions::default()));
-    cfg.num_classes = scene.classes.len() as u32;
-    cfg.feature_supervision = false;
+    *cfg = crate::field::finish(cfg.clone(), &scene, scene.classes.len()).config;
     cfg.validate()?;
     Ok(scene)
 }

@@ -5,23 +5,12 @@
 //! join and `steps` more steps train with them.
 use crate::field::gpu::trainer::{RenderedFrame, Trainer};
 use crate::field::refine::RefineOptions;
-use crate::field::{FieldConfig, Preset};
 use crate::gpu::GpuError;
 use crate::labels::LabelSet;
 use crate::scene::Guide;
 use crate::scene::Scene;
 
 use super::metrics::{Confusion, EvalReport};
-
-/// The `budget` preset (`field::Preset::Budget`) for `classes` classes: a config that trains
-/// in reasonable time on a CPU device. The quality tests and `--preset budget` of `simulate`
-/// and `ablate` use it.
-pub fn budget_config(classes: u32) -> FieldConfig {
-    FieldConfig {
-        num_classes: classes,
-        ..Preset::Budget.config()
-    }
-}
 
 /// Steps trained between loss read-backs (each read waits for the GPU).
 const CHUNK: u32 = 10;

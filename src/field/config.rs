@@ -249,12 +249,6 @@ const MAX_HASH_RESOLUTION: f64 = (1u32 << 20) as f64;
 const MAX_WIDTH: u32 = 1024;
 
 impl FieldConfig {
-    /// A small model for tests and quick browser sessions: 2^14 entries, 8 levels, width 32
-    /// (the `small` preset).
-    pub fn small() -> FieldConfig {
-        super::presets::Preset::Small.config()
-    }
-
     pub fn hash_table_size(&self) -> usize {
         1usize << self.log2_hash_table_size
     }

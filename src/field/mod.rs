@@ -16,8 +16,10 @@ pub mod params;
 pub mod presets;
 pub mod reference;
 pub mod refine;
+pub mod run_config;
 
 pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LastSample, LossWeights, SemanticInput};
 pub use params::{MlpLayout, ParamLayout};
-pub use presets::Preset;
+pub use presets::{Preset, Runner};
+pub use run_config::{Finished, finish};
 pub mod gpu;

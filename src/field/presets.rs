@@ -1,7 +1,29 @@
 //! The named field configs, in one table: the CLI's `--preset` and the page's `#model=` choose
-//! from it by the same names. `num_classes` and `feature_dim` are left at their defaults; the
-//! caller sets them from the scene.
+//! from it by the same names, and [`Preset::for_adapter`] is the one rule for which an adapter
+//! gets when none is named. `num_classes` and `feature_dim` are left at their defaults:
+//! `run_config::finish` sets them from the scene.
 use super::config::{AdamConfig, FieldConfig};
+
+/// Where a field trains, which decides the preset an adapter gets when none is named: a page
+/// gets far fewer steps from the same device than a headless run (it shares it with drawing and
+/// repaints), so it starts smaller.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Runner {
+    /// The web page.
+    Page,
+    /// The command line and the evaluation: `segment`, `simulate`, `bench`, `ablate`.
+    Headless,
+}
+
+impl Runner {
+    /// Whether a run of `preset` here trains on the archive's feature codes. The page's `tiny`
+    /// model does not: on a CPU rasterizer a page gets a few dozen steps in a minute, and there
+    /// the 64-d feature branch and its loss cost more time than they give back in quality
+    /// (docs/results/measurements.md).
+    pub fn trains_on_codes(self, preset: Preset) -> bool {
+        !(self == Runner::Page && preset == Preset::Tiny)
+    }
+}
 
 /// Smallest first.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -40,33 +62,42 @@ impl Preset {
         }
     }
 
-    /// The preset to train when none is named, for the adapter the work runs on, and why (for
-    /// the user: "adapter llvmpipe is a CPU device ..."). The page makes the same split by
-    /// `gpu::context::is_software_adapter` (`app::model_size`), with `tiny` there since a
-    /// browser gets far fewer steps than a headless run: a CPU device gets `budget`, a discrete
-    /// GPU the full model, any other GPU (integrated, virtual, unknown) `small`.
-    pub fn for_adapter(info: &wgpu::AdapterInfo) -> (Preset, String) {
+    /// The preset to train when none is named, for the adapter the work runs on and where it
+    /// runs, and why (for the user: "adapter llvmpipe is a CPU device ..."). A CPU device gets
+    /// `budget` headless and `tiny` in a page, which gets far fewer steps from it; a discrete GPU
+    /// gets the full model headless; any other GPU (integrated, virtual, unknown), and every GPU
+    /// in a page, `small` (the page's `#model=full` asks for more).
+    pub fn for_adapter(info: &wgpu::AdapterInfo, runner: Runner) -> (Preset, String) {
         let name = &info.name;
         if crate::gpu::context::is_software_adapter(info) {
-            return (
-                Preset::Budget,
-                format!("adapter {name} is a CPU device (a software rasterizer): the budget the quality tests train"),
-            );
+            return match runner {
+                Runner::Headless => (
+                    Preset::Budget,
+                    format!(
+                        "adapter {name} is a CPU device (a software rasterizer): the budget the quality tests train"
+                    ),
+                ),
+                Runner::Page => (
+                    Preset::Tiny,
+                    format!("adapter {name} is a CPU device (a software rasterizer): the tiny model"),
+                ),
+            };
         }
         let kind = match info.device_type {
-            wgpu::DeviceType::DiscreteGpu => {
+            wgpu::DeviceType::DiscreteGpu if runner == Runner::Headless => {
                 return (
                     Preset::Full,
                     format!("adapter {name} is a discrete GPU: the full model"),
                 );
             }
+            wgpu::DeviceType::DiscreteGpu => "a discrete GPU shared with the page's drawing",
             wgpu::DeviceType::IntegratedGpu => "an integrated GPU",
             wgpu::DeviceType::VirtualGpu => "a virtual GPU",
             _ => "a GPU of unknown type",
         };
         (
             Preset::Small,
-            format!("adapter {name} is {kind}; the full model wants a discrete GPU"),
+            format!("adapter {name} is {kind}; the full model wants a discrete GPU to itself"),
         )
     }
 
@@ -82,6 +113,10 @@ impl Preset {
                 samples_coarse: 4,
                 samples_fine: 8,
                 batch_rays: 128,
+                // The page trains `tiny` without the archive's codes (`Runner::trains_on_codes`):
+                // the feature branch then only feeds the semantic head, and a narrow one costs
+                // less. Where codes are supervised, `run_config::finish` widens it to theirs.
+                feature_dim: 8,
                 // Few steps happen on a CPU rasterizer: larger steps than the interactive
                 // default so scribbles show in the masks within a minute.
                 adam: AdamConfig {
@@ -121,6 +156,14 @@ impl Preset {
     }
 }
 
+impl FieldConfig {
+    /// A small model for tests and quick browser sessions: 2^14 entries, 8 levels, width 32
+    /// (the `small` preset).
+    pub fn small() -> FieldConfig {
+        Preset::Small.config()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -144,20 +187,29 @@ mod tests {
             device_type,
             ..wgpu::AdapterInfo::new(wgpu::DeviceType::Other, wgpu::Backend::Noop)
         };
-        let (p, why) = Preset::for_adapter(&info("llvmpipe (LLVM 19.1.7, 256 bits)", wgpu::DeviceType::Cpu));
+        let (p, why) = Preset::for_adapter(
+            &info("llvmpipe (LLVM 19.1.7, 256 bits)", wgpu::DeviceType::Cpu),
+            Runner::Headless,
+        );
         assert_eq!(p, Preset::Budget);
         assert!(
             why.starts_with("adapter llvmpipe") && why.contains("CPU device"),
             "{why}"
         );
         // Browsers often report no device type: the name tells.
-        let (p, _) = Preset::for_adapter(&info("SwiftShader Device", wgpu::DeviceType::Other));
-        assert_eq!(p, Preset::Budget);
-        let (p, why) = Preset::for_adapter(&info("NVIDIA H200", wgpu::DeviceType::DiscreteGpu));
+        let swiftshader = info("SwiftShader Device", wgpu::DeviceType::Other);
+        assert_eq!(Preset::for_adapter(&swiftshader, Runner::Headless).0, Preset::Budget);
+        let h200 = info("NVIDIA H200", wgpu::DeviceType::DiscreteGpu);
+        let (p, why) = Preset::for_adapter(&h200, Runner::Headless);
         assert_eq!(p, Preset::Full);
         assert!(why.contains("discrete GPU"), "{why}");
-        let (p, why) = Preset::for_adapter(&info("Intel Iris Xe", wgpu::DeviceType::IntegratedGpu));
+        let iris = info("Intel Iris Xe", wgpu::DeviceType::IntegratedGpu);
+        let (p, why) = Preset::for_adapter(&iris, Runner::Headless);
         assert_eq!(p, Preset::Small);
         assert!(why.contains("integrated GPU"), "{why}");
+        // A page gets fewer steps from the same device: one size smaller.
+        assert_eq!(Preset::for_adapter(&swiftshader, Runner::Page).0, Preset::Tiny);
+        assert_eq!(Preset::for_adapter(&h200, Runner::Page).0, Preset::Small);
+        assert_eq!(Preset::for_adapter(&iris, Runner::Page).0, Preset::Small);
     }
 }

@@ -22,7 +22,6 @@ use self::training::TrainingControl;
 use self::view::View;
 use super::browser;
 use super::frame_strip::FrameStrip;
-use super::model_size::ModelSize;
 use super::overlays::RenderedTextures;
 use super::page_options::{PageOptionError, PageOptions};
 use super::page_status;
@@ -31,6 +30,7 @@ use super::persistence::{self, Origin};
 use super::side_panel;
 use super::store::Opened;
 use crate::export::ExportOptions;
+use crate::field::{Preset, Runner};
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
 use crate::labels::autosave::SceneSource;
@@ -67,7 +67,7 @@ pub struct AnnotatorSetup {
     pub source: SceneSource,
     /// eframe's device, shared with the trainer; `None` without WebGPU.
     pub gpu: Option<GpuContext>,
-    pub model: ModelSize,
+    pub model: Preset,
     /// The page's options; `labels` only for the first scene of the page.
     pub options: PageOptions,
     /// Values in the address that could not be used: told to the user.
@@ -291,7 +291,7 @@ impl Annotator {
                         frame: self.view.frame as u32,
                         labelled_pixels: self.doc.summary.labelled_pixels,
                         factor: t.factor(),
-                        has_codes: self.doc.scene.features.is_some() && t.model.trains_on_feature_codes(),
+                        has_codes: self.doc.scene.features.is_some() && Runner::Page.trains_on_codes(t.model),
                         animate: !t.software(),
                     },
                 );

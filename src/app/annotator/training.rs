@@ -3,13 +3,13 @@
 use std::rc::Rc;
 
 use super::super::browser;
-use super::super::model_size::ModelSize;
 use super::super::page_options::{Kernels, PageOptions};
 use super::super::training::scene::{auto_factor, downscale};
 use super::super::training::{Phase, Refresh, Training, TrainingOptions, TrainingSetup};
 use super::document::Document;
 use crate::export::ExportOptions;
 use crate::field::refine::RefineOptions;
+use crate::field::{Preset, Runner, finish};
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
 use crate::scene::Scene;
@@ -17,7 +17,7 @@ use crate::scene::Scene;
 pub struct TrainingControl {
     /// The page's device; `None` without WebGPU.
     gpu: Option<GpuContext>,
-    pub model: ModelSize,
+    pub model: Preset,
     options: PageOptions,
     /// The running task; `None` before the first start, without a GPU, or while a restart waits.
     pub handle: Option<Training>,
@@ -32,7 +32,7 @@ pub struct TrainingControl {
 }
 
 impl TrainingControl {
-    pub fn new(gpu: Option<GpuContext>, model: ModelSize, options: PageOptions) -> TrainingControl {
+    pub fn new(gpu: Option<GpuContext>, model: Preset, options: PageOptions) -> TrainingControl {
         TrainingControl {
             gpu,
             model,
@@ -62,8 +62,8 @@ impl TrainingControl {
         let factor = self
             .options
             .res
-            .unwrap_or_else(|| auto_factor(scene.width, scene.height, self.model == ModelSize::Tiny));
-        let key = (factor, self.model.trains_on_feature_codes());
+            .unwrap_or_else(|| auto_factor(scene.width, scene.height, self.model == Preset::Tiny));
+        let key = (factor, Runner::Page.trains_on_codes(self.model));
         let train_scene = match &self.train_scene {
             Some((k, s)) if *k == key => s.clone(),
             _ => {
@@ -72,7 +72,7 @@ impl TrainingControl {
                 s
             }
         };
-        let mut config = self.model.config(&train_scene, doc.labels.classes.len());
+        let mut config = finish(self.model.config(), &train_scene, doc.labels.classes.len()).config;
         if let Some(rays) = self.options.rays {
             config.batch_rays = rays;
         }

@@ -17,10 +17,10 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::eval::Confusion;
-use crate::eval::headless::{budget_config, render_and_score, train_schedule};
-use crate::field::FieldConfig;
+use crate::eval::headless::{render_and_score, train_schedule};
 use crate::field::gpu::trainer::Trainer;
 use crate::field::refine::RefineOptions;
+use crate::field::{FieldConfig, Preset, finish};
 use crate::gpu::{GpuContext, GpuOptions};
 use crate::labels::synthetic::{ScribbleOptions, scribble_frames};
 use crate::labels::{LabelSet, UNLABELLED, rasterize_frame};
@@ -147,11 +147,12 @@ pub fn plan(options: &SuiteOptions) -> Result<Vec<RunSpec>, String> {
 }
 
 /// The config a run of `capture` trains with: the budget preset with feature supervision, the
-/// `overrides` on top (not for the ceiling), propagation off for the strokes alone.
+/// `overrides` on top (not for the ceiling), propagation off for the strokes alone, finished for
+/// the scene.
 pub fn run_config(scene: &Scene, mode: Mode, overrides: Option<&serde_json::Value>) -> Result<FieldConfig, String> {
     let mut cfg = FieldConfig {
         feature_supervision: true,
-        ..budget_config(scene.classes.len() as u32)
+        ..Preset::Budget.config()
     };
     if let (Some(overrides), false) = (overrides, mode == Mode::Ceiling) {
         cfg = cfg.with_changes(overrides).map_err(|e| format!("--config: {e}"))?;
@@ -159,6 +160,7 @@ pub fn run_config(scene: &Scene, mode: Mode, overrides: Option<&serde_json::Valu
     if mode != Mode::Spread {
         cfg.scribble_propagation.enabled = false;
     }
+    let cfg = finish(cfg, scene, scene.classes.len()).config;
     cfg.validate().map_err(|e| e.to_string())?;
     Ok(cfg)
 }

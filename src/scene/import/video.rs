@@ -286,7 +286,7 @@ mod page {
             .map(|e| String::from(e.message()))
             .or_else(|| e.as_string())
             .unwrap_or_else(|| {
-                "the browser cannot decode it (Chrome and Safari decode HEVC only where the hardware does)".into()
+                "no decoder for its codec here (Chrome and Safari decode HEVC only where the hardware does)".into()
             })
     }
 
