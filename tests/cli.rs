@@ -76,7 +76,7 @@ fn demo_scene_then_info() {
         "{t}"
     );
     assert!(
-        tail[0].contains("no feature codes") && tail[0].contains("--features baseline"),
+        tail[0].contains("no feature codes") && tail[0].contains("baseline codes `pack` bakes"),
         "{t}"
     );
 }
@@ -100,6 +100,9 @@ fn pack_real_autolabel_scene() {
     let t = text(&run(&["info", out.to_str().unwrap()]));
     assert!(t.contains("frames:      10") && t.contains("320 x 240"), "{t}");
     assert!(t.contains("mug") && t.contains("ground truth: yes"), "{t}");
+    // The weight-free codes are baked unless told not to, and the next steps need no --config.
+    assert!(t.contains("features:    yes (40 x 30 x 64, baseline"), "{t}");
+    assert!(!t.contains("--config") && !t.contains("no feature codes"), "{t}");
 }
 
 #[test]
@@ -110,8 +113,23 @@ fn pack_real_colmap_capture() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("alex.scene.zip");
     let (src, out_s) = (src.to_str().unwrap(), out.to_str().unwrap());
-    let pack =
-        |extra: &[&str]| run(&[&["pack", src, "-o", out_s, "--max-size", "64", "--every", "13"], extra].concat());
+    let pack = |extra: &[&str]| {
+        run(&[
+            &[
+                "pack",
+                src,
+                "-o",
+                out_s,
+                "--max-size",
+                "64",
+                "--every",
+                "13",
+                "--no-features",
+            ],
+            extra,
+        ]
+        .concat())
+    };
     let o = pack(&["--mask-classes", "room,head"]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("(colmap layout)"), "{}", text(&o));
@@ -138,6 +156,7 @@ fn pack_real_seven_scenes_subset() {
         src.to_str().unwrap(),
         "-o",
         out.to_str().unwrap(),
+        "--no-features",
         "--every",
         "10",
         "--max-size",
@@ -208,7 +227,13 @@ fn pack_nerf_split_folders_and_scannet_exports() {
     let (lego, scan) = write_lego_and_scannet(d);
     let out = d.join("lego.scene.zip");
     let pack = |input: &Path, extra: &[&str]| {
-        let mut args = vec!["pack", input.to_str().unwrap(), "-o", out.to_str().unwrap()];
+        let mut args = vec![
+            "pack",
+            input.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--no-features",
+        ];
         args.extend_from_slice(extra);
         run(&args)
     };
@@ -444,6 +469,16 @@ fn pack_bakes_baseline_and_imported_features() {
     );
     let t = text(&run(&["info", out_s]));
     assert!(t.contains("features:    yes (20 x 15 x 64, baseline"), "{t}");
+    // --no-features packs none, and cannot go with --features.
+    let o = pack(&["--no-features"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&run(&["info", out_s])).contains("features:    no"));
+    let o = pack(&["--no-features", "--features", "baseline"]);
+    assert!(
+        !o.status.success() && text(&o).contains("cannot be used with"),
+        "{}",
+        text(&o)
+    );
 
     // Imported maps, (C, H, W) as PyTorch writes them, named like the capture's frames.
     let npy = dir.path().join("npy");

@@ -96,6 +96,7 @@ impl Setup {
             &s.path("s.scene.zip"),
             "--max-size",
             "32",
+            "--no-features",
         ]));
         ok(&run(&[
             "scribble-from-gt",

@@ -36,6 +36,8 @@ fn tiny_config(classes: usize) -> FieldConfig {
         samples_coarse: 4,
         samples_fine: 8,
         num_classes: classes as u32,
+        // The demo scenes here have no codes to supervise with.
+        feature_supervision: false,
         ..Preset::Budget.config()
     }
 }

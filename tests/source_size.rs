@@ -44,7 +44,15 @@ fn masks_at_the_capture_size_agree_with_the_archive_size() {
     let path = |name: &str| d.join(name).to_str().unwrap().to_string();
     let cap = capture(&d.join("capture"), 0);
     let cap = cap.to_str().unwrap();
-    let t = ok(&run(&["pack", cap, "-o", &path("s.scene.zip"), "--max-size", "48"]));
+    let t = ok(&run(&[
+        "pack",
+        cap,
+        "-o",
+        &path("s.scene.zip"),
+        "--max-size",
+        "48",
+        "--no-features",
+    ]));
     assert!(t.contains(&format!("{} x {}", ARCHIVE.0, ARCHIVE.1)), "{t}");
     ok(&run(&[
         "scribble-from-gt",
@@ -180,7 +188,15 @@ fn time_masks_at_full_size() {
     .unwrap();
     write_autolabel(&scene, &d.join("capture"));
     let cap = path("capture");
-    ok(&run(&["pack", &cap, "-o", &path("s.scene.zip"), "--max-size", "160"]));
+    ok(&run(&[
+        "pack",
+        &cap,
+        "-o",
+        &path("s.scene.zip"),
+        "--max-size",
+        "160",
+        "--no-features",
+    ]));
     ok(&run(&[
         "scribble-from-gt",
         &path("s.scene.zip"),

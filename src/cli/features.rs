@@ -89,6 +89,12 @@ impl FeatureArgs {
         }
     }
 
+    /// These arguments with `kind` where `--features` was not given.
+    pub fn or(mut self, kind: FeatureKind) -> FeatureArgs {
+        self.features.get_or_insert(kind);
+        self
+    }
+
     /// Bakes the codes into `scene` when `--features` was given.
     pub fn apply(&self, scene: &mut Scene) -> CliResult {
         let Some(kind) = self.features else { return Ok(()) };

@@ -23,27 +23,23 @@ fn next_steps(scene: &Scene, archive: &str) -> Vec<String> {
     } else {
         archive.to_string()
     };
-    let supervision = match scene.features {
-        Some(_) => " --config '{\"feature_supervision\": true}'",
-        None => "",
-    };
     let mut lines = Vec::new();
     let segment = match (&scene.labels, scene.has_gt()) {
-        (Some(_), _) => format!("segment {archive} -o masks/{supervision}   (trains on the strokes it holds)"),
+        (Some(_), _) => format!("segment {archive} -o masks/   (trains on the strokes it holds)"),
         (None, has_gt) => {
             lines.push(if has_gt {
                 format!("next:        scribblefield scribble-from-gt {archive} --frames 0 -o labels.json   (strokes from its ground truth)")
             } else {
                 "next:        draw strokes in the page (scribblefield serve www, open this archive) and save labels.json".to_string()
             });
-            format!("segment {archive} --labels labels.json -o masks/{supervision}")
+            format!("segment {archive} --labels labels.json -o masks/")
         }
     };
     let lead = if lines.is_empty() { "next:  " } else { "then:  " };
     lines.push(format!("{lead}      scribblefield {segment}"));
     if scene.features.is_none() {
         lines.push(
-            "note:        no feature codes: the documented figures use archives packed with --features baseline --feature-stride 2"
+            "note:        no feature codes (packed with --no-features?): the documented figures use the baseline codes `pack` bakes"
                 .to_string(),
         );
     }

@@ -50,6 +50,11 @@ pub struct PackArgs {
     alpha_gt: bool,
     #[command(flatten)]
     features: super::features::FeatureArgs,
+    /// Bake no feature codes. Without it `pack` bakes the weight-free `baseline` codes unless
+    /// `--features` names another extractor: the documented quality figures and the page use
+    /// them, and training supervises with them.
+    #[arg(long, conflicts_with = "features")]
+    no_features: bool,
 }
 
 pub fn run(args: PackArgs) -> CliResult {
@@ -83,7 +88,12 @@ pub fn run(args: PackArgs) -> CliResult {
     for line in &imported.report {
         println!("{line}");
     }
-    args.features.apply(&mut imported.scene)?;
+    let features = if args.no_features {
+        args.features
+    } else {
+        args.features.or(super::features::FeatureKind::Baseline)
+    };
+    features.apply(&mut imported.scene)?;
     write_archive_path(&imported.scene, &args.output)?;
     println!(
         "packed {} ({} layout) into {}",

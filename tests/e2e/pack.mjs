@@ -13,7 +13,7 @@
 //   E2E_URL        page to open, e.g. http://127.0.0.1:8080/ (required)
 //   E2E_CAPTURE    the capture folder, e.g. ../shared/data/alexander-colmap (required)
 //   E2E_REFERENCE  the same capture packed by the command line with the same options
-//                  (`pack E2E_CAPTURE --max-size 96 --every 9`): its ground truth plans the
+//                  (`pack E2E_CAPTURE --max-size 96 --every 9 --no-features`): its ground truth plans the
 //                  strokes, and the page's scene must match it (required)
 //   E2E_OUT        folder for screenshots and the downloaded zip (default /tmp/e2e)
 //   CHROMIUM       browser binary (default /usr/bin/chromium)

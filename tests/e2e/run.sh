@@ -47,7 +47,8 @@ if [ -d "$SPARSE_CAPTURE" ] && { wanted spread || wanted pack; }; then
   # the same); this archive, packed by the command line, gives it the ground truth to plan
   # strokes from and the scene the page must arrive at.
   PACK_REFERENCE="$(mktemp -d)/alexander-colmap.scene.zip"
-  target/release/scribblefield pack "$SPARSE_CAPTURE" -o "$PACK_REFERENCE" --max-size 96 --every 9 >/dev/null
+  target/release/scribblefield pack "$SPARSE_CAPTURE" -o "$PACK_REFERENCE" --max-size 96 --every 9 --no-features \
+    >/dev/null
 elif [ ! -d "$SPARSE_CAPTURE" ]; then
   echo "(no $SPARSE_CAPTURE: skipping spread.mjs and pack.mjs)"
 fi
@@ -60,7 +61,7 @@ if [ -d "$ROOT/../shared/data/ycb-video-0000" ] && command -v ffmpeg >/dev/null 
   STRAY_FIXTURE="$STRAY_DIR" cargo test --release --quiet --test import_stray write_browser_fixture -- --ignored \
     >/dev/null
   target/release/scribblefield pack "$STRAY_DIR/ycb-stray" -o "$STRAY_DIR/reference.scene.zip" --max-size 160 \
-    --every 3 >/dev/null
+    --every 3 --no-features >/dev/null
 elif wanted stray; then
   echo "(no ../shared/data/ycb-video-0000 or no ffmpeg: skipping stray.mjs)"
 fi

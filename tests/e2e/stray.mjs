@@ -12,7 +12,7 @@
 //   E2E_STRAY            the capture folder (H.264) (required)
 //   E2E_STRAY_HEVC       the same with an HEVC video (required)
 //   E2E_STRAY_REFERENCE  the capture packed by the command line: `pack E2E_STRAY --max-size 160
-//                        --every 3` (required)
+//                        --every 3 --no-features` (required)
 //   E2E_OUT              folder for screenshots and the saved archive (default /tmp/e2e)
 //   CHROMIUM             browser binary (default /usr/bin/chromium)
 import { mkdirSync, readFileSync } from "node:fs";
@@ -32,7 +32,7 @@ if (!url || !capturePath || !hevcPath || !referencePath) {
 }
 const outDir = process.env.E2E_OUT || "/tmp/e2e";
 mkdirSync(outDir, { recursive: true });
-// As `pack --max-size 160 --every 3`: frames 0, 3, 6 and 9 of 10, no features.
+// As `pack --max-size 160 --every 3 --no-features`: frames 0, 3, 6 and 9 of 10.
 const PAGE_OPTIONS = "pack-size=160&pack-every=3&pack-stride=0&model=tiny&rays=256";
 const TIMEOUT_MS = 300_000;
 /// The corner block of frame `n` (tests/import_stray.rs `marker`).
