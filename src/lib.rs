@@ -17,10 +17,13 @@ pub mod labels;
 mod module_layers;
 pub mod pause;
 pub mod percent;
+pub mod refine;
 pub mod rng;
 // Weights files and trainer checkpoints: native only (the page reads neither).
 #[cfg(not(target_arch = "wasm32"))]
 pub mod safetensors;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod saved_field;
 pub mod scene;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod serve;

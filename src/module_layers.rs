@@ -31,11 +31,12 @@ const LAYERS: &[&[&str]] = &[
     // Annotating: brush, history, share links, autosave, synthetic scribbles, canvas zoom.
     &["labels"],
     // Spreading the strokes over more pixels and frames before training.
-    &["spread"],
+    &["spread", "refine"],
     // What learns from labels: pretrained feature extractors, the neural field.
     &["features", "field"],
     // What uses a trained field: evaluation, mask export; the static file server. And the fuzz
     // targets' entry points, which feed the parsers of scene, labels and features.
+    &["saved_field"],
     &["eval", "export", "serve", "fuzzing"],
     // The two front ends.
     &["app", "cli"],

@@ -6,7 +6,7 @@
 //!
 //! Written here rather than taken from the `safetensors` crate because every error must name the
 //! file and the tensor it is about. Used by the feature extractors' weights (`features`) and the
-//! trainer's checkpoints (`field::checkpoint`), hence at the bottom of the module layers.
+//! trainer's checkpoints (`saved_field`), hence at the bottom of the module layers.
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -52,7 +52,7 @@ pub struct SafeTensors {
 }
 
 /// Largest safetensors file read (a regular file only): the weights read here are tens of MB,
-/// a trainer checkpoint at most `field::checkpoint::MAX_FILE_BYTES`.
+/// a trainer checkpoint at most `saved_field::MAX_FILE_BYTES`.
 const MAX_FILE_BYTES: u64 = 2 << 30;
 
 fn dtype_size(dtype: &str) -> Option<usize> {

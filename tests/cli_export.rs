@@ -11,12 +11,12 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use cli_support::{fails, ok, run, write_autolabel};
-use scribblefield::field::checkpoint::{Checkpoint, TrainedOn};
 use scribblefield::field::gpu::trainer::TrainerState;
 use scribblefield::field::params::ParamLayout;
 use scribblefield::field::{FieldConfig, Preset};
 use scribblefield::gpu::test_support::gpu_for_tests;
 use scribblefield::labels::LabelSet;
+use scribblefield::saved_field::{Checkpoint, TrainedOn};
 use scribblefield::scene::demo::{DemoOptions, demo_scene};
 use scribblefield::scene::read_archive_path;
 

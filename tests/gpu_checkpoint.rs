@@ -1,13 +1,13 @@
-//! The trainer's checkpoint (`field::checkpoint`, a safetensors file) on lavapipe: a checkpoint
+//! The trainer's checkpoint (`saved_field`, a safetensors file) on lavapipe: a checkpoint
 //! written by one trainer, read from disk by a fresh trainer, gives the same state and renders the
 //! same frame bit for bit; another model refuses it, naming the file.
 use std::collections::BTreeMap;
 
 use scribblefield::field::FieldConfig;
-use scribblefield::field::checkpoint::Checkpoint;
 use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::gpu::test_support::gpu_for_tests;
 use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
+use scribblefield::saved_field::Checkpoint;
 use scribblefield::scene::demo::{DemoOptions, demo_scene};
 
 #[test]

@@ -1,4 +1,4 @@
-//! `shaders/refine.wgsl` against its CPU twin `field::refine::refine_probabilities` on lavapipe:
+//! `shaders/refine.wgsl` against its CPU twin `refine::refine_probabilities` on lavapipe:
 //! one round into an output buffer filled with garbage, and the whole refinement through
 //! `RefinePass::refine` and `RenderedFrame::refine_on_gpu`.
 //!
@@ -6,12 +6,12 @@
 //! rounded and it may fuse multiply-adds; probabilities in [0, 1] agree within 1e-5 after a round
 //! and 1e-4 after several.
 use image::{ImageBuffer, Luma, Rgb, RgbImage};
-use scribblefield::field::gpu::refine::{GuideBuffers, RefinePass, RefineUniforms};
 use scribblefield::field::gpu::view::FrameAssembler;
-use scribblefield::field::refine::{RefineOptions, refine_probabilities};
 use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{read_buffer_blocking, storage_buffer_from, storage_buffer_garbage};
 use scribblefield::gpu::test_support::gpu_for_tests;
+use scribblefield::refine::gpu::{GuideBuffers, RefinePass, RefineUniforms};
+use scribblefield::refine::{RefineOptions, refine_probabilities};
 use scribblefield::rng::SplitMix64;
 use scribblefield::scene::DepthImage;
 use scribblefield::scene::Guide;

@@ -8,10 +8,10 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use scribblefield::features::pth::{PickleLimits, Pth, PthLimits};
-use scribblefield::field::checkpoint::Checkpoint;
 use scribblefield::field::gpu::trainer::TrainerState;
 use scribblefield::field::{ParamLayout, Preset};
 use scribblefield::safetensors::SafeTensors;
+use scribblefield::saved_field::Checkpoint;
 use scribblefield::scene::import::{ImportOptions, import, text_checks};
 
 fn err<T>(r: Result<T, impl std::fmt::Display>) -> String {
@@ -279,7 +279,7 @@ fn checkpoints_with_overlapping_tensors_huge_configs_or_nan_are_refused() {
 #[test]
 #[ignore = "writes the seed corpus"]
 fn write_checkpoint_fuzz_seed() {
-    use scribblefield::field::checkpoint::TrainedOn;
+    use scribblefield::saved_field::TrainedOn;
     use scribblefield::scene::label_set::{ClassInfo, LabelSet};
     let mut ck = small_checkpoint();
     let classes = (0..2)

@@ -1,14 +1,14 @@
 //! `export CHECKPOINT ARCHIVE -o DIR`: the masks `segment` wrote, again, from the field it saved
 //! with `--save-checkpoint`, without training: at the archive's resolution or, with `--source`,
 //! at the capture's, with the refinement asked for. The checkpoint's metadata
-//! (`field::checkpoint::TrainedOn`) says which archive, seed and labels the field was trained
+//! (`saved_field::TrainedOn`) says which archive, seed and labels the field was trained
 //! with; an archive other than that one is refused before the GPU opens.
 use std::path::PathBuf;
 
 use clap::Args;
-use scribblefield::field::checkpoint::{Checkpoint, TrainedOn};
 use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::gpu::{GpuContext, GpuOptions};
+use scribblefield::saved_field::{Checkpoint, TrainedOn};
 use scribblefield::scene::read_archive_path;
 
 use super::CliResult;

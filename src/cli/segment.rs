@@ -6,12 +6,12 @@ use scribblefield::eval::Confusion;
 use scribblefield::eval::headless::{render_and_score, train_schedule};
 use scribblefield::eval::source_size::{SourceCapture, render_at_source};
 use scribblefield::export::{ExportOptions, Format, MaskDirWriter};
-use scribblefield::field::checkpoint::TrainedOn;
 use scribblefield::field::gpu::scene_buffers::LabelIndex;
 use scribblefield::field::gpu::trainer::Trainer;
-use scribblefield::field::refine::RefineOptions;
 use scribblefield::gpu::{GpuContext, GpuOptions};
 use scribblefield::labels::{ClassInfo, LabelSet};
+use scribblefield::refine::RefineOptions;
+use scribblefield::saved_field::TrainedOn;
 use scribblefield::scene::import::Background;
 use scribblefield::scene::{Scene, read_archive_path};
 
@@ -64,7 +64,7 @@ pub(super) struct MaskArgs {
     objects: Option<u32>,
     /// Rounds of edge-aware refinement of each mask with its frame's colour and depth (0: the
     /// field's own argmax); default: 3 where the frames have dense depth, 10 where they do not
-    /// (photo captures); see `field::refine`.
+    /// (photo captures); see `refine`.
     #[arg(long)]
     refine_iterations: Option<u32>,
     /// The capture folder the archive was packed from (any layout `pack` reads): the masks are

@@ -4,9 +4,9 @@
 //! Schedule: `warmup` steps without labels (colour, depth and features only), then the labels
 //! join and `steps` more steps train with them.
 use crate::field::gpu::trainer::{RenderedFrame, Trainer};
-use crate::field::refine::RefineOptions;
 use crate::gpu::GpuError;
 use crate::labels::LabelSet;
+use crate::refine::RefineOptions;
 use crate::scene::Guide;
 use crate::scene::Scene;
 

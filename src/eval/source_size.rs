@@ -14,7 +14,7 @@ use image::GrayImage;
 
 use crate::field::gpu::trainer::Trainer;
 use crate::field::gpu::view::ViewCamera;
-use crate::field::refine::{RefineOptions, argmax_and_confidence, refine_probabilities};
+use crate::refine::{RefineOptions, argmax_and_confidence, refine_probabilities};
 use crate::scene::Guide;
 use crate::scene::Scene;
 use crate::scene::camera::Pose;

@@ -9,13 +9,10 @@
 //! 5,056 + 64·C (semantic), i.e. 14,321,574 f32 (≈ 55 MiB) for C = 2. The trainer keeps four
 //! buffers of that length (parameters, gradient, Adam m and v).
 pub mod bf16;
-#[cfg(not(target_arch = "wasm32"))]
-pub mod checkpoint;
 pub mod config;
 pub mod params;
 pub mod presets;
 pub mod reference;
-pub mod refine;
 pub mod run_config;
 
 pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LastSample, LossWeights, SemanticInput};

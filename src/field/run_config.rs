@@ -30,3 +30,57 @@ pub fn finish(mut cfg: FieldConfig, scene: &Scene, classes: usize) -> Finished {
     }
     Finished { config: cfg, notes }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::field::{FieldConfig, LastSample};
+    use crate::refine::RefineOptions;
+    use crate::scene::Scene;
+    use crate::scene::demo::{DemoOptions, demo_scene};
+
+    #[test]
+    fn photo_captures_get_more_rounds_and_an_opaque_last_sample() {
+        let last_sample = |scene: &Scene| FieldConfig::default().for_scene(scene).last_sample;
+        let mut scene = demo_scene(&DemoOptions {
+            width: 24,
+            height: 16,
+            frames: 4,
+            ..DemoOptions::default()
+        })
+        .unwrap();
+        assert_eq!(RefineOptions::for_scene(&scene), RefineOptions::DEFAULT);
+        assert_eq!(last_sample(&scene), LastSample::Clear);
+        let forced = FieldConfig {
+            last_sample: LastSample::Opaque,
+            ..FieldConfig::default()
+        };
+        assert!(forced.for_scene(&scene).opaque_last_sample());
+        // A reconstruction's points: a reading at one pixel in ten, on 3 frames of 4.
+        for frame in &mut scene.frames[1..] {
+            let depth = frame.depth.as_mut().unwrap();
+            for (i, p) in depth.pixels_mut().enumerate() {
+                if i % 10 != 0 {
+                    p.0[0] = 0;
+                }
+            }
+        }
+        let sparse = RefineOptions::for_scene(&scene);
+        assert_eq!(last_sample(&scene), LastSample::Opaque);
+        assert_eq!(sparse.iterations, RefineOptions::ROUNDS_WITHOUT_DENSE_DEPTH);
+        assert_eq!(
+            RefineOptions {
+                iterations: 3,
+                ..sparse
+            },
+            RefineOptions::DEFAULT
+        );
+        for frame in &mut scene.frames {
+            frame.depth = None;
+        }
+        assert_eq!(
+            RefineOptions::for_scene(&scene).iterations,
+            RefineOptions::ROUNDS_WITHOUT_DENSE_DEPTH
+        );
+        assert_eq!(last_sample(&scene), LastSample::Opaque);
+    }
+}

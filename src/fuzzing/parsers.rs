@@ -6,9 +6,9 @@ use std::rc::Rc;
 
 use super::{Outcome, assert_scene_within_limits, split_on};
 use crate::features::pth::{Pth, PthLimits};
-use crate::field::checkpoint::{Checkpoint, MAX_PARAMS, TrainedOn};
 use crate::field::{ParamLayout, Preset};
 use crate::pause::{NoPause, run_to_end};
+use crate::saved_field::{Checkpoint, MAX_PARAMS, TrainedOn};
 use crate::scene::import::{ImportOptions, MemoryFiles, import_files, text_checks};
 
 /// Limits of the `.pth` targets: far below the defaults, so a fuzzed input that reaches them is

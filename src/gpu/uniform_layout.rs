@@ -111,12 +111,7 @@ pub const MIRRORS: &[Mirror] = &[
         "sample_points.wgsl",
         "SamplePlanUniforms",
     ),
-    mirror(
-        "src/field/gpu/refine.rs",
-        "RefineUniforms",
-        "refine.wgsl",
-        "RefineUniforms",
-    ),
+    mirror("src/refine/gpu.rs", "RefineUniforms", "refine.wgsl", "RefineUniforms"),
     mirror(
         "src/field/gpu/scene_buffers.rs",
         "SceneUniforms",

@@ -8,10 +8,10 @@ use super::super::training::scene::{auto_factor, downscale};
 use super::super::training::{Phase, Refresh, Training, TrainingOptions, TrainingSetup};
 use super::document::Document;
 use crate::export::ExportOptions;
-use crate::field::refine::RefineOptions;
 use crate::field::{Preset, Runner, finish};
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
+use crate::refine::RefineOptions;
 use crate::scene::Scene;
 
 pub struct TrainingControl {

@@ -20,10 +20,10 @@ pub use self::messages::{Phase, Progress, RefreshTimes, Rendered, Spread, TrainC
 use super::browser::now_ms;
 use crate::export::ExportOptions;
 use crate::field::FieldConfig;
-use crate::field::refine::RefineOptions;
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
 use crate::labels::scale::scale_labels;
+use crate::refine::RefineOptions;
 use crate::scene::Scene;
 
 /// How the visible frame's mask is refreshed when it is out of date.

@@ -16,12 +16,12 @@ use super::scene::upscale_mask;
 use super::{TrainingOptions, TrainingSetup};
 use crate::export::{ExportOptions, ExportWriter, zip_files};
 use crate::field::FieldConfig;
-use crate::field::gpu::refine::RefinePass;
 use crate::field::gpu::trainer::{DepthGuide, RenderedFrame, Trainer, ViewCamera};
 use crate::field::gpu::view::frame_depth_at;
 use crate::gpu::GpuContext;
 use crate::labels::LabelSet;
 use crate::pause::Pause;
+use crate::refine::gpu::RefinePass;
 use crate::scene::Guide;
 use crate::scene::Scene;
 

@@ -1,5 +1,5 @@
 //! The run's folder: saving and loading the resume state, labels, curve and the trainer's
-//! checkpoint (`trainer.safetensors`, `field::checkpoint`).
+//! checkpoint (`trainer.safetensors`, `saved_field`).
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -8,9 +8,9 @@ use super::{
     SimulateSettings, SimulateState, TRAINER_FILE, io_error,
 };
 use crate::eval::curves::curve_csv;
-use crate::field::checkpoint::Checkpoint;
 use crate::field::gpu::trainer::Trainer;
 use crate::labels::LabelSet;
+use crate::saved_field::Checkpoint;
 
 /// The checkpoint's metadata key for the round it was saved after.
 const ROUND_KEY: &str = "round";

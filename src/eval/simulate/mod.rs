@@ -11,7 +11,7 @@
 //! | `simulate.json` | settings, rounds and clicks done, the curve (the resume state; written last) |
 //! | `curve.csv` | `round,clicks,mean_iou,pixel_acc,steps`, one row per evaluation |
 //! | `labels.json` | every click so far, as 1-point strokes (the `labels.json` format) |
-//! | `trainer.safetensors` | the trainer's parameters, Adam moments and step count after the last round (`field::checkpoint`) |
+//! | `trainer.safetensors` | the trainer's parameters, Adam moments and step count after the last round (`saved_field`) |
 //!
 //! **Resume**: a folder holding a run with the same settings (scene bytes, field config, seed,
 //! schedule, frame split; the click budget may differ) continues after its last completed round:
@@ -25,9 +25,9 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::field::gpu::trainer::Trainer;
-use crate::field::refine::RefineOptions;
 use crate::gpu::{GpuContext, GpuError};
 use crate::labels::{LabelSet, Stroke, UNLABELLED, rasterize_frame};
+use crate::refine::RefineOptions;
 use crate::rng::SplitMix64;
 use crate::scene::GT_VOID;
 use crate::scene::Scene;

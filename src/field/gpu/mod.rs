@@ -15,7 +15,6 @@ pub mod fixed_point;
 pub mod head_glue;
 pub mod keep;
 pub mod rays;
-pub mod refine;
 pub mod row_view;
 pub mod scene_buffers;
 pub mod sh_encode;

@@ -6,11 +6,11 @@
 //! is rendered twice: first with every sample spread over the ray, which gives a rough depth, then
 //! with that depth as the guide (NeRF's coarse-to-fine idea with the renderer's own estimate).
 use crate::field::reference::sampling::{clip_to_bounds, ray_through_pixel};
-use crate::field::refine::{RefineOptions, argmax_and_confidence, refine_probabilities};
 use crate::gpu::{GpuContext, GpuError};
+use crate::refine::{RefineOptions, argmax_and_confidence, refine_probabilities};
 use crate::scene::Guide;
 
-use super::refine::RefinePass;
+use crate::refine::gpu::RefinePass;
 use crate::scene::resample::nearest_source;
 use crate::scene::{Bounds, Intrinsics, Pca, Pose, Scene};
 
@@ -124,7 +124,7 @@ pub struct RenderedFrame {
 
 impl RenderedFrame {
     /// Snaps the class map to the edges of `guide` (the frame this was rendered for, at this
-    /// resolution), on the CPU: see [`crate::field::refine`]. Errors name a guide of another size.
+    /// resolution), on the CPU: see [`crate::refine`]. Errors name a guide of another size.
     pub fn refine(&mut self, guide: Guide<'_>, options: &RefineOptions) -> Result<(), String> {
         if options.is_off() {
             return Ok(());

@@ -1,9 +1,9 @@
-//! The edge-aware refinement of `field::refine` on the GPU (`shaders/refine.wgsl`): the same
+//! The edge-aware refinement of `refine` on the GPU (`shaders/refine.wgsl`): the same
 //! rounds of 7 x 7 taps, one invocation per pixel, rounds ping-ponging between two buffers in one
 //! submission, then one read-back. The page uses it so a 640 x 480 refinement (0.44 s on one CPU
 //! core natively, more in wasm) does not hold up the page's thread; it awaits the read-back
 //! without blocking.
-use crate::field::refine::{HALF_TAPS, RefineOptions, TapScales, check_inputs, log_depth};
+use super::{HALF_TAPS, RefineOptions, TapScales, check_inputs, log_depth};
 use crate::gpu::buffers::{read_elements_async, storage_buffer_from, storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::{Dispatch, bind_named, whole};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
@@ -130,7 +130,7 @@ impl RefinePass {
     }
 
     /// Refines `probabilities` (`classes` per pixel of `guide`) in place, as
-    /// `field::refine::refine_probabilities` does on the CPU.
+    /// `refine::refine_probabilities` does on the CPU.
     pub async fn refine(
         &self,
         ctx: &GpuContext,
@@ -145,7 +145,7 @@ impl RefinePass {
             return Ok(());
         }
         if options.votes {
-            crate::field::refine::to_votes(probabilities, classes);
+            crate::refine::to_votes(probabilities, classes);
         }
         let guide = GuideBuffers::new(ctx, guide, classes, options)?;
         let buffers = [

@@ -11,8 +11,10 @@
 //! Depth is in the weights because colour alone lets objects of the same colour (the demo's red
 //! ball and red box) leak into each other where they touch in the image. Cost: one pass over
 //! 7 x 7 taps per round (`tests::bench` times it); docs/results/measurements.md has the gains
-//! and timings measured. The page runs the GPU twin (`field::gpu::refine`,
+//! and timings measured. The page runs the GPU twin (`refine::gpu`,
 //! `shaders/refine.wgsl`); the CLI runs this one.
+pub mod gpu;
+
 use crate::scene::{Guide, Scene};
 use serde::{Deserialize, Serialize};
 
@@ -114,7 +116,7 @@ const MAX_ITERATIONS: u32 = 64;
 pub(crate) const HALF_TAPS: i64 = 3;
 
 /// Refines per-pixel class probabilities (`classes` values per pixel, row-major, each pixel's
-/// summing to 1) in place on the CPU (`gpu::refine` is the GPU twin). Errors name a size that
+/// summing to 1) in place on the CPU (`refine::gpu` is the GPU twin). Errors name a size that
 /// does not match the guide, or a bad option.
 pub fn refine_probabilities(
     probabilities: &mut Vec<f32>,
@@ -319,55 +321,7 @@ mod tests {
         to_votes(&mut tie, 2);
         assert_eq!(tie, vec![1.0, 0.0], "the first of equals");
     }
-    use crate::scene::demo::{DemoOptions, demo_scene};
     use image::{ImageBuffer, Luma};
-
-    #[test]
-    fn photo_captures_get_more_rounds_and_an_opaque_last_sample() {
-        use crate::field::{FieldConfig, LastSample};
-        let last_sample = |scene: &Scene| FieldConfig::default().for_scene(scene).last_sample;
-        let mut scene = demo_scene(&DemoOptions {
-            width: 24,
-            height: 16,
-            frames: 4,
-            ..DemoOptions::default()
-        })
-        .unwrap();
-        assert_eq!(RefineOptions::for_scene(&scene), RefineOptions::DEFAULT);
-        assert_eq!(last_sample(&scene), LastSample::Clear);
-        let forced = FieldConfig {
-            last_sample: LastSample::Opaque,
-            ..FieldConfig::default()
-        };
-        assert!(forced.for_scene(&scene).opaque_last_sample());
-        // A reconstruction's points: a reading at one pixel in ten, on 3 frames of 4.
-        for frame in &mut scene.frames[1..] {
-            let depth = frame.depth.as_mut().unwrap();
-            for (i, p) in depth.pixels_mut().enumerate() {
-                if i % 10 != 0 {
-                    p.0[0] = 0;
-                }
-            }
-        }
-        let sparse = RefineOptions::for_scene(&scene);
-        assert_eq!(last_sample(&scene), LastSample::Opaque);
-        assert_eq!(sparse.iterations, RefineOptions::ROUNDS_WITHOUT_DENSE_DEPTH);
-        assert_eq!(
-            RefineOptions {
-                iterations: 3,
-                ..sparse
-            },
-            RefineOptions::DEFAULT
-        );
-        for frame in &mut scene.frames {
-            frame.depth = None;
-        }
-        assert_eq!(
-            RefineOptions::for_scene(&scene).iterations,
-            RefineOptions::ROUNDS_WITHOUT_DENSE_DEPTH
-        );
-        assert_eq!(last_sample(&scene), LastSample::Opaque);
-    }
 
     fn one_hot(classes: &[u8], count: usize, softness: f32) -> Vec<f32> {
         classes

@@ -1,4 +1,4 @@
-//! The trainer's checkpoint: its parameters, both Adam moments and its step count, as a
+//! A trained field saved to a file, the trainer's checkpoint: its parameters, both Adam moments and its step count, as a
 //! safetensors file (`crate::safetensors`), so any safetensors reader can open it.
 //!
 //! One F32 tensor per range of the parameter layout, in buffer order: a tensor per hash-grid
@@ -22,9 +22,9 @@
 use std::collections::BTreeMap;
 use std::ops::Range;
 
-use super::config::{FieldConfig, LastSample};
-use super::gpu::trainer::{Trainer, TrainerState};
-use super::params::ParamLayout;
+use crate::field::config::{FieldConfig, LastSample};
+use crate::field::gpu::trainer::{Trainer, TrainerState};
+use crate::field::params::ParamLayout;
 use crate::gpu::GpuError;
 use crate::labels::LabelSet;
 use crate::safetensors::{SafeTensors, to_bytes_with_metadata};
@@ -554,5 +554,4 @@ fn config_of(json: &str) -> Result<FieldConfig, serde_json::Error> {
 }
 
 #[cfg(test)]
-#[path = "checkpoint_tests.rs"]
 mod tests;
