@@ -163,16 +163,6 @@ fn frame_0_carried_to_the_other_frames_agrees_with_the_clip_packed_from_its_fold
     assert!((a - o).abs() <= 0.02, "{a} vs {o}");
 }
 
-/// Runs the import of `dir` and returns its error, which must name `file`.
-fn error_naming(dir: &Path, file: &str) -> String {
-    let e = import(dir, &ImportOptions::default(), &mut |_, _| {})
-        .map(|_| ())
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains(file), "the error should name {file}: {e}");
-    e
-}
-
 #[test]
 fn bad_scenes_are_refused_naming_the_file() {
     let Some(ycb) = real_data(YCB) else { return };

@@ -295,16 +295,6 @@ fn a_recorded_video_gives_the_clips_geometry_and_colours() {
     assert!((s - o).abs() <= 0.02, "{s} vs {o}");
 }
 
-/// Runs the import of `dir` and returns its error, which must name `file`.
-fn error_naming(dir: &Path, file: &str) -> String {
-    let e = import(dir, &ImportOptions::default(), &mut |_, _| {})
-        .map(|_| ())
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains(file), "the error should name {file}: {e}");
-    e
-}
-
 #[test]
 fn bad_captures_are_refused_naming_the_file() {
     let Some(ycb) = setup() else { return };

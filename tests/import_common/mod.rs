@@ -179,3 +179,18 @@ pub fn carried_ground_truth_iou(
     }
     counts.iter().map(|(h, u)| *h as f64 / (*u).max(1) as f64).sum::<f64>() / classes as f64
 }
+
+/// Runs the import of `dir` with the default options and returns its error, which must name
+/// `file`.
+pub fn error_naming(dir: &Path, file: &str) -> String {
+    let e = scribblefield::scene::import::import(
+        dir,
+        &scribblefield::scene::import::ImportOptions::default(),
+        &mut |_, _| {},
+    )
+    .map(|_| ())
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains(file), "the error should name {file}: {e}");
+    e
+}
