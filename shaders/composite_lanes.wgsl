@@ -143,7 +143,8 @@ fn backward(rows: RayRows, lane: u32) {
             for (var ch = lane; ch < k; ch += LANES) {
                 var g = 0.0;
                 if ch >= 4u {
-                    g = w * ray_outputs[rows.grad_at + ch];
+                    let painted_logit = ch < 4u + params.classes && painted_far_side(m);
+                    g = select(w * ray_outputs[rows.grad_at + ch], 0.0, painted_logit);
                 } else if ch > 0u {
                     let colour = colour_of(m, ch - 1u);
                     g = w * ray_outputs[rows.grad_at + ch - 1u] * colour * (1.0 - colour);
