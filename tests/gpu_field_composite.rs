@@ -15,9 +15,9 @@ use scribblefield::field::gpu::rays::{
 use scribblefield::field::reference::loss::{RayTarget, add_opacity, opacity_loss, ray_loss};
 use scribblefield::field::reference::{Channels, activations, render};
 use scribblefield::field::{FarSide, FieldConfig, bf16};
-use scribblefield::gpu::GpuContext;
 use scribblefield::gpu::buffers::{fill_with_garbage, read_buffer_blocking, storage_buffer_from, uniform_buffer_from};
 use scribblefield::gpu::test_support::gpu_for_tests;
+use scribblefield::gpu::{GpuContext, KernelFamily};
 use scribblefield::rng::SplitMix64;
 
 /// Stride of the density MLP's output rows in these tests ([h₀, geometry feature]).
@@ -499,8 +499,8 @@ fn check_render_matches_training(ctx: &GpuContext, batch: &Batch) {
 /// whatever the adapter.
 fn with_each_kernel(ctx: &GpuContext) -> [GpuContext; 2] {
     let kernels = [
-        ctx.clone().treated_as_software(true),
-        ctx.clone().treated_as_software(false),
+        ctx.clone().with_kernels(KernelFamily::UniformWeights),
+        ctx.clone().with_kernels(KernelFamily::Tiled),
     ];
     assert_eq!(
         CompositeKernel::for_device(&kernels[0]),

@@ -11,7 +11,7 @@
 //! must be the reference's dZ within bf16 rounding, and dW the sum of the stored values.
 use scribblefield::field::bf16;
 use scribblefield::field::gpu::dense::{
-    DenseFamily, DensePipelines, InputRows, MlpGradients, MlpPass, MlpPassDesc, PackedReads, RowFormat, RowView,
+    DensePipelines, InputRows, MlpGradients, MlpPass, MlpPassDesc, PackedReads, RowFormat, RowView,
     UNIFORM_WEIGHT_FLOATS,
 };
 use scribblefield::field::gpu::keep::{HeadRows, workgroup_counts};
@@ -19,6 +19,7 @@ use scribblefield::field::params::{MlpLayout, ParamLayout};
 use scribblefield::field::reference::mlp::{MlpTrace, backward, forward};
 use scribblefield::field::{Encoding, FieldConfig};
 use scribblefield::gpu::GpuContext;
+use scribblefield::gpu::KernelFamily;
 use scribblefield::gpu::buffers::{
     GARBAGE_WORDS, fill_with_garbage, read_buffer_blocking, storage_buffer_from, storage_buffer_garbage,
     storage_buffer_padded, storage_buffer_zeroed,
@@ -267,10 +268,10 @@ fn check_mlp(case: MlpCase<'_>) -> Vec<u32> {
         ctx.queue
             .write_buffer(&head_rows.row_count, 0, bytemuck::bytes_of(&(active as u32)));
     }
-    let families: Vec<DenseFamily> = mlp.layer_families().collect();
+    let families: Vec<KernelFamily> = mlp.layer_families().collect();
     let windows = mlp.weight_gradient_windows();
-    if pipelines.family() == DenseFamily::Tiled {
-        assert!(families.iter().all(|f| *f == DenseFamily::Tiled));
+    if pipelines.family() == KernelFamily::Tiled {
+        assert!(families.iter().all(|f| *f == KernelFamily::Tiled));
         assert!(windows.iter().all(|w| !w));
     } else {
         assert!(windows.iter().all(|w| *w), "{name}: every dW here fits uniform windows");
@@ -647,13 +648,13 @@ fn every_mlp_matches_the_reference_with_uniform_weights() {
     };
     // With and without the input-gradient chain (the device decides by default).
     for chain in [true, false] {
-        let uniform = DensePipelines::with_family(DenseFamily::UniformWeights).with_input_gradient_chain(chain);
+        let uniform = DensePipelines::with_family(KernelFamily::UniformWeights).with_input_gradient_chain(chain);
         check_every_mlp(&ctx, uniform.with_uniform_block_limit(64));
         // The narrower blocks other CPU devices get (SwiftShader: 16).
         for limit in [16, 4] {
             check_every_mlp(
                 &ctx,
-                DensePipelines::with_family(DenseFamily::UniformWeights)
+                DensePipelines::with_family(KernelFamily::UniformWeights)
                     .with_uniform_block_limit(limit)
                     .with_input_gradient_chain(chain),
             );
@@ -675,9 +676,9 @@ fn every_mlp_matches_the_reference_with_uniform_weights() {
         gradients: None,
         kept: None,
     };
-    let mut pipelines = DensePipelines::with_family(DenseFamily::UniformWeights);
+    let mut pipelines = DensePipelines::with_family(KernelFamily::UniformWeights);
     let mlp = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc)).unwrap();
-    assert!(mlp.layer_families().all(|f| f == DenseFamily::UniformWeights));
+    assert!(mlp.layer_families().all(|f| f == KernelFamily::UniformWeights));
 }
 
 /// What the bit-for-bit comparisons of two ways of running the uniform-weight kernels run:
@@ -709,7 +710,7 @@ fn packed_reads_from_storage_give_the_bits_of_uniform_reads() {
         return;
     };
     let pipelines = |reads, limit| {
-        DensePipelines::with_family(DenseFamily::UniformWeights)
+        DensePipelines::with_family(KernelFamily::UniformWeights)
             .with_uniform_block_limit(limit)
             .with_input_gradient_chain(false)
             .with_packed_reads(reads)
@@ -765,7 +766,7 @@ fn unrolled_reductions_give_the_bits_of_loops() {
             let params = layout.init(29);
             for (index, (mlp_name, mlp)) in layout.mlps().into_iter().enumerate() {
                 let run = |unrolled| {
-                    let mut pipelines = DensePipelines::with_family(DenseFamily::UniformWeights)
+                    let mut pipelines = DensePipelines::with_family(KernelFamily::UniformWeights)
                         .with_uniform_block_limit(limit)
                         .with_input_gradient_chain(chain)
                         .with_unrolled_reductions(unrolled);
@@ -804,7 +805,7 @@ fn uniform_mlps_chain_their_input_gradients_where_they_fit() {
     };
     let configs = configs();
     let config = |name: &str| configs.iter().find(|(n, _)| *n == name).unwrap().1.clone();
-    let uniform = || DensePipelines::with_family(DenseFamily::UniformWeights).with_input_gradient_chain(true);
+    let uniform = || DensePipelines::with_family(KernelFamily::UniformWeights).with_input_gradient_chain(true);
     let cases = [
         (
             "small",
@@ -913,7 +914,7 @@ fn tiny_and_multi_chunk_row_counts_match_the_reference() {
     let cfg = FieldConfig::small();
     let layout = ParamLayout::new(&cfg);
     let params = layout.init(5);
-    for family in [DenseFamily::Tiled, DenseFamily::UniformWeights] {
+    for family in [KernelFamily::Tiled, KernelFamily::UniformWeights] {
         let mut pipelines = DensePipelines::with_family(family);
         // 1 row; fewer rows than a tile; many weight-gradient chunks with a ragged last one.
         for (rows, seed) in [(1, 1), (61, 2), (5003, 3)] {
@@ -944,7 +945,7 @@ fn kept_row_counts_match_the_reference() {
     let cfg = FieldConfig::small();
     let layout = ParamLayout::new(&cfg);
     let params = layout.init(7);
-    for family in [DenseFamily::Tiled, DenseFamily::UniformWeights] {
+    for family in [KernelFamily::Tiled, KernelFamily::UniformWeights] {
         let mut pipelines = DensePipelines::with_family(family).with_input_gradient_chain(true);
         for (kept, seed) in [(0, 11), (1, 12), (1500, 13), (3000, 14)] {
             for (mlp_name, mlp, input_grad) in [("colour", &layout.color, false), ("semantic", &layout.semantic, true)]
@@ -1017,10 +1018,10 @@ fn forward_only_pass_refuses_backward_and_bad_views_are_errors() {
         "{error}"
     );
     // The packed-weight kernels take it, and store the hidden outputs as bf16 unless told not to.
-    let mut uniform = DensePipelines::with_family(DenseFamily::UniformWeights);
+    let mut uniform = DensePipelines::with_family(KernelFamily::UniformWeights);
     let mlp = pollster::block_on(MlpPass::new(&ctx, &mut uniform, desc(bf16_input))).unwrap();
     assert_eq!(mlp.hidden_rows(), RowFormat::Bf16);
-    let mut f32_rows = DensePipelines::with_family(DenseFamily::UniformWeights).with_hidden_rows(RowFormat::F32);
+    let mut f32_rows = DensePipelines::with_family(KernelFamily::UniformWeights).with_hidden_rows(RowFormat::F32);
     let mlp = pollster::block_on(MlpPass::new(&ctx, &mut f32_rows, desc(RowView::packed(&input, width)))).unwrap();
     assert_eq!(mlp.hidden_rows(), RowFormat::F32);
 }
@@ -1065,12 +1066,12 @@ fn owned_input_rows_take_the_hidden_rows_format() {
         assert_eq!(grad.format, gradient);
         grad.check("input gradient", rows, in_dim).unwrap();
     };
-    let uniform = build(&mut DensePipelines::with_family(DenseFamily::UniformWeights));
+    let uniform = build(&mut DensePipelines::with_family(KernelFamily::UniformWeights));
     check(&uniform, RowFormat::Bf16, RowFormat::Bf16);
     let f32_rows =
-        build(&mut DensePipelines::with_family(DenseFamily::UniformWeights).with_hidden_rows(RowFormat::F32));
+        build(&mut DensePipelines::with_family(KernelFamily::UniformWeights).with_hidden_rows(RowFormat::F32));
     check(&f32_rows, RowFormat::F32, RowFormat::F32);
-    let tiled = build(&mut DensePipelines::with_family(DenseFamily::Tiled));
+    let tiled = build(&mut DensePipelines::with_family(KernelFamily::Tiled));
     check(&tiled, RowFormat::F32, RowFormat::F32);
 }
 
@@ -1098,7 +1099,7 @@ fn owned_bf16_input_gradient_is_the_f32_one_rounded() {
     let input_buffer = storage_buffer_from(&ctx, "input", &input).unwrap();
     let f32_grad = storage_buffer_garbage::<f32>(&ctx, "input grad", rows * in_dim).unwrap();
     for chain in [true, false] {
-        let mut pipelines = DensePipelines::with_family(DenseFamily::UniformWeights).with_input_gradient_chain(chain);
+        let mut pipelines = DensePipelines::with_family(KernelFamily::UniformWeights).with_input_gradient_chain(chain);
         let build = |pipelines: &mut DensePipelines, input: InputRows, input_grad: InputRows| {
             let grads = storage_buffer_zeroed::<f32>(&ctx, "grads", layout.total).unwrap();
             let desc = MlpPassDesc {
@@ -1184,7 +1185,7 @@ fn input_gradient_columns_outside_the_range_are_left_alone() {
         (RowFormat::Bf16, 16..width),
         (RowFormat::F32, 0..3),
     ] {
-        let mut pipelines = DensePipelines::with_family(DenseFamily::UniformWeights).with_input_gradient_chain(false);
+        let mut pipelines = DensePipelines::with_family(KernelFamily::UniformWeights).with_input_gradient_chain(false);
         let words = RowView::words(format, rows as u32, width) as usize;
         let mut run = |columns: Option<std::ops::Range<u32>>| -> Vec<u32> {
             let grad = storage_buffer_garbage::<f32>(&ctx, "input grad", words).unwrap();
@@ -1295,8 +1296,8 @@ fn density_mlp_throughput_report() {
     let input_grad = storage_buffer_garbage::<f32>(&ctx, "input grad", rows * in_dim).unwrap();
     // DENSE_FAMILY=uniform measures the CPU-device kernels.
     let family = match std::env::var("DENSE_FAMILY").as_deref() {
-        Ok("uniform") => DenseFamily::UniformWeights,
-        _ => DenseFamily::Tiled,
+        Ok("uniform") => KernelFamily::UniformWeights,
+        _ => KernelFamily::Tiled,
     };
     let mut pipelines = DensePipelines::with_family(family);
     let desc = MlpPassDesc {

@@ -2,6 +2,7 @@
 use scribblefield::field::gpu::encoding::AtomicAdd;
 use scribblefield::field::gpu::trainer::Trainer;
 use scribblefield::field::{AdamConfig, FieldConfig, LastSample, SemanticInput};
+use scribblefield::gpu::KernelFamily;
 use scribblefield::gpu::test_support::gpu_for_tests;
 use scribblefield::labels::synthetic::{ScribbleOptions, scribble_frames};
 use scribblefield::scene::demo::{DemoOptions, demo_scene};
@@ -308,14 +309,14 @@ fn check_one_step_gradient(
     };
     let ctx = match kernels {
         Kernels::Chosen => ctx,
-        Kernels::Gpu => ctx.treated_as_software(false),
+        Kernels::Gpu => ctx.with_kernels(KernelFamily::Tiled),
         Kernels::BrowserGpu => {
-            let mut ctx = ctx.treated_as_software(false);
+            let mut ctx = ctx.with_kernels(KernelFamily::Tiled);
             ctx.features.remove(wgpu::Features::SHADER_FLOAT32_ATOMIC);
             ctx
         }
         Kernels::BrowserCpu => {
-            let mut ctx = ctx.treated_as_software(true);
+            let mut ctx = ctx.with_kernels(KernelFamily::UniformWeights);
             ctx.features.remove(wgpu::Features::SHADER_FLOAT32_ATOMIC);
             ctx
         }

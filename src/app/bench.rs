@@ -15,7 +15,7 @@ use egui::RichText;
 use serde_json::{Map, Value, json};
 
 use super::browser::{self, now_ms};
-use super::page_options::{Kernels, PageOptions};
+use super::page_options::PageOptions;
 use super::page_status;
 use super::status::PageStatus;
 use super::training::batches::{Batches, MAX_BATCH, stage_wall_ms};
@@ -23,7 +23,7 @@ use super::training::device::gpu_done;
 use crate::eval::bench::{bench_scene, mean_kept, step_report};
 use crate::field::Preset;
 use crate::field::gpu::trainer::Trainer;
-use crate::gpu::GpuContext;
+use crate::gpu::{GpuContext, KernelFamily};
 use crate::gpu::matmul_bench::matmul_bench;
 
 /// Untimed steps first, as `bench`'s default `--warmup` (pipeline compilation, first touches).
@@ -43,7 +43,7 @@ struct BenchPlan {
     /// Batches in flight; by default as the page's training task keeps them on this device.
     in_flight: Option<usize>,
     rays: Option<u32>,
-    kernels: Option<Kernels>,
+    kernels: Option<KernelFamily>,
 }
 
 /// What the page shows and the bench task updates.
@@ -144,13 +144,12 @@ async fn run(
     shown: &RefCell<Shown>,
 ) -> Result<Map<String, Value>, String> {
     let gpu = match plan.kernels {
-        Some(Kernels::Tiled) => gpu.treated_as_software(false),
-        Some(Kernels::Uniform) => gpu.treated_as_software(true),
+        Some(kernels) => gpu.with_kernels(kernels),
         None => gpu,
     };
     // As the annotator asks while training: on a CPU rasterizer a repaint costs about a second
     // of the device the steps run on.
-    let repaint = std::time::Duration::from_millis(if gpu.is_software() { 3000 } else { 250 });
+    let repaint = std::time::Duration::from_millis(gpu.profile().training_repaint_ms);
     stage(shown, egui_ctx, "scene");
     // Let the page show it before the scene's rendering holds the thread.
     browser::sleep_ms(20).await;

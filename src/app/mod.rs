@@ -46,9 +46,8 @@ pub mod training;
 #[cfg(target_arch = "wasm32")]
 pub use page::App;
 
-/// How often progress (training numbers, decoded frames) asks for a repaint, at most. On a CPU
-/// rasterizer (SwiftShader) one repaint of the page keeps the device busy for about a second,
-/// and the work being reported on waits behind it; on a GPU a repaint is cheap.
-pub fn repaint_interval_ms(software: bool) -> u64 {
-    if software { 1000 } else { 100 }
+/// How often progress (decoded frames, loading) asks for a repaint, at most
+/// (`DeviceProfile::repaint_ms`); a page without a device repaints as often as on a GPU.
+pub fn repaint_interval_ms(gpu: Option<&crate::gpu::GpuContext>) -> u64 {
+    gpu.map_or(100, |g| g.profile().repaint_ms)
 }

@@ -109,8 +109,7 @@ impl App {
         let model = options.model.unwrap_or(default_model);
         let scene_url = loading::scene_url(&options);
         let source = SceneSource::Url(browser::absolute_url(&scene_url));
-        let software = gpu.as_ref().is_some_and(|g| g.is_software());
-        let load = SceneLoad::start(scene_url, cc.egui_ctx.clone(), repaint_interval_ms(software));
+        let load = SceneLoad::start(scene_url, cc.egui_ctx.clone(), repaint_interval_ms(gpu.as_ref()));
         let inbox: Rc<RefCell<Vec<Incoming>>> = Rc::default();
         let (folder_inbox, ctx) = (inbox.clone(), cc.egui_ctx.clone());
         let installed = browser::on_capture_folder(move |files| {
@@ -136,7 +135,7 @@ impl App {
     }
 
     fn repaint_ms(&self) -> u64 {
-        repaint_interval_ms(self.gpu.as_ref().is_some_and(|g| g.is_software()))
+        repaint_interval_ms(self.gpu.as_ref())
     }
 
     /// Asks for a scene archive and opens it.

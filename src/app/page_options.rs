@@ -4,17 +4,9 @@
 //! instead, so a typo never keeps the page from opening. Plain logic: tested natively.
 use crate::export::{ExportOptions, Format};
 use crate::field::Preset;
+use crate::gpu::KernelFamily;
 use crate::labels::share::{parse_fragment, percent_decode};
 use crate::scene::archive::limits;
-
-/// Which dense kernels the trainer uses, whatever the adapter is (`#kernels=`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Kernels {
-    /// The workgroup-tiled kernels of GPUs.
-    Tiled,
-    /// The uniform-weight kernels of CPU rasterizers.
-    Uniform,
-}
 
 /// Everything the address can ask for. `None` (or `false`) where it asks nothing: the page
 /// then picks for itself.
@@ -40,7 +32,7 @@ pub struct PageOptions {
     /// `split=1`: submit each stage of a step on its own.
     pub split: bool,
     /// `kernels=tiled|uniform`.
-    pub kernels: Option<Kernels>,
+    pub kernels: Option<KernelFamily>,
     /// `pack-size=N`: a capture packed in the page is downscaled to this longest side
     /// (`pack --max-size`).
     pub pack_size: Option<u32>,
@@ -133,8 +125,8 @@ impl PageOptions {
                 "profile" => options.profile = value != "0",
                 "split" => options.split = value != "0",
                 "kernels" => match value.as_str() {
-                    "tiled" => options.kernels = Some(Kernels::Tiled),
-                    "uniform" => options.kernels = Some(Kernels::Uniform),
+                    "tiled" => options.kernels = Some(KernelFamily::Tiled),
+                    "uniform" => options.kernels = Some(KernelFamily::UniformWeights),
                     _ => bad("kernels", "tiled or uniform"),
                 },
                 "pack-size" => match value.parse::<u32>() {
@@ -223,7 +215,7 @@ mod tests {
                 refine: Some(2),
                 profile: true,
                 split: true,
-                kernels: Some(Kernels::Uniform),
+                kernels: Some(KernelFamily::UniformWeights),
                 ..PageOptions::default()
             }
         );

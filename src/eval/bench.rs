@@ -96,7 +96,7 @@ pub fn step_report(
         .collect();
     let Value::Object(mut fields) = json!({
         "adapter": ctx.describe(),
-        "kernels": if ctx.is_software() { "uniform" } else { "tiled" },
+        "kernels": ctx.profile().kernels.name(),
         "hash_atomics": match trainer.hash_atomics() {
             AtomicAdd::Float => "float",
             AtomicAdd::FixedPoint => "fixed_point",

@@ -70,7 +70,7 @@ impl Preset {
     /// in a page, `small` (the page's `#model=full` asks for more).
     pub fn for_adapter(info: &wgpu::AdapterInfo, runner: Runner) -> (Preset, String) {
         let name = &info.name;
-        if crate::gpu::context::is_software_adapter(info) {
+        if crate::gpu::DeviceProfile::of_adapter(info).software {
             return match runner {
                 Runner::Headless => (
                     Preset::Budget,

@@ -8,6 +8,7 @@ use std::sync::Arc;
 
 use super::error::GpuError;
 use super::pipeline_cache::{PipelineCache, PipelineCacheStats};
+use super::profile::{DeviceProfile, KernelFamily};
 
 /// How to pick the adapter.
 #[derive(Debug, Clone)]
@@ -57,8 +58,8 @@ pub struct GpuContext {
     pub features: wgpu::Features,
     /// Compute passes can carry timestamp writes (see `gpu::timing`).
     pub has_timestamps: bool,
-    /// Set by [`GpuContext::treated_as_software`]: overrides what the adapter says.
-    software_override: Option<bool>,
+    /// What the kernels and the page's loop are chosen by on this device.
+    profile: DeviceProfile,
     /// Pipelines and bind group layouts compiled on this device, shared by every clone.
     pipeline_cache: Arc<PipelineCache>,
 }
@@ -97,14 +98,15 @@ impl GpuContext {
     /// Wraps a device somebody else created (eframe's render state in the web app).
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue) -> Self {
         let features = device.features();
+        let adapter_info = device.adapter_info();
         GpuContext {
-            adapter_info: device.adapter_info(),
+            profile: DeviceProfile::of_adapter(&adapter_info),
+            adapter_info,
             limits: device.limits(),
             has_timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
             features,
             device,
             queue,
-            software_override: None,
             pipeline_cache: Arc::default(),
         }
     }
@@ -125,24 +127,21 @@ impl GpuContext {
         self.pipeline_cache.bind_group_layout(&self.device, label, entries)
     }
 
-    /// The same device, with kernels chosen as for a software rasterizer (`true`) or a GPU
-    /// (`false`) whatever the adapter is: to compare the kernel families on one device.
-    pub fn treated_as_software(mut self, software: bool) -> Self {
-        self.software_override = Some(software);
+    /// The same device running the `kernels` family whatever the adapter is (`#kernels=`, and
+    /// tests that compare the families on one device).
+    pub fn with_kernels(mut self, kernels: KernelFamily) -> Self {
+        self.profile = self.profile.with_kernels(kernels);
         self
+    }
+
+    /// What the kernels and the page's loop are chosen by on this device.
+    pub fn profile(&self) -> &DeviceProfile {
+        &self.profile
     }
 
     /// One line naming the adapter, driver and backend, for logs and bench reports.
     pub fn describe(&self) -> String {
         describe_adapter(&self.adapter_info)
-    }
-
-    /// True for software rasterizers (lavapipe, SwiftShader): slow, but exact enough for tests.
-    pub fn is_software(&self) -> bool {
-        if let Some(software) = self.software_override {
-            return software;
-        }
-        is_software_adapter(&self.adapter_info)
     }
 
     /// Native only: blocks until all submitted work is done and its callbacks have run.
@@ -236,19 +235,6 @@ fn ensure_at_most(what: &str, limit: &'static str, needed: u64, allowed: u64) ->
             allowed,
         })
     }
-}
-
-/// Whether an adapter is a software rasterizer (lavapipe/llvmpipe, SwiftShader, WARP): a CPU
-/// device type, or one of their names in the adapter's name or driver (browsers often report
-/// no device type). The kernels pick their CPU-friendly family and the page its smallest model
-/// from this one list.
-pub fn is_software_adapter(info: &wgpu::AdapterInfo) -> bool {
-    const NAMES: [&str; 5] = ["swiftshader", "llvmpipe", "lavapipe", "software", "warp"];
-    let named = |s: &str| {
-        let s = s.to_ascii_lowercase();
-        NAMES.iter().any(|n| s.contains(n))
-    };
-    info.device_type == wgpu::DeviceType::Cpu || named(&info.name) || named(&info.driver)
 }
 
 fn describe_adapter(info: &wgpu::AdapterInfo) -> String {

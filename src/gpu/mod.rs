@@ -10,6 +10,7 @@ pub mod matmul;
 pub mod matmul_bench;
 pub mod pipeline;
 pub mod pipeline_cache;
+pub mod profile;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod shader_check;
 pub mod shaders;
@@ -21,6 +22,7 @@ pub mod uniform_layout;
 
 pub use context::{GpuContext, GpuOptions};
 pub use error::GpuError;
+pub use profile::{DeviceProfile, KernelFamily};
 
 /// `shader_check` and `uniform_layout` are shared with build.rs, where `naga` is a build-dependency; here it is
 /// wgpu's own copy (same version, with the WGSL front end).

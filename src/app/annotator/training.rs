@@ -3,7 +3,7 @@
 use std::rc::Rc;
 
 use super::super::browser;
-use super::super::page_options::{Kernels, PageOptions};
+use super::super::page_options::PageOptions;
 use super::super::training::scene::{auto_factor, downscale};
 use super::super::training::{Phase, Refresh, Training, TrainingOptions, TrainingSetup};
 use super::document::Document;
@@ -47,7 +47,7 @@ impl TrainingControl {
 
     /// A CPU rasterizer: every repaint costs the training about a second there.
     pub fn software(&self) -> bool {
-        self.gpu.as_ref().is_some_and(|g| g.is_software())
+        self.gpu.as_ref().is_some_and(|g| g.profile().software)
     }
 
     /// (Re)starts training from scratch on `doc`'s labels, showing `frame` first; on load, after
@@ -81,7 +81,7 @@ impl TrainingControl {
             profile: self.options.profile,
             // Training numbers: on a CPU rasterizer every repaint delays training by about a
             // second, so there the panel is updated every few seconds.
-            repaint_ms: if gpu.is_software() { 3000 } else { 250 },
+            repaint_ms: gpu.profile().training_repaint_ms,
             split_steps: self.options.split,
             refine: RefineOptions::for_scene(&train_scene),
             ..TrainingOptions::default()
@@ -96,8 +96,7 @@ impl TrainingControl {
             };
         }
         let gpu = match self.options.kernels {
-            Some(Kernels::Tiled) => gpu.treated_as_software(false),
-            Some(Kernels::Uniform) => gpu.treated_as_software(true),
+            Some(kernels) => gpu.with_kernels(kernels),
             None => gpu,
         };
         let setup = TrainingSetup {

@@ -21,13 +21,12 @@ use super::super::browser::{now_ms, sleep_ms};
 use super::device::{GpuDone, RateMeter, gpu_done, gpu_done_at};
 use crate::field::gpu::trainer::Trainer;
 use crate::gpu::GpuContext;
+use crate::gpu::profile::GPU_BATCHES_IN_FLIGHT;
 
 /// GPU time one batch of steps should take.
 pub const TARGET_BATCH_MS: f64 = 20.0;
 /// Most steps in one batch (a fast GPU would otherwise queue seconds of work on a slow frame).
 pub const MAX_BATCH: u32 = 64;
-/// Batches submitted and not yet seen done, at most.
-pub const IN_FLIGHT: usize = 2;
 
 /// A batch submitted, not yet seen done.
 struct Submitted {
@@ -61,13 +60,13 @@ pub struct BatchTimes {
     pub finished: Option<Finished>,
 }
 
-/// The page's way of training: batches adapted to the GPU's time, up to [`IN_FLIGHT`] of them
-/// queued.
+/// The page's way of training: batches adapted to the GPU's time, up to
+/// [`GPU_BATCHES_IN_FLIGHT`] of them queued.
 pub struct Batches {
     /// Steps in the next batch, adapted to [`TARGET_BATCH_MS`].
     pub size: u32,
-    /// Batches kept in flight: [`IN_FLIGHT`], or 1 to wait for each batch before recording the
-    /// next ([`Batches::for_device`] chooses).
+    /// Batches kept in flight: [`GPU_BATCHES_IN_FLIGHT`], or 1 to wait for each batch before
+    /// recording the next ([`Batches::for_device`] chooses).
     pub depth: usize,
     /// Submit every stage of a step as its own command buffer (`#split=1`).
     pub split_steps: bool,
@@ -82,18 +81,19 @@ pub struct Batches {
 }
 
 impl Batches {
-    /// Batches kept in flight on `ctx`: one on a CPU rasterizer, [`IN_FLIGHT`] on a GPU (see the
+    /// Batches kept in flight on `ctx` (`DeviceProfile::batches_in_flight`: one on a CPU
+    /// rasterizer, [`GPU_BATCHES_IN_FLIGHT`] on a GPU; see the
     /// module's notes).
     pub fn for_device(ctx: &GpuContext, split_steps: bool) -> Batches {
         let mut batches = Batches::new(split_steps);
-        batches.depth = if ctx.is_software() { 1 } else { IN_FLIGHT };
+        batches.depth = ctx.profile().batches_in_flight;
         batches
     }
 
     pub fn new(split_steps: bool) -> Batches {
         Batches {
             size: 1,
-            depth: IN_FLIGHT,
+            depth: GPU_BATCHES_IN_FLIGHT,
             split_steps,
             in_flight: VecDeque::new(),
             last_done_ms: f64::NEG_INFINITY,

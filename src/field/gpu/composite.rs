@@ -31,7 +31,7 @@ use crate::field::reference::Channels;
 use crate::gpu::buffers::{storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::{Dispatch, whole};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec};
-use crate::gpu::{GpuContext, GpuError, shaders};
+use crate::gpu::{GpuContext, GpuError, KernelFamily, shaders};
 
 use super::rays::{RAY_WORKGROUP_SIZE, TARGET_HEADER_WORDS};
 pub use super::row_view::RowView;
@@ -171,10 +171,9 @@ pub enum CompositeKernel {
 impl CompositeKernel {
     /// The kernel that is faster on `ctx`'s kind of device.
     pub fn for_device(ctx: &GpuContext) -> CompositeKernel {
-        if ctx.is_software() {
-            CompositeKernel::InvocationPerRay
-        } else {
-            CompositeKernel::WorkgroupPerRay
+        match ctx.profile().kernels {
+            KernelFamily::UniformWeights => CompositeKernel::InvocationPerRay,
+            KernelFamily::Tiled => CompositeKernel::WorkgroupPerRay,
         }
     }
 }

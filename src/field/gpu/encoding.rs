@@ -21,7 +21,7 @@ use crate::field::reference::hash_grid::HashGrid;
 use crate::gpu::buffers::{PendingRead, read_buffer_async, storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::{Dispatch, whole};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec};
-use crate::gpu::{GpuContext, GpuError, shaders};
+use crate::gpu::{GpuContext, GpuError, KernelFamily, shaders};
 
 /// Invocations per workgroup of the three kernels (their `WORKGROUP_SIZE`).
 pub const WORKGROUP_SIZE: u32 = 64;
@@ -242,7 +242,7 @@ impl AtomicAdd {
     pub fn best_for(ctx: &GpuContext) -> AtomicAdd {
         if ctx.features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC) {
             AtomicAdd::Float
-        } else if ctx.is_software() {
+        } else if ctx.profile().kernels == KernelFamily::UniformWeights {
             AtomicAdd::PerLevel
         } else {
             AtomicAdd::FixedPoint

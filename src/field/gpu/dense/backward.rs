@@ -12,8 +12,9 @@ use super::tiled::{REDUCE_SHAPE, REDUCE_WORKGROUP, TileShape, weight_chunks};
 use super::uniform::{
     UniformWeightPartials, WeightGradientShape, WindowedLayer, dz_windows_buffer, padded_to_vec4, uniform_weight_chunks,
 };
-use super::{Activation, DenseFamily, RowFormat, RowView, bf16_rows};
+use super::{Activation, RowFormat, RowView, bf16_rows};
 use crate::field::gpu::keep::HeadRows;
+use crate::gpu::KernelFamily;
 use crate::gpu::buffers::{storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::Dispatch;
 use crate::gpu::pipeline::Dispatch1d;
@@ -112,8 +113,8 @@ impl DenseBackward {
 
         let label_dw = format!("{label} weight gradient");
         let uniform_plan = match pipelines.family {
-            DenseFamily::UniformWeights => uniform_weight_chunks(ctx, spec),
-            DenseFamily::Tiled => None,
+            KernelFamily::UniformWeights => uniform_weight_chunks(ctx, spec),
+            KernelFamily::Tiled => None,
         };
         // The uniform-window weight gradient reads dZ from its own buffer, in padded rows.
         let dz = uniform_plan
@@ -219,7 +220,7 @@ impl DenseBackward {
                 // with windows an earlier kernel filled, which it reads as dY) it writes nothing
                 // there (WRITE_DZ off), so any other buffer does.
                 let (unused, unused_mask);
-                if family == DenseFamily::UniformWeights {
+                if family == KernelFamily::UniformWeights {
                     let target = match &dz {
                         Some(dz) if writes_dz => dz,
                         _ => {

@@ -14,11 +14,11 @@
 use super::layer::{DenseDims, DenseLayerSpec, bound};
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
 use super::uniform::{
-    MAX_UNROLLED, MlpPacking, UNIFORM_WORKGROUP, is_lavapipe, padded_to_vec4, uniform_block, uniform_dispatch,
-    uniform_weight_chunks,
+    MAX_UNROLLED, MlpPacking, UNIFORM_WORKGROUP, padded_to_vec4, uniform_block, uniform_dispatch, uniform_weight_chunks,
 };
-use super::{DenseFamily, RowFormat, RowView, bf16_rows};
+use super::{RowFormat, RowView, bf16_rows};
 use crate::field::gpu::keep::HeadRows;
+use crate::gpu::KernelFamily;
 use crate::gpu::buffers::{storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::Dispatch;
 use crate::gpu::{GpuContext, GpuError};
@@ -36,13 +36,6 @@ struct ChainDims {
 /// Storage buffers the chain kernel binds.
 const CHAIN_STORAGE_BINDINGS: u32 = 8;
 
-/// Whether `ctx`'s device runs the chain faster than a kernel per layer: lavapipe (LLVM) does;
-/// SwiftShader ran every MLP's backward slower with it (docs/results/bench.md), and GPUs run
-/// the tiled kernels.
-pub(super) fn chains_on(ctx: &GpuContext) -> bool {
-    is_lavapipe(ctx)
-}
-
 /// Whether the MLP of `specs` (with the packed copies of `packing`) can run its input gradients
 /// as one chain on `ctx`: the block one invocation computes, or `None`.
 pub(super) fn chain_block(
@@ -52,7 +45,7 @@ pub(super) fn chain_block(
     packing: &MlpPacking,
     input_grad: bool,
 ) -> Option<u32> {
-    if pipelines.family != DenseFamily::UniformWeights
+    if pipelines.family != KernelFamily::UniformWeights
         || !pipelines.input_gradient_chain(ctx)
         || !(2..=3).contains(&specs.len())
         || ctx.limits.max_storage_buffers_per_shader_stage < CHAIN_STORAGE_BINDINGS

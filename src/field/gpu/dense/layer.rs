@@ -7,8 +7,9 @@ use std::ops::Range;
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind, ProductWeights};
 use super::relu_mask::ReluMask;
 use super::uniform::padded_to_vec4;
-use super::{Activation, DenseFamily, RowFormat, RowView, bf16_rows};
+use super::{Activation, RowFormat, RowView, bf16_rows};
 use crate::field::gpu::keep::HeadRows;
+use crate::gpu::KernelFamily;
 use crate::gpu::buffers::{storage_buffer_from, storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::{Dispatch, IndirectArgs, bind_named};
 use crate::gpu::{GpuContext, GpuError};
@@ -188,7 +189,7 @@ pub struct DenseForward {
     packed: bool,
     /// One per block where each block is its own pipeline, otherwise one.
     dispatches: Vec<Dispatch>,
-    family: DenseFamily,
+    family: KernelFamily,
     /// How X and Y are stored.
     formats: (RowFormat, RowFormat),
     /// The bits of Y > 0 it also stores, where asked.
@@ -260,14 +261,14 @@ impl DenseForward {
         ];
         // The uniform-weight kernel always names `relu_mask`; without WRITE_MASK any buffer does.
         let mask = match (relu_mask, family) {
-            (true, DenseFamily::UniformWeights) => Some(ReluMask::zeroed(
+            (true, KernelFamily::UniformWeights) => Some(ReluMask::zeroed(
                 ctx,
                 &format!("{label} ReLU mask"),
                 spec.rows,
                 spec.out_dim,
                 pipelines.uniform_product_block(ctx, spec.out_dim),
             )?),
-            (true, DenseFamily::Tiled) => {
+            (true, KernelFamily::Tiled) => {
                 return Err(GpuError::invalid_argument(
                     &label,
                     "the tiled forward stores no mask bits",
@@ -276,7 +277,7 @@ impl DenseForward {
             (false, _) => None,
         };
         let unused;
-        if family == DenseFamily::UniformWeights {
+        if family == KernelFamily::UniformWeights {
             let target = match &mask {
                 Some(mask) => &mask.buffer,
                 None => {
@@ -322,7 +323,7 @@ impl DenseForward {
     }
 
     /// The kernels this layer's forward runs (uniform weights only where the layer fits).
-    pub fn family(&self) -> DenseFamily {
+    pub fn family(&self) -> KernelFamily {
         self.family
     }
 

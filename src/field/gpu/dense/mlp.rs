@@ -5,9 +5,10 @@ use super::layer::{DenseForward, DenseLayerSpec};
 use super::pipelines::ProductKind;
 use super::uniform::MlpPacking;
 use super::uniform::uniform_weight_chunks;
-use super::{Activation, DenseFamily, DensePipelines, ReluMask, RowFormat, RowView};
+use super::{Activation, DensePipelines, ReluMask, RowFormat, RowView};
 use crate::field::gpu::keep::HeadRows;
 use crate::field::params::MlpLayout;
+use crate::gpu::KernelFamily;
 use crate::gpu::buffers::storage_buffer_zeroed;
 use crate::gpu::{GpuContext, GpuError};
 
@@ -394,7 +395,7 @@ impl MlpPass {
     }
 
     /// The kernel family each layer's forward (and input gradient) runs.
-    pub fn layer_families(&self) -> impl Iterator<Item = DenseFamily> + '_ {
+    pub fn layer_families(&self) -> impl Iterator<Item = KernelFamily> + '_ {
         self.forward.iter().map(DenseForward::family)
     }
 }
@@ -468,7 +469,7 @@ fn hidden_format(
             .enumerate()
             .all(|(k, &dx)| !dx || packed(k, ProductKind::BackwardInput))
             && specs.iter().all(|spec| uniform_weight_chunks(ctx, spec).is_some()));
-    let uniform = pipelines.family == DenseFamily::UniformWeights;
+    let uniform = pipelines.family == KernelFamily::UniformWeights;
     if uniform && forward && backward_packed {
         pipelines.hidden_rows()
     } else {

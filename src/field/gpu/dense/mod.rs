@@ -21,7 +21,7 @@
 //! [`DensePipelines`] into the context's pipeline cache) and shared by every layer of every MLP.
 //!
 //! On CPU devices (lavapipe, SwiftShader) the forward and the input gradient use a second
-//! family of kernels, [`DenseFamily::UniformWeights`] (`shaders/dense_*_uniform.wgsl`): one
+//! family of kernels, [`KernelFamily::UniformWeights`] (`shaders/dense_*_uniform.wgsl`): one
 //! invocation per row, the layer's weights read through a uniform binding, which those devices
 //! load once per SIMD group instead of once per lane (see the shader for the measurement). Each
 //! such product reads a copy of the layer's weights in rows padded to whole vec4s (all of one
@@ -72,33 +72,11 @@ pub use tiled::TileShape;
 pub use uniform::{PackedReads, UNIFORM_WEIGHT_FLOATS};
 
 pub use crate::field::gpu::row_view::{RowFormat, RowView};
-use crate::gpu::GpuContext;
 
 /// The override constant `name` (`X_BF16`, `Y_BF16`) that makes a packed-weight kernel read or
 /// write `view`'s rows in its format.
 pub(super) fn bf16_rows(name: &'static str, view: &RowView) -> (&'static str, f64) {
     (name, f64::from(u8::from(view.is_bf16())))
-}
-
-/// Which kernels compute the forward and input gradient of a layer.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum DenseFamily {
-    /// Workgroup-tiled products (GPUs).
-    Tiled,
-    /// Row-per-invocation loops over weights in a uniform binding (CPU devices), where a layer
-    /// and the parameter buffer allow it; tiled otherwise.
-    UniformWeights,
-}
-
-impl DenseFamily {
-    /// The family that is faster on `ctx`'s kind of device.
-    pub fn for_device(ctx: &GpuContext) -> DenseFamily {
-        if ctx.is_software() {
-            DenseFamily::UniformWeights
-        } else {
-            DenseFamily::Tiled
-        }
-    }
 }
 
 /// The layer's nonlinearity, applied to the product (there is no bias).

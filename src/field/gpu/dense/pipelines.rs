@@ -2,12 +2,11 @@
 //! kernel family for one product. Compiled pipelines are kept by the context's pipeline cache,
 //! so every layer of every MLP (and every later trainer on the device) shares them.
 
+use super::RowFormat;
 use super::layer::{DenseLayerSpec, range_binding};
 use super::tiled::{TileShape, row_tile_dispatch};
-use super::uniform::{
-    MAX_UNROLLED, PackedReads, padded_to_vec4, uniform_block, uniform_dispatch, unrolls_on, widest_uniform_block,
-};
-use super::{DenseFamily, RowFormat};
+use super::uniform::{MAX_UNROLLED, PackedReads, padded_to_vec4, uniform_block, uniform_dispatch};
+use crate::gpu::KernelFamily;
 use crate::gpu::pipeline::{KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
@@ -98,17 +97,17 @@ impl DenseKernel {
 /// Which dense kernel family layers use; compiles (or fetches from the context's cache) the
 /// pipeline for one kernel and its override constants.
 pub struct DensePipelines {
-    pub(super) family: DenseFamily,
+    pub(super) family: KernelFamily,
     /// The widest block of outputs one uniform-weight invocation computes; `None`: the device's
-    /// (`widest_uniform_block`).
+    /// (`DeviceProfile::widest_uniform_block`).
     uniform_block_limit: Option<u32>,
     /// Whether MLPs that qualify run their input gradients as one chain (`chain.rs`); `None`:
-    /// where the device is faster with it (`chain::chains_on`).
+    /// where the device is faster with it (`DeviceProfile::chains`).
     input_gradient_chain: Option<bool>,
     /// Where the uniform-weight family reads; `None`: [`PackedReads::for_this_build`].
     packed_reads: Option<PackedReads>,
     /// Whether the uniform-weight products write their reductions out step by step; `None`:
-    /// where the device is faster with it (`uniform::unrolls_on`).
+    /// where the device is faster with it (`DeviceProfile::unrolled_reductions`).
     unrolled_reductions: Option<bool>,
     /// How MLPs whose kernels all run this family store their hidden outputs.
     hidden_rows: RowFormat,
@@ -116,7 +115,7 @@ pub struct DensePipelines {
 
 impl Default for DensePipelines {
     fn default() -> Self {
-        DensePipelines::with_family(DenseFamily::Tiled)
+        DensePipelines::with_family(KernelFamily::Tiled)
     }
 }
 
@@ -126,7 +125,7 @@ impl DensePipelines {
         DensePipelines::default()
     }
 
-    pub fn with_family(family: DenseFamily) -> DensePipelines {
+    pub fn with_family(family: KernelFamily) -> DensePipelines {
         DensePipelines {
             family,
             uniform_block_limit: None,
@@ -191,8 +190,7 @@ impl DensePipelines {
     }
 
     pub(super) fn input_gradient_chain(&self, ctx: &GpuContext) -> bool {
-        self.input_gradient_chain
-            .unwrap_or_else(|| super::chain::chains_on(ctx))
+        self.input_gradient_chain.unwrap_or(ctx.profile().chains)
     }
 
     /// The same with the uniform-weight products' reductions written out step by step, or kept
@@ -226,7 +224,7 @@ impl DensePipelines {
     }
 
     fn unrolls(&self, ctx: &GpuContext, reduced: u32, row_columns: u32, block: u32) -> bool {
-        self.unrolled_reductions.unwrap_or_else(|| unrolls_on(ctx))
+        self.unrolled_reductions.unwrap_or(ctx.profile().unrolled_reductions)
             && self.packed_reads() == PackedReads::Uniform
             && reduced <= MAX_UNROLLED
             && row_columns.div_ceil(block) <= MAX_FIXED_BLOCKS
@@ -257,7 +255,7 @@ impl DensePipelines {
     }
 
     pub(super) fn uniform_block_limit(&self, ctx: &GpuContext) -> u32 {
-        self.uniform_block_limit.unwrap_or_else(|| widest_uniform_block(ctx))
+        self.uniform_block_limit.unwrap_or(ctx.profile().widest_uniform_block)
     }
 
     /// The columns one invocation of a uniform-weight product of `columns` columns computes
@@ -266,7 +264,7 @@ impl DensePipelines {
         uniform_block(columns, self.uniform_block_limit(ctx))
     }
 
-    pub fn family(&self) -> DenseFamily {
+    pub fn family(&self) -> KernelFamily {
         self.family
     }
 
@@ -338,7 +336,7 @@ pub(super) type ProductKernel<'a> = (
     (Vec<wgpu::ComputePipeline>, DenseKernel),
     ProductWeights<'a>,
     [u32; 3],
-    DenseFamily,
+    KernelFamily,
     u32,
 );
 
@@ -393,7 +391,7 @@ impl DensePipelines {
                 (pipelines, uniform_kernel),
                 ProductWeights::Packed(packed),
                 workgroups,
-                DenseFamily::UniformWeights,
+                KernelFamily::UniformWeights,
                 super::uniform::UNIFORM_WORKGROUP,
             ));
         }
@@ -414,7 +412,7 @@ impl DensePipelines {
             (vec![pipeline], tiled_kernel),
             ProductWeights::Range(binding, offset),
             workgroups,
-            DenseFamily::Tiled,
+            KernelFamily::Tiled,
             shape.tile_rows(),
         ))
     }

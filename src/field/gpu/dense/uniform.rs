@@ -6,8 +6,9 @@ use std::num::NonZeroU64;
 
 use super::layer::{DenseLayerSpec, bound, range_binding};
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
-use super::{DenseFamily, RowView, bf16_rows};
+use super::{RowView, bf16_rows};
 use crate::field::bf16;
+use crate::gpu::KernelFamily;
 use crate::gpu::buffers::uniform_buffer_from;
 use crate::gpu::dispatch::{Dispatch, IndirectArgs, bind_named};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
@@ -62,32 +63,9 @@ pub(super) fn uniform_block(width: u32, limit: u32) -> u32 {
     padded_to_vec4(width.max(1).div_ceil(blocks))
 }
 
-/// The widest block worth computing per invocation on `ctx`'s device. lavapipe (LLVM) keeps a
-/// whole 32- or 64-wide row's accumulators, spilled or not, cheaper than loading each input once
-/// per block of 16; SwiftShader's Subzero compiler ran 16 faster, natively and in the page, and
-/// a browser's CPU device has no name to tell which it is (docs/results/bench.md).
-pub(super) fn widest_uniform_block(ctx: &GpuContext) -> u32 {
-    if is_lavapipe(ctx) { 64 } else { 16 }
-}
-
 /// The longest reduction the uniform-weight kernels write out step by step (`MAX_UNROLLED` in
 /// `shaders/_dense_uniform.wgsl`).
 pub(super) const MAX_UNROLLED: u32 = 128;
-
-/// Whether the uniform-weight kernels run their reductions written out step by step on `ctx`
-/// (UNROLL in `shaders/_dense_uniform.wgsl`): lavapipe loads a uniform value once for all lanes
-/// only at an index made of constants, and gathers it lane by lane otherwise; other CPU devices
-/// keep the loop they were measured with (docs/results/bench.md).
-pub(super) fn unrolls_on(ctx: &GpuContext) -> bool {
-    is_lavapipe(ctx)
-}
-
-/// Whether `ctx`'s adapter is Mesa's lavapipe (llvmpipe, LLVM), whose compiler some kernels
-/// suit better than other CPU devices' (SwiftShader's Subzero).
-pub(super) fn is_lavapipe(ctx: &GpuContext) -> bool {
-    let name = ctx.adapter_info.name.to_ascii_lowercase();
-    name.contains("llvmpipe") || name.contains("lavapipe")
-}
 
 pub(super) fn uniform_dispatch(ctx: &GpuContext, rows: u32, width: u32, block: u32) -> Result<[u32; 3], GpuError> {
     let groups = Dispatch1d::for_device(ctx, u64::from(rows), UNIFORM_WORKGROUP)?;
@@ -488,7 +466,7 @@ impl DensePipelines {
     /// device binds 64 KiB uniforms, and the packed matrix fits one.
     pub(super) fn packs(&self, ctx: &GpuContext, spec: &DenseLayerSpec, kind: ProductKind) -> bool {
         let (rows, columns) = packed_shape(spec, kind);
-        self.family == DenseFamily::UniformWeights
+        self.family == KernelFamily::UniformWeights
             && (ctx.limits.max_uniform_buffer_binding_size as usize) >= UNIFORM_WEIGHT_FLOATS * 4
             && rows as usize * padded_to_vec4(columns) as usize <= UNIFORM_WEIGHT_FLOATS
     }
