@@ -23,8 +23,8 @@ use super::training::device::gpu_done;
 use crate::eval::bench::{bench_scene, mean_kept, step_report};
 use crate::field::Preset;
 use crate::field::gpu::trainer::Trainer;
-use crate::gpu::{GpuContext, KernelFamily};
 use crate::gpu::matmul_bench::matmul_bench;
+use crate::gpu::{GpuContext, KernelFamily};
 
 /// Untimed steps first, as `bench`'s default `--warmup` (pipeline compilation, first touches).
 const WARMUP_STEPS: u32 = 2;

@@ -7,8 +7,9 @@
 //! stride-2 stem 3 -> 32, 16 MBConv blocks in 7 groups, a 1x1 head 320 -> 1280 and a 1000-way
 //! classifier. Tensors are channels-last [`FeatureMap`]s.
 use super::checkpoint::Checkpoint;
-use super::ops::{self, Activation, Dense, Depthwise};
+use super::ops::{self, Depthwise};
 use super::{Extractor, FeatureError, FeatureMap};
+use crate::dense::{self, Activation, Dense};
 use image::RgbImage;
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -196,7 +197,7 @@ impl EfficientNetLite0 {
             groups,
             head,
             fc,
-            threads: ops::default_threads(),
+            threads: dense::default_threads(),
         })
     }
 

@@ -1,10 +1,10 @@
 //! CPU kernels for convolutional feature extractors, on channels-last (HWC) `f32` tensors:
 //! depthwise convolutions, im2col and TensorFlow "SAME" padding. The dense layer (1x1 and
 //! im2col convolutions, fully connected layers) is the crate's one CPU dense layer,
-//! `crate::dense::Dense`, re-exported here with its activations and thread helpers. Written so
+//! `crate::dense::Dense`, with its activations and thread helpers. Written so
 //! that LLVM autovectorizes the inner loops; on x86-64 the same code is also compiled with
 //! AVX2+FMA and picked at run time. Work is split over output rows with `std::thread::scope`.
-pub use crate::dense::{Activation, Dense, default_threads, erf, gelu, parallel_rows};
+use crate::dense::{Activation, parallel_rows};
 
 /// TensorFlow "SAME" padding of a length-`n` axis for kernel `k` and stride `s`:
 /// `(output length, padding before)`. The total padding is `max((ceil(n/s) - 1) * s + k - n, 0)`,
@@ -181,6 +181,7 @@ pub fn conv_weight_to_im2col(weight: &[f32], cout: usize, cin: usize, k: usize) 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::dense::Dense;
     use crate::dense::test_support::{assert_close, noise};
 
     #[test]

@@ -15,9 +15,10 @@
 //! shapes and the number of heads is given (6 for ViT-S). Tested against the official PyTorch code
 //! on random weights (`dino_vectors.rs`), never run on the real weights here.
 use super::checkpoint::Checkpoint;
-use super::ops::{self, Activation, Dense};
+use super::ops;
 use super::softmax::softmax_rows;
 use super::{FeatureError, FeatureMap};
+use crate::dense::{self, Activation, Dense};
 use image::RgbImage;
 
 const LN_EPS: f32 = 1e-6;
@@ -66,7 +67,7 @@ impl LayerNorm {
     fn forward(&self, x: &[f32], threads: usize) -> Vec<f32> {
         let d = self.weight.len();
         let mut out = vec![0.0; x.len()];
-        ops::parallel_rows(&mut out, d, threads, 16, |row0, chunk| {
+        dense::parallel_rows(&mut out, d, threads, 16, |row0, chunk| {
             for (r, o) in chunk.chunks_exact_mut(d).enumerate() {
                 let row = &x[(row0 + r) * d..][..d];
                 let mean = row.iter().map(|&v| v as f64).sum::<f64>() / d as f64;
@@ -255,7 +256,7 @@ impl DinoVit {
             blocks,
             layer_scale,
             norm: LayerNorm::load(st, "norm", dim)?,
-            threads: ops::default_threads(),
+            threads: dense::default_threads(),
         })
     }
 
@@ -386,7 +387,7 @@ impl DinoVit {
         // Each thread takes whole blocks of query rows, and for each block and head computes the
         // scores, their softmax and the weighted values while the `BLOCK x tokens` scores are
         // still in cache: one pass over them instead of three through memory.
-        ops::parallel_rows(&mut out, d, self.threads, BLOCK, |row0, chunk| {
+        dense::parallel_rows(&mut out, d, self.threads, BLOCK, |row0, chunk| {
             let mut q = Vec::with_capacity(BLOCK * hd);
             let mut scores = vec![0.0; BLOCK * tokens];
             let mut o = vec![0.0; BLOCK * hd];

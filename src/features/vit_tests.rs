@@ -277,10 +277,10 @@ fn reference(wt: &Weights, img: &[Vec<Vec<f64>>], keys_out: bool) -> (usize, usi
 fn gelu_is_the_exact_erf_gelu() {
     for i in -80..=80 {
         let x = i as f64 / 10.0;
-        assert!((ops::erf(x) - erf_series(x)).abs() < 3e-7, "erf({x})");
+        assert!((crate::dense::erf(x) - erf_series(x)).abs() < 3e-7, "erf({x})");
         let want = 0.5 * x * (1.0 + erf_series(x / 2f64.sqrt()));
         assert!(
-            (ops::gelu(x as f32) as f64 - want).abs() < 1e-6 * (1.0 + want.abs()),
+            (crate::dense::gelu(x as f32) as f64 - want).abs() < 1e-6 * (1.0 + want.abs()),
             "gelu({x})"
         );
     }
@@ -446,7 +446,7 @@ fn bench_dino_640x480() {
     let rgb = RgbImage::from_fn(640, 480, |x, y| {
         image::Rgb([(x * 7 % 256) as u8, (y * 3 % 256) as u8, ((x + y) % 256) as u8])
     });
-    let threads = ops::default_threads();
+    let threads = crate::dense::default_threads();
     for (model, side) in [(DinoModel::DinoVits8, 28), (DinoModel::Dinov2Vits14, 37)] {
         let layer_scale = model == DinoModel::Dinov2Vits14;
         let wt = Weights::random_with(384, 6, 12, 1536, model.patch(), side, layer_scale);

@@ -1,8 +1,8 @@
 //! The labels a trainer draws rays from: the user's strokes spread (`spread`) after the
 //! self-check, uploaded as the label index, and what training reports about them.
 use super::Trainer;
-use crate::field::gpu::scene_buffers::LabelIndex;
 use crate::field::FarSide;
+use crate::field::gpu::scene_buffers::LabelIndex;
 use crate::gpu::GpuError;
 use crate::labels::LabelSet;
 use crate::pause::{NoPause, Pause, run_to_end};
