@@ -44,3 +44,15 @@ impl Pause for CountPauses {
         std::future::ready(())
     }
 }
+
+/// Resolves after `ms` milliseconds, through the browser's timer: the thread is the browser's
+/// meanwhile.
+#[cfg(target_arch = "wasm32")]
+pub async fn sleep_ms(ms: u32) {
+    let (done, elapsed) = futures_channel::oneshot::channel::<()>();
+    gloo::timers::callback::Timeout::new(ms, move || {
+        let _ = done.send(());
+    })
+    .forget();
+    let _ = elapsed.await;
+}

@@ -48,12 +48,7 @@ pub fn wall_clock_ms() -> f64 {
 
 /// Yields to the browser for `ms` milliseconds (0: just let it run its event loop once).
 pub async fn sleep_ms(ms: i32) {
-    let (done, elapsed) = futures_channel::oneshot::channel::<()>();
-    gloo::timers::callback::Timeout::new(ms.max(0) as u32, move || {
-        let _ = done.send(());
-    })
-    .forget();
-    let _ = elapsed.await;
+    crate::pause::sleep_ms(ms.max(0) as u32).await;
 }
 
 /// Resolves at the browser's next animation frame (at once where there is no window).

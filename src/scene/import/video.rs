@@ -290,6 +290,10 @@ mod page {
             })
     }
 
+    /// How often, and how long apart, a frame is drawn again while it has no picture.
+    const PICTURE_TRIES: u32 = 200;
+    const PICTURE_WAIT_MS: u32 = 25;
+
     /// Waits for `event` on `video`; its `error` event instead is an error.
     async fn event(video: &HtmlVideoElement, event: &str) -> std::result::Result<(), JsValue> {
         let promise = js_sys::Promise::new(&mut |resolve, reject| {
@@ -398,16 +402,35 @@ mod page {
             player.video.set_current_time(time);
             let fail = |why: String| video_error(&name, format!("the browser could not show frame {index}: {why}"));
             sought.await.map_err(|e| fail(said(e)))?;
-            player
-                .context
-                .draw_image_with_html_video_element(&player.video, 0.0, 0.0)
-                .map_err(|e| fail(said(e)))?;
-            let rgba = player
-                .context
-                .get_image_data(0.0, 0.0, w as f64, h as f64)
-                .map_err(|e| fail(said(e)))?
-                .data()
-                .0;
+            // A seek can end before the browser has the frame's picture (seen on a loaded
+            // machine: the first frame after loading drew nothing). Drawing then leaves the
+            // canvas as it was, so it is cleared first and a picture is known by its opaque
+            // pixels: a video frame draws opaque.
+            let mut tries = 0;
+            let rgba = loop {
+                player.context.clear_rect(0.0, 0.0, f64::from(w), f64::from(h));
+                player
+                    .context
+                    .draw_image_with_html_video_element(&player.video, 0.0, 0.0)
+                    .map_err(|e| fail(said(e)))?;
+                let rgba = player
+                    .context
+                    .get_image_data(0.0, 0.0, f64::from(w), f64::from(h))
+                    .map_err(|e| fail(said(e)))?
+                    .data()
+                    .0;
+                if rgba.chunks_exact(4).any(|p| p[3] != 0) {
+                    break rgba;
+                }
+                tries += 1;
+                if tries > PICTURE_TRIES {
+                    return Err(fail(format!(
+                        "no picture {} ms after seeking to it",
+                        PICTURE_TRIES * PICTURE_WAIT_MS
+                    )));
+                }
+                crate::pause::sleep_ms(PICTURE_WAIT_MS).await;
+            };
             let rgb: Vec<u8> = rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
             RgbImage::from_raw(w, h, rgb).ok_or_else(|| fail("a frame of the wrong size".into()))
         }
