@@ -1,7 +1,6 @@
 //! The labels a trainer draws rays from: the user's strokes spread (`spread`) after the
 //! self-check, uploaded as the label index, and what training reports about them.
 use super::Trainer;
-use crate::field::FarSide;
 use crate::field::gpu::scene_buffers::LabelIndex;
 use crate::gpu::GpuError;
 use crate::labels::LabelSet;
@@ -28,7 +27,6 @@ impl Trainer {
         let classes = self.cfg.num_classes as usize;
         let asked = self.cfg.scribble_propagation;
         self.spread_check = None;
-        let mut spread_across_views = false;
         let maps = match labels {
             Some(labels) => {
                 let options = if asked.enabled && asked.self_check {
@@ -38,7 +36,6 @@ impl Trainer {
                 } else {
                     asked
                 };
-                spread_across_views = options.enabled && options.across_views;
                 self.propagation
                     .maps_pausing(scene, labels, classes, &options, pause)
                     .await
@@ -47,13 +44,10 @@ impl Trainer {
         };
         // What the strokes say lies beyond the scene box: labelled rays that end in an opaque
         // sample pass through the box with that class and stop in it with any other
-        // (`LossWeights::opacity`), where the strokes spread across views or the far side is
-        // painted with it (`FarSide::Strokes`); the strokes alone have trained without the term.
+        // (`LossWeights::opacity`).
         let far_class = match labels {
-            Some(_) if spread_across_views || self.cfg.far_side == FarSide::Strokes => {
-                self.propagation.far_class().map(u32::from)
-            }
-            _ => None,
+            Some(_) => self.propagation.far_class().map(u32::from),
+            None => None,
         };
         let drawn = match labels {
             Some(labels) if self.cfg.scribble_propagation.drawn_share > 0.0 => Some(LabelIndex::from_labels(
@@ -70,12 +64,8 @@ impl Trainer {
 
     /// For a field restored from a checkpoint, which renders and does not train: the class
     /// `labels` (those it was trained on) give what lies beyond the scene box, found as training
-    /// found it, so that a painted far side (`FarSide::Strokes`) renders as it did then. Nothing
-    /// to do for a far side the field learned.
+    /// found it, so that a painted far side (`FarSide::Strokes`) renders as it did then.
     pub fn follow_far_class(&mut self, labels: &LabelSet, scene: &Scene) {
-        if self.cfg.far_side != FarSide::Strokes {
-            return;
-        }
         let options = crate::spread::PropagationOptions {
             enabled: false,
             ..self.cfg.scribble_propagation
