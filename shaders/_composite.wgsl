@@ -48,8 +48,7 @@ struct CompositeUniforms {
     weight_opacity: f32,
     // The class of what lies beyond the scene box, or NO_FAR_CLASS: no opacity term.
     far_class: u32,
-    // 1: an opaque last sample renders the far class (reference::render::paint_far_side).
-    paint_far_side: u32,
+    _pad0: u32,
     _pad1: u32,
 }
 
@@ -90,20 +89,7 @@ fn colour_of(n: u32, c: u32) -> f32 {
     return sigmoid(color_source[h * params.color_stride + params.color_offset + c]);
 }
 
-// The logit a painted far side gives its class (reference::render::FAR_SIDE_LOGIT).
-const FAR_SIDE_LOGIT: f32 = 8.0;
-
-// Whether sample n is a painted far side: a ray's opaque last sample when the far class is
-// known and painted. Its logits are FAR_SIDE_LOGIT for the far class and 0 for the rest, and the
-// semantic head gets no gradient from it.
-fn painted_far_side(n: u32) -> bool {
-    return params.paint_far_side != 0u && params.far_class != NO_FAR_CLASS && intervals[n].x < 0.0;
-}
-
 fn logit_of(n: u32, c: u32) -> f32 {
-    if painted_far_side(n) {
-        return select(0.0, FAR_SIDE_LOGIT, c == params.far_class);
-    }
     let h = slot[n];
     if h == NOT_KEPT {
         return 0.0;

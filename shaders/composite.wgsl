@@ -125,10 +125,5 @@ fn composite(
         for (var ch = 4u; ch < k; ch++) {
             head_grads[row + ch] = w * ray_outputs[grad_at + ch];
         }
-        if painted_far_side(n) {
-            for (var c = 0u; c < params.classes; c++) {
-                head_grads[row + 4u + c] = 0.0;
-            }
-        }
     }
 }

@@ -143,8 +143,7 @@ fn backward(rows: RayRows, lane: u32) {
             for (var ch = lane; ch < k; ch += LANES) {
                 var g = 0.0;
                 if ch >= 4u {
-                    let painted_logit = ch < 4u + params.classes && painted_far_side(m);
-                    g = select(w * ray_outputs[rows.grad_at + ch], 0.0, painted_logit);
+                    g = w * ray_outputs[rows.grad_at + ch];
                 } else if ch > 0u {
                     let colour = colour_of(m, ch - 1u);
                     g = w * ray_outputs[rows.grad_at + ch - 1u] * colour * (1.0 - colour);

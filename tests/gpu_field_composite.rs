@@ -14,7 +14,7 @@ use scribblefield::field::gpu::rays::{
 };
 use scribblefield::field::reference::loss::{RayTarget, add_opacity, opacity_loss, ray_loss};
 use scribblefield::field::reference::{Channels, activations, render};
-use scribblefield::field::{FarSide, FieldConfig, bf16};
+use scribblefield::field::{FieldConfig, bf16};
 use scribblefield::gpu::buffers::{fill_with_garbage, read_buffer_blocking, storage_buffer_from, uniform_buffer_from};
 use scribblefield::gpu::test_support::gpu_for_tests;
 use scribblefield::gpu::{GpuContext, KernelFamily};
@@ -221,10 +221,6 @@ fn reference_ray(batch: &Batch, ray: usize) -> Expected {
                 .map(|v| if kept { f64::from(*v) } else { 0.0 }),
         );
     }
-    let painted = batch.far_class.filter(|_| cfg.far_side == FarSide::Strokes);
-    if let Some(class) = painted {
-        render::paint_far_side(&mut values, &deltas, &channels, class);
-    }
     let forward = render::composite(&sigmas, &deltas, &values, k);
     let f = |w: usize| f32::from_bits(row[w]);
     let depth = f(TARGET_DEPTH);
@@ -251,11 +247,8 @@ fn reference_ray(batch: &Batch, ray: usize) -> Expected {
         cfg.batch_rays as usize,
     );
     let grad_left = add_opacity(&mut terms, opacity);
-    let (grad_sigma, mut grad_values) =
+    let (grad_sigma, grad_values) =
         render::composite_backward(&forward, &deltas, &values, k, &grad_rendered, grad_left);
-    if painted.is_some() {
-        render::hold_far_side(&mut grad_values, &deltas, &channels);
-    }
     let mut grad_heads = Vec::with_capacity(s_count * k);
     for s in 0..s_count {
         let gv = &grad_values[s * k..(s + 1) * k];
@@ -609,39 +602,6 @@ fn composite_matches_reference_with_the_opacity_term() {
         assert!(semantic(&batch) > semantic(&plain) * 1.05, "far class {far_class}");
         for ctx in with_each_kernel(&ctx) {
             check_batch(&ctx, &batch);
-        }
-    }
-}
-
-/// With the far side painted (`FarSide::Strokes`), a ray's opaque last sample renders the far
-/// class whatever the semantic head gives it, and the head gets no gradient there: training
-/// and display against the reference, in both kernels.
-#[test]
-fn composite_matches_reference_with_the_far_side_painted() {
-    let Some(ctx) = gpu_for_tests("composite_matches_reference_with_the_far_side_painted") else {
-        return;
-    };
-    let painted_config = || FieldConfig {
-        far_side: FarSide::Strokes,
-        ..config(3, 5, 5, 7, 300, true)
-    };
-    let rendered =
-        |batch: &Batch| -> Vec<f64> { (0..300).flat_map(|ray| reference_ray(batch, ray).rendered).collect() };
-    for far_class in [0, 2] {
-        let learned = Batch {
-            far_class: Some(far_class),
-            ..Batch::random_thin(config(3, 5, 5, 7, 300, true), 17)
-        };
-        let batch = Batch {
-            cfg: painted_config(),
-            far_class: Some(far_class),
-            ..Batch::random_thin(config(3, 5, 5, 7, 300, true), 17)
-        };
-        // Thin rays leave much of their light to the far side: painting it changes the render.
-        assert_ne!(rendered(&batch), rendered(&learned), "far class {far_class}");
-        for ctx in with_each_kernel(&ctx) {
-            check_batch(&ctx, &batch);
-            check_render_matches_training(&ctx, &batch);
         }
     }
 }

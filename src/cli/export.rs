@@ -52,7 +52,6 @@ pub fn run(args: ExportArgs) -> CliResult {
     scene.labels = None;
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &checkpoint.config, trained_on.seed))?;
     trainer.restore_checkpoint(&file, &checkpoint)?;
-    trainer.follow_far_class(&trained_on.labels, &scene);
     println!(
         "field: {file}, trained {} steps on {} (seed {}), {} classes",
         checkpoint.state.step,

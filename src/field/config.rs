@@ -83,21 +83,6 @@ pub enum LastSample {
     Clear,
 }
 
-/// What class the opaque last sample at the scene box's far side renders.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum FarSide {
-    /// Whatever the semantic head gives it there, learned like any other sample: only where
-    /// labelled rays end on it.
-    #[default]
-    Learned,
-    /// The class the strokes give the pixels far from every point of a photo capture's
-    /// reconstruction (`PropagationCache::far_class`), wherever a ray ends on it, so the views
-    /// nobody drew on see the room beyond the box in that class without any label of theirs;
-    /// learned as above where the strokes name no such class.
-    Strokes,
-}
-
 /// Weights of the loss terms (docs/architecture.md, "The model").
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -205,8 +190,6 @@ pub struct FieldConfig {
     pub head_weight_threshold: f32,
     /// What a ray renders behind its last sample (see `LastSample`).
     pub last_sample: LastSample,
-    /// The class an opaque last sample renders (see `FarSide`).
-    pub far_side: FarSide,
     /// What the semantic head sees (see `SemanticInput`).
     pub semantic_input: SemanticInput,
     /// How strokes spread inside their own frame before training (`spread::propagate`).
@@ -242,7 +225,6 @@ impl Default for FieldConfig {
             semantic_trunk_gradient: 1.0,
             head_weight_threshold: 1e-4,
             last_sample: LastSample::Auto,
-            far_side: FarSide::Learned,
             semantic_input: SemanticInput::Auto,
             scribble_propagation: PropagationOptions::default(),
         }

@@ -15,7 +15,7 @@ pub mod presets;
 pub mod reference;
 pub mod run_config;
 
-pub use config::{AdamConfig, ConfigError, Encoding, FarSide, FieldConfig, LastSample, LossWeights, SemanticInput};
+pub use config::{AdamConfig, ConfigError, Encoding, FieldConfig, LastSample, LossWeights, SemanticInput};
 pub use params::{MlpLayout, ParamLayout};
 pub use presets::{Preset, Runner};
 pub use run_config::{Finished, finish};

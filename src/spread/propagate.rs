@@ -281,9 +281,8 @@ impl PropagationCache {
 
     /// The class the last [`PropagationCache::maps`] gave the pixels far from every point of a
     /// capture with sparse depth: what the strokes say lies beyond the reconstruction (a photo
-    /// capture's room, `view_seeds::region_class`), known from the strokes alone whether or not
-    /// they spread. `None` on captures with dense depth or none, or when the strokes on such
-    /// pixels name no single class.
+    /// capture's room, `view_seeds::region_class`). `None` on captures with dense depth or none,
+    /// with propagation off, or when the strokes on such pixels name no single class.
     pub fn far_class(&self) -> Option<u16> {
         self.far_class
     }
@@ -447,28 +446,6 @@ enum Carried {
     Walks(Vec<u16>),
 }
 
-/// The capture's points as each frame sees them, built once per scene.
-async fn sparse_capture<'a>(
-    cache: &'a mut PropagationCache,
-    scene: &Scene,
-    pause: &mut impl Pause,
-) -> &'a mut SparseCapture {
-    let sparse = match cache.sparse.take() {
-        Some(sparse) => sparse,
-        None => SparseCapture::new(scene, pause).await,
-    };
-    cache.sparse.insert(sparse)
-}
-
-/// The class the strokes give the pixels far from every point (`view_seeds::region_class`).
-fn far_class_of_strokes(sparse: &SparseCapture, seeds: &[FrameSeeds], classes: usize) -> Option<u16> {
-    let drawn: Vec<(&[u16], &[bool])> = seeds
-        .iter()
-        .filter_map(|s| Some((s.strokes.as_deref()?, sparse.far.get(s.frame as usize)?.as_slice())))
-        .collect();
-    region_class(&drawn, classes)
-}
-
 /// What each frame starts from: its rasterized strokes, and on a capture with sparse depth
 /// (when `across_views`) the labels the points carry to it. Frames in ascending order.
 async fn frame_seeds(
@@ -495,14 +472,7 @@ async fn frame_seeds(
             carried: None,
         })
         .collect();
-    if !scene.has_sparse_depth() {
-        return seeds;
-    }
-    // What the strokes say lies beyond the reconstruction is known from the strokes alone, so
-    // the trainer has it whether or not they spread (`PropagationCache::far_class`).
-    let unreconstructed = far_class_of_strokes(sparse_capture(cache, scene, pause).await, &seeds, classes);
-    cache.far_class = unreconstructed;
-    if !(options.enabled && options.across_views) {
+    if !(options.enabled && options.across_views && scene.has_sparse_depth()) {
         return seeds;
     }
     let strokes: Vec<(u32, Vec<u16>)> = seeds
@@ -535,7 +505,17 @@ async fn frame_seeds(
         };
         walked.push((*frame, map));
     }
-    let sparse = sparse_capture(cache, scene, pause).await;
+    let sparse = match cache.sparse.take() {
+        Some(sparse) => sparse,
+        None => SparseCapture::new(scene, pause).await,
+    };
+    let sparse = cache.sparse.insert(sparse);
+    let drawn: Vec<(&[u16], &[bool])> = strokes
+        .iter()
+        .map(|(f, map)| (map.as_slice(), sparse.far[*f as usize].as_slice()))
+        .collect();
+    let unreconstructed = region_class(&drawn, classes);
+    cache.far_class = unreconstructed;
     let point_classes = sparse
         .point_classes(walked, classes, unreconstructed, pause)
         .await

@@ -331,15 +331,6 @@ fn strokes_whose_points_hold_one_class_still_carry_it_to_every_photo() {
         ..PropagationOptions::default()
     };
     let iou = label_iou(&scene, &cache.maps(&scene, &labels, 2, &walked));
-    // The strokes alone name it too, for a painted far side (`FarSide::Strokes`): only the
-    // strokes are trained on, and the class is the same.
-    let alone = PropagationOptions {
-        enabled: false,
-        ..PropagationOptions::default()
-    };
-    let strokes = cache.maps(&scene, &labels, 2, &alone);
-    assert_eq!(strokes.len(), 2, "the drawn photos alone");
-    assert_eq!(cache.far_class(), Some(0));
     eprintln!(
         "at 400 px: {frames} frames, {labelled} labelled pixels, {right:.4} right, the head in {with_head}; \
          walking every photo: IoU per class {iou:?}"

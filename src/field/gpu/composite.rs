@@ -26,7 +26,7 @@
 //! rendered block and nothing else, for frames that are shown and not trained on.
 //!
 //! A ray that misses the scene box contributes nothing (zero loss and gradients).
-use crate::field::config::{FarSide, FieldConfig};
+use crate::field::config::FieldConfig;
 use crate::field::reference::Channels;
 use crate::gpu::buffers::{storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::{Dispatch, whole};
@@ -63,9 +63,7 @@ pub struct CompositeUniforms {
     /// The class of what lies beyond the scene box ([`CompositePass::set_far_class`]), or
     /// [`NO_FAR_CLASS`].
     pub far_class: u32,
-    /// 1 when an opaque last sample renders the far class instead of the semantic head's
-    /// logits (`FarSide::Strokes`, `reference::render::paint_far_side`), 0 otherwise.
-    pub paint_far_side: u32,
+    pub _pad0: u32,
     pub _pad1: u32,
 }
 
@@ -237,7 +235,7 @@ impl CompositePass {
             weight_feature: cfg.loss.feature,
             weight_opacity: cfg.loss.opacity,
             far_class: NO_FAR_CLASS,
-            paint_far_side: u32::from(cfg.far_side == FarSide::Strokes),
+            _pad0: 0,
             _pad1: 0,
         };
         let grad_heads = storage_buffer_zeroed::<f32>(ctx, "density gradients", samples * layout.grad_stride())?;

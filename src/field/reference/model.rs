@@ -22,7 +22,7 @@ use super::real::Real;
 use super::render::{self, Channels, Composite};
 use super::sampling::{self, Ray, SamplePlan};
 use super::{frequency, sh};
-use crate::field::config::{ConfigError, FarSide, FieldConfig};
+use crate::field::config::{ConfigError, FieldConfig};
 use crate::field::params::ParamLayout;
 use crate::scene::Bounds;
 
@@ -34,9 +34,8 @@ pub struct FieldModel {
     pub grid: HashGrid,
     pub channels: Channels,
     /// The class of what lies beyond the scene box, for the opacity term
-    /// (`loss::opacity_loss`) and, with `FarSide::Strokes`, the class an opaque last sample is
-    /// painted with; the trainer takes it from its labels (`PropagationCache::far_class`).
-    /// None: neither.
+    /// (`loss::opacity_loss`); the trainer takes it from its labels
+    /// (`PropagationCache::far_class`). None: no such term.
     pub far_class: Option<u32>,
     /// How each MLP's hidden outputs and each layer's dZ are seen; the GPU trainer says which
     /// it stores as bf16 (`Trainer::stored_rows`). Default: exact everywhere.
@@ -216,15 +215,6 @@ impl FieldModel {
         }
     }
 
-    /// The class an opaque last sample is painted with (`FarSide::Strokes` and a far class), or
-    /// `None`: the semantic head's.
-    pub fn painted_far_side(&self) -> Option<u32> {
-        match self.config.far_side {
-            FarSide::Strokes => self.far_class,
-            FarSide::Learned => None,
-        }
-    }
-
     /// Forward pass of one ray: every sample, then rendering.
     pub fn forward_ray<R: Real>(&self, params: &[R], ray: &SampledRay) -> RayTrace<R> {
         let mut view_sh = [R::ZERO; sh::SH_COEFFS];
@@ -249,10 +239,7 @@ impl FieldModel {
         }
         let sigmas: Vec<R> = samples.iter().map(|s| s.sigma).collect();
         let deltas: Vec<R> = ray.deltas.iter().map(|d| R::of_f32(*d)).collect();
-        let mut values: Vec<R> = samples.iter().flat_map(|s| s.value.iter().copied()).collect();
-        if let Some(class) = self.painted_far_side() {
-            render::paint_far_side(&mut values, &deltas, &self.channels, class);
-        }
+        let values: Vec<R> = samples.iter().flat_map(|s| s.value.iter().copied()).collect();
         let composite = render::composite(&sigmas, &deltas, &values, self.channels.count());
         RayTrace {
             samples,
@@ -274,7 +261,7 @@ impl FieldModel {
         grad: &mut [R],
     ) {
         let k = self.channels.count();
-        let (grad_sigma, mut grad_values) = render::composite_backward(
+        let (grad_sigma, grad_values) = render::composite_backward(
             &trace.composite,
             &trace.deltas,
             &trace.values,
@@ -282,9 +269,6 @@ impl FieldModel {
             grad_rendered,
             grad_left,
         );
-        if self.painted_far_side().is_some() {
-            render::hold_far_side(&mut grad_values, &trace.deltas, &self.channels);
-        }
         for (i, sample) in trace.samples.iter().enumerate() {
             self.backward_sample(
                 params,

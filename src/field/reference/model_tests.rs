@@ -7,7 +7,7 @@ use super::loss::RayTarget;
 use super::model::{FieldModel, SampledRay, TrainingRay};
 use super::sampling::ray_through_pixel;
 use super::{Adam, sh};
-use crate::field::config::{Encoding, FarSide, FieldConfig, LastSample, SemanticInput};
+use crate::field::config::{Encoding, FieldConfig, LastSample, SemanticInput};
 use crate::rng::SplitMix64;
 use crate::scene::{Bounds, Intrinsics, Pose};
 
@@ -111,18 +111,6 @@ fn whole_model_gradient_with_an_opaque_last_sample_and_the_opacity_term() {
     );
 }
 
-#[test]
-fn whole_model_gradient_with_the_far_side_painted() {
-    check_whole_model_gradient_far(
-        FieldConfig {
-            last_sample: LastSample::Opaque,
-            far_side: FarSide::Strokes,
-            ..tiny_config()
-        },
-        Some(1),
-    );
-}
-
 fn check_whole_model_gradient(config: FieldConfig) {
     check_whole_model_gradient_far(config, None);
 }
@@ -155,17 +143,6 @@ fn check_whole_model_gradient_far(config: FieldConfig, far_class: Option<u32>) {
         };
         let plain = without.loss(&params, &batch);
         assert!(terms.semantic > plain.semantic + 1e-9, "{terms:?} against {plain:?}");
-        if model.painted_far_side().is_some() {
-            let learned = FieldModel {
-                config: FieldConfig {
-                    far_side: FarSide::Learned,
-                    ..model.config.clone()
-                },
-                ..model.clone()
-            };
-            let unpainted = learned.loss(&params, &batch).semantic;
-            assert!((terms.semantic - unpainted).abs() > 1e-9, "the far side is painted");
-        }
     }
     let numeric = central_differences(|p| model.loss(p, &batch).total(), &params, 1e-6);
     for (name, range) in [

@@ -42,46 +42,6 @@ impl Channels {
 /// the transmittance left whatever its density, and its density gets no gradient.
 pub const OPAQUE_INTERVAL: f32 = -1.0;
 
-/// The logit a painted far side gives its class (`FarSide::Strokes`; every other class gets 0
-/// there): a ray that meets nothing in the box renders that class with probability
-/// e^8 / (e^8 + C − 1), sure enough that such rays barely pull on it, while a surface in front
-/// with a weight near 1 still decides the ray's class.
-pub const FAR_SIDE_LOGIT: f32 = 8.0;
-
-/// Whether a ray's last sample is opaque (its interval is [`OPAQUE_INTERVAL`]).
-fn ends_opaque<R: Real>(deltas: &[R]) -> bool {
-    deltas.last().is_some_and(|d| *d < R::ZERO)
-}
-
-/// Paints the ray's opaque last sample with class `class` (`FarSide::Strokes`): its logits in
-/// `values` (n × `channels.count()`) become [`FAR_SIDE_LOGIT`] for `class` and 0 for the rest.
-/// A ray whose last sample is not opaque is left as it is.
-pub fn paint_far_side<R: Real>(values: &mut [R], deltas: &[R], channels: &Channels, class: u32) {
-    if !ends_opaque(deltas) {
-        return;
-    }
-    let k = channels.count();
-    let last = &mut values[(deltas.len() - 1) * k..];
-    for c in 0..channels.classes {
-        last[Channels::SEMANTIC + c] = if c as u32 == class {
-            R::of_f32(FAR_SIDE_LOGIT)
-        } else {
-            R::ZERO
-        };
-    }
-}
-
-/// The painted far side's logits are not the semantic head's: their gradient in `grad_values`
-/// (n × `channels.count()`, from [`composite_backward`]) is dropped.
-pub fn hold_far_side<R: Real>(grad_values: &mut [R], deltas: &[R], channels: &Channels) {
-    if !ends_opaque(deltas) {
-        return;
-    }
-    let k = channels.count();
-    let last = &mut grad_values[(deltas.len() - 1) * k..];
-    last[Channels::SEMANTIC..Channels::SEMANTIC + channels.classes].fill(R::ZERO);
-}
-
 /// One sample's step along the ray: (weight T·α, transmittance after it), advancing the summed
 /// optical depth. Shared by `composite` and `kept_samples` (and `shaders/_density.wgsl`).
 fn transmittance_step<R: Real>(sigma: R, delta: R, optical_depth: &mut R) -> (R, R) {
@@ -222,47 +182,6 @@ mod tests {
         // nothing behind it survives.
         assert_eq!(kept_samples(&h0, &deltas, 1e-4), [false, true, false, false]);
         assert_eq!(kept_samples(&h0, &deltas, 0.0), [true; 4]);
-    }
-
-    #[test]
-    fn a_painted_far_side_renders_its_class_behind_an_empty_box() {
-        let channels = Channels {
-            classes: 3,
-            feature_dim: 1,
-        };
-        let k = channels.count();
-        let mut rng = SplitMix64::new(3);
-        let opaque = f64::from(OPAQUE_INTERVAL);
-        let deltas = [0.1, 0.1, opaque];
-        let mut values = random_vec(&mut rng, 3 * k, 1.0);
-        let before = values.clone();
-        paint_far_side(&mut values, &deltas, &channels, 1);
-        let painted = [0.0, f64::from(FAR_SIDE_LOGIT), 0.0];
-        assert_eq!(
-            &values[2 * k + Channels::SEMANTIC..2 * k + Channels::SEMANTIC + 3],
-            &painted
-        );
-        // Colour, depth and feature of the far side, and every other sample, are the heads'.
-        for (i, (v, b)) in values.iter().zip(&before).enumerate() {
-            let logit = i >= 2 * k + Channels::SEMANTIC && i < 2 * k + Channels::SEMANTIC + 3;
-            assert!(logit || v == b, "value {i} changed");
-        }
-        // An empty box: the ray renders the painted class.
-        let c = composite(&[0.0, 0.0, 0.0], &deltas, &values, k);
-        assert_eq!(&c.output[Channels::SEMANTIC..Channels::SEMANTIC + 3], &painted);
-        // Its gradient stops at the painted logits and nowhere else.
-        let (_, mut grad) = composite_backward(&c, &deltas, &values, k, &vec![1.0; k], 0.0);
-        hold_far_side(&mut grad, &deltas, &channels);
-        assert_eq!(
-            &grad[2 * k + Channels::SEMANTIC..2 * k + Channels::SEMANTIC + 3],
-            &[0.0; 3]
-        );
-        assert!(grad[2 * k] != 0.0 && grad[2 * k + Channels::SEMANTIC + 3] != 0.0);
-        // A ray with nothing behind its last sample is not painted.
-        let clear = [0.1; 3];
-        let mut unpainted = before.clone();
-        paint_far_side(&mut unpainted, &clear, &channels, 1);
-        assert_eq!(unpainted, before);
     }
 
     #[test]

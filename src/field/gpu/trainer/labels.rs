@@ -62,20 +62,6 @@ impl Trainer {
         self.use_label_maps(maps, far_class, drawn.as_ref(), scene)
     }
 
-    /// For a field restored from a checkpoint, which renders and does not train: the class
-    /// `labels` (those it was trained on) give what lies beyond the scene box, found as training
-    /// found it, so that a painted far side (`FarSide::Strokes`) renders as it did then.
-    pub fn follow_far_class(&mut self, labels: &LabelSet, scene: &Scene) {
-        let options = crate::spread::PropagationOptions {
-            enabled: false,
-            ..self.cfg.scribble_propagation
-        };
-        self.propagation
-            .maps(scene, labels, self.cfg.num_classes as usize, &options);
-        self.composite
-            .set_far_class(&self.ctx, self.propagation.far_class().map(u32::from));
-    }
-
     /// Trains on `maps` (per frame, a class per pixel or `UNLABELLED`) exactly as given, with no
     /// spreading and no class beyond the scene box: for measurements that train on known
     /// labels (the quality suite's ceiling, the true masks of every frame).
