@@ -12,7 +12,7 @@ use super::tiled::{REDUCE_SHAPE, REDUCE_WORKGROUP, TileShape, weight_chunks};
 use super::uniform::{
     UniformWeightPartials, WeightGradientShape, WindowedLayer, dz_windows_buffer, padded_to_vec4, uniform_weight_chunks,
 };
-use super::{Activation, RowFormat, RowView, bf16_rows};
+use super::{RowFormat, RowView, bf16_rows};
 use crate::field::gpu::keep::HeadRows;
 use crate::gpu::KernelFamily;
 use crate::gpu::buffers::{storage_buffer_zeroed, uniform_buffer_from};
@@ -397,7 +397,7 @@ impl DenseBackward {
     /// - the reduction: the partial matrices read, the gradient read and written.
     pub fn global_bytes(&self, rows: u64) -> u64 {
         let (i, o) = (u64::from(self.spec.in_dim), u64::from(self.spec.out_dim));
-        let relu = u64::from(self.spec.activation == Activation::Relu && !self.dz_given);
+        let relu = u64::from(self.spec.relu && !self.dz_given);
         // dZ's bf16 rows, in words.
         let dz_row = u64::from(crate::field::bf16::row_words(self.spec.out_dim));
         let [x_row, y_row, dy_row, dx_row] = [

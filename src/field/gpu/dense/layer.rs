@@ -7,7 +7,7 @@ use std::ops::Range;
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind, ProductWeights};
 use super::relu_mask::ReluMask;
 use super::uniform::padded_to_vec4;
-use super::{Activation, RowFormat, RowView, bf16_rows};
+use super::{RowFormat, RowView, bf16_rows};
 use crate::field::gpu::keep::HeadRows;
 use crate::gpu::KernelFamily;
 use crate::gpu::buffers::{storage_buffer_from, storage_buffer_zeroed, uniform_buffer_from};
@@ -46,7 +46,8 @@ pub struct DenseLayerSpec {
     pub rows: u32,
     pub in_dim: u32,
     pub out_dim: u32,
-    pub activation: Activation,
+    /// A ReLU on the product (there is no bias); the last layer of an MLP has none.
+    pub relu: bool,
     /// The `[out][in]` matrix's range of the flat parameter (and gradient) buffer.
     pub weights: Range<usize>,
 }
@@ -81,7 +82,7 @@ impl DenseLayerSpec {
             rows: self.rows,
             in_dim: self.in_dim,
             out_dim: self.out_dim,
-            relu: u32::from(self.activation == Activation::Relu),
+            relu: u32::from(self.relu),
             ..DenseDims::default()
         }
     }
@@ -216,7 +217,7 @@ impl DenseForward {
     ) -> Result<DenseForward, GpuError> {
         spec.check()?;
         let label = format!("{} forward", spec.label);
-        if relu_mask && (packed.is_none() || spec.activation != Activation::Relu) {
+        if relu_mask && (packed.is_none() || !spec.relu) {
             return Err(GpuError::invalid_argument(
                 &label,
                 "only a ReLU layer on the uniform-weight kernel stores its mask bits",

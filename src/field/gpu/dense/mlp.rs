@@ -5,7 +5,7 @@ use super::layer::{DenseForward, DenseLayerSpec};
 use super::pipelines::ProductKind;
 use super::uniform::MlpPacking;
 use super::uniform::uniform_weight_chunks;
-use super::{Activation, DensePipelines, ReluMask, RowFormat, RowView};
+use super::{DensePipelines, ReluMask, RowFormat, RowView};
 use crate::field::gpu::keep::HeadRows;
 use crate::field::params::MlpLayout;
 use crate::gpu::KernelFamily;
@@ -421,11 +421,7 @@ fn layer_specs(label: &str, layout: &MlpLayout, rows: u32) -> Result<Vec<DenseLa
             rows,
             in_dim: dims[k],
             out_dim: dims[k + 1],
-            activation: if k + 1 < layers {
-                Activation::Relu
-            } else {
-                Activation::None
-            },
+            relu: k + 1 < layers,
             weights: layout.layers[k].clone(),
         })
         .collect();

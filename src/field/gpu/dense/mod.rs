@@ -78,10 +78,3 @@ pub use crate::field::gpu::row_view::{RowFormat, RowView};
 pub(super) fn bf16_rows(name: &'static str, view: &RowView) -> (&'static str, f64) {
     (name, f64::from(u8::from(view.is_bf16())))
 }
-
-/// The layer's nonlinearity, applied to the product (there is no bias).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Activation {
-    Relu,
-    None,
-}

@@ -1,5 +1,5 @@
 use super::{WeightGradientShape, uniform_block, weight_gradient_block};
-use crate::field::gpu::dense::{Activation, DenseLayerSpec};
+use crate::field::gpu::dense::DenseLayerSpec;
 
 #[test]
 fn weight_gradient_spans_keep_four_workgroups_per_dispatch() {
@@ -17,7 +17,7 @@ fn weight_gradient_spans_keep_four_workgroups_per_dispatch() {
             rows: 1000,
             in_dim,
             out_dim,
-            activation: Activation::Relu,
+            relu: true,
             weights: 0..(in_dim * out_dim) as usize,
         };
         let shape = WeightGradientShape::new(&spec, limit);
