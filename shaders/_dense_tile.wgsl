@@ -9,7 +9,7 @@
 // `dense::TileShape` (wide layers 16x16 invocations over 64x64 tiles, narrow outputs tall thin
 // tiles); the staging arrays are sized for the largest shape: 12 KiB, under WebGPU's 16 KiB.
 
-// Mirrors `DenseDims` in src/field/gpu/dense/layer.rs (16 u32, 64 bytes). Offsets and strides count
+// Mirrors `DenseDims` in src/field/gpu/dense/spec.rs (16 u32, 64 bytes). Offsets and strides count
 // f32 elements; a view (stride, offset) addresses element j of row n at n·stride + offset + j.
 struct DenseDims {
     rows: u32,

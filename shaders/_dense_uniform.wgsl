@@ -18,7 +18,7 @@
 // MLPs about 3x slower than natively on the same device (docs/results/bench.md).
 //
 // Stages declare `weights: array<vec4<f32>, UNIFORM_WEIGHT_VEC4S>` in one of two address spaces
-// (`PackedReads` in src/field/gpu/dense/uniform.rs): `uniform` for naga (native), `storage,
+// (`PackedReads` in src/field/gpu/dense/uniform_shape.rs): `uniform` for naga (native), `storage,
 // read` for Tint (the page). Tint lowers every uniform access to a byte offset and back,
 // `(index · 16) / 16`, a division per vec4 that SwiftShader's compiler runs lane by lane; in the
 // page that made these kernels about 1.3x slower than natively, and reading the same copy from

@@ -55,7 +55,7 @@ pub const MIRRORS: &[Mirror] = &[
         "ChainDims",
     ),
     mirror(
-        "src/field/gpu/dense/layer.rs",
+        "src/field/gpu/dense/spec.rs",
         "DenseDims",
         "dense_forward.wgsl",
         "DenseDims",
@@ -139,7 +139,7 @@ pub struct FieldLayout {
 /// A struct's size and fields, on one side of the mirror.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct StructLayout {
-    /// Where it comes from, for messages: "`DenseDims` in src/field/gpu/dense/layer.rs".
+    /// Where it comes from, for messages: "`DenseDims` in src/field/gpu/dense/spec.rs".
     pub origin: String,
     pub name: String,
     pub size: u32,

@@ -2,15 +2,15 @@
 //! sums reduced in a second pass (tiled or uniform-weight kernels per product, as the forward).
 use std::ops::Range;
 
-use super::layer::{
-    DenseDims, DenseLayerSpec, WORD, bound, bound_product, check_binding, kept_dispatch, range_binding, row_count,
-    row_words,
-};
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind, ProductWeights};
+use super::pipelines::{bound, bound_product};
 use super::relu_mask::ReluMask;
+use super::spec::{
+    DenseDims, DenseLayerSpec, WORD, check_binding, kept_dispatch, padded_to_vec4, range_binding, row_count, row_words,
+};
 use super::tiled::{REDUCE_SHAPE, REDUCE_WORKGROUP, TileShape, weight_chunks};
 use super::uniform::{
-    UniformWeightPartials, WeightGradientShape, WindowedLayer, dz_windows_buffer, padded_to_vec4, uniform_weight_chunks,
+    UniformWeightPartials, WeightGradientShape, WindowedLayer, dz_windows_buffer, uniform_weight_chunks,
 };
 use super::{RowFormat, RowView, bf16_rows};
 use crate::field::gpu::keep::HeadRows;
@@ -296,7 +296,7 @@ impl DenseBackward {
                         mask_dispatch: kept_dispatch(
                             kept,
                             crate::field::bf16::row_words(spec.out_dim),
-                            super::uniform::UNIFORM_WORKGROUP,
+                            super::uniform_shape::UNIFORM_WORKGROUP,
                             1,
                         )?,
                     },

@@ -11,11 +11,11 @@
 //! by quad), every layer's weight gradient reads dZ through uniform windows, and the packed
 //! copies the walk multiplies by lie in one 64 KiB window. Otherwise each layer keeps its own
 //! input-gradient kernel.
-use super::layer::{DenseDims, DenseLayerSpec, bound};
+use super::pipelines::bound;
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
-use super::uniform::{
-    MAX_UNROLLED, MlpPacking, UNIFORM_WORKGROUP, padded_to_vec4, uniform_block, uniform_dispatch, uniform_weight_chunks,
-};
+use super::spec::{DenseDims, DenseLayerSpec, padded_to_vec4};
+use super::uniform::{MlpPacking, uniform_weight_chunks};
+use super::uniform_shape::{MAX_UNROLLED, UNIFORM_WORKGROUP, uniform_block, uniform_dispatch};
 use super::{RowFormat, RowView, bf16_rows};
 use crate::field::gpu::keep::HeadRows;
 use crate::gpu::KernelFamily;

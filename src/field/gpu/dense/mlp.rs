@@ -1,10 +1,10 @@
 //! Whole MLPs on the dense layers: the twin of `reference::mlp`.
 use super::backward::{DenseBackward, DenseGradients, OutputGradient};
 use super::chain::{BackwardChain, ChainDesc, chain_block};
-use super::layer::{DenseForward, DenseLayerSpec};
+use super::layer::DenseForward;
 use super::pipelines::ProductKind;
-use super::uniform::MlpPacking;
-use super::uniform::uniform_weight_chunks;
+use super::spec::DenseLayerSpec;
+use super::uniform::{MlpPacking, uniform_weight_chunks};
 use super::{DensePipelines, ReluMask, RowFormat, RowView};
 use crate::field::gpu::keep::HeadRows;
 use crate::field::params::MlpLayout;

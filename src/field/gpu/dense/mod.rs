@@ -49,27 +49,33 @@
 //! into that layer's weight-gradient windows, with the mask from bits its forward stored
 //! ([`relu_mask`]).
 //!
-//! Where things live: [`tiled`] (tile shapes and the tiled weight-gradient chunking),
-//! [`uniform`] (the uniform-weight family), [`chain`] (the input-gradient chain), [`relu_mask`] (the
-//! ReLU's bits between layers), [`pipelines`] (the pipeline cache and the choice of
-//! kernel per product), [`layer`] (layer specs, one layer's forward and backward) and [`mlp`]
-//! (whole MLPs). Everything a caller needs is re-exported here.
+//! Where things live, from the bottom up (each file imports only those above it in this list):
+//! [`spec`] (a layer's spec, the kernels' uniform block, bindings and rows), [`tiled`] (tile
+//! shapes and the tiled weight-gradient chunking), [`uniform_shape`] (the uniform-weight
+//! family's blocks and reads), [`pipelines`] (the pipeline cache, the choice of kernel per
+//! product and binding one), [`uniform`] (the uniform-weight kernels), [`relu_mask`] (the ReLU's
+//! bits between layers), [`layer`] (one layer's forward), [`chain`] (the input-gradient chain),
+//! [`backward`] (one layer's backward) and [`mlp`] (whole MLPs). Everything a caller needs is
+//! re-exported here.
 mod backward;
 mod chain;
 mod layer;
 mod mlp;
 mod pipelines;
 mod relu_mask;
+mod spec;
 mod tiled;
 mod uniform;
+mod uniform_shape;
 
 pub use backward::{DenseBackward, DenseGradients};
-pub use layer::{DenseDims, DenseForward, DenseLayerSpec};
+pub use layer::DenseForward;
 pub use mlp::{InputRows, MlpGradients, MlpPass, MlpPassDesc, mlp_row_format};
 pub use pipelines::DensePipelines;
 pub use relu_mask::ReluMask;
+pub use spec::{DenseDims, DenseLayerSpec};
 pub use tiled::TileShape;
-pub use uniform::{PackedReads, UNIFORM_WEIGHT_FLOATS};
+pub use uniform_shape::{PackedReads, UNIFORM_WEIGHT_FLOATS};
 
 pub use crate::field::gpu::row_view::{RowFormat, RowView};
 

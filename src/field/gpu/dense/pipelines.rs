@@ -3,10 +3,12 @@
 //! so every layer of every MLP (and every later trainer on the device) shares them.
 
 use super::RowFormat;
-use super::layer::{DenseLayerSpec, range_binding};
+use super::spec::{DenseLayerSpec, kept_dispatch, padded_to_vec4, range_binding};
 use super::tiled::{TileShape, row_tile_dispatch};
-use super::uniform::{MAX_UNROLLED, PackedReads, padded_to_vec4, uniform_block, uniform_dispatch};
+use super::uniform_shape::{MAX_UNROLLED, PackedReads, uniform_block, uniform_dispatch};
+use crate::field::gpu::keep::HeadRows;
 use crate::gpu::KernelFamily;
+use crate::gpu::dispatch::{Dispatch, bind_named};
 use crate::gpu::pipeline::{KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError, shaders};
 
@@ -392,7 +394,7 @@ impl DensePipelines {
                 ProductWeights::Packed(packed),
                 workgroups,
                 KernelFamily::UniformWeights,
-                super::uniform::UNIFORM_WORKGROUP,
+                super::uniform_shape::UNIFORM_WORKGROUP,
             ));
         }
         if let Some((name, _)) = constants
@@ -416,4 +418,33 @@ impl DensePipelines {
             shape.tile_rows(),
         ))
     }
+}
+
+/// One dispatch per pipeline of a product ([`super::pipelines::ProductKernel`]), each bound to
+/// the same resources and launched over the kept rows where there are some.
+pub(super) fn bound_product(
+    ctx: &GpuContext,
+    (pipelines, kernel): (Vec<wgpu::ComputePipeline>, DenseKernel),
+    resources: &[(&str, wgpu::BindingResource<'_>)],
+    workgroups: [u32; 3],
+    (kept, rows_per_workgroup): (Option<&HeadRows>, u32),
+) -> Result<Vec<Dispatch>, GpuError> {
+    pipelines
+        .into_iter()
+        .map(|pipeline| {
+            let indirect = kept_dispatch(kept, 1, rows_per_workgroup, workgroups[2])?;
+            Ok(bound(ctx, (pipeline, kernel), resources, workgroups)?.with_indirect(indirect))
+        })
+        .collect()
+}
+
+/// One dense kernel's dispatch, its group 0 bound by the WGSL names of `kernel`'s bindings.
+pub(super) fn bound(
+    ctx: &GpuContext,
+    (pipeline, kernel): (wgpu::ComputePipeline, DenseKernel),
+    resources: &[(&str, wgpu::BindingResource<'_>)],
+    workgroups: impl Into<[u32; 3]>,
+) -> Result<Dispatch, GpuError> {
+    let bind_group = bind_named(ctx, &kernel.spec(), &pipeline.get_bind_group_layout(0), 0, resources)?;
+    Ok(Dispatch::new(pipeline, bind_group, workgroups))
 }

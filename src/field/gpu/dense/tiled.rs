@@ -1,6 +1,6 @@
 //! The workgroup-tiled dense kernels (`shaders/dense_*.wgsl` over `_dense_tile.wgsl`): the
 //! tile shape picked per layer shape, and how the weight gradient is cut into chunks of rows.
-use super::layer::DenseLayerSpec;
+use super::spec::DenseLayerSpec;
 use crate::gpu::pipeline::Dispatch1d;
 use crate::gpu::{GpuContext, GpuError};
 

@@ -4,8 +4,12 @@
 //! [`WINDOWS_PER_DISPATCH`] chunks per dispatch.
 use std::num::NonZeroU64;
 
-use super::layer::{DenseLayerSpec, bound, range_binding};
+use super::pipelines::bound;
 use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
+use super::spec::{DenseLayerSpec, padded_to_vec4, range_binding};
+use super::uniform_shape::{
+    PackedReads, UNIFORM_WEIGHT_FLOATS, UNIFORM_WORKGROUP, packed_window_alignment, uniform_block,
+};
 use super::{RowView, bf16_rows};
 use crate::field::bf16;
 use crate::gpu::KernelFamily;
@@ -13,64 +17,6 @@ use crate::gpu::buffers::uniform_buffer_from;
 use crate::gpu::dispatch::{Dispatch, IndirectArgs, bind_named};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
 use crate::gpu::{GpuContext, GpuError};
-
-/// Where the uniform-weight kernels read a layer's packed weights and the weight gradient reads
-/// dZ (`shaders/_dense_uniform.wgsl`). The same kernels either way, summing in the same order,
-/// so the results are the same bits.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum PackedReads {
-    /// 64 KiB uniform bindings (`dense_*_uniform.wgsl`): a load every lane shares is one scalar
-    /// load on CPU devices, as naga's SPIR-V runs natively.
-    Uniform,
-    /// Storage bindings (`dense_*_packed_storage.wgsl`): Tint, the browser's compiler, turns
-    /// every uniform access into a byte offset divided back by 16, which SwiftShader runs lane by
-    /// lane; from storage it loads a shared index once (docs/results/bench.md, "Tint divides per
-    /// uniform access").
-    Storage,
-}
-
-impl PackedReads {
-    /// The faster for the compiler this build hands its WGSL to: Tint in the browser (measured
-    /// in Chromium), naga natively.
-    pub fn for_this_build() -> PackedReads {
-        if cfg!(target_arch = "wasm32") {
-            PackedReads::Storage
-        } else {
-            PackedReads::Uniform
-        }
-    }
-}
-
-/// Offset alignment of a window of the packed copies, bound as a uniform or a storage range.
-fn packed_window_alignment(ctx: &GpuContext) -> u32 {
-    ctx.limits
-        .min_uniform_buffer_offset_alignment
-        .max(ctx.limits.min_storage_buffer_offset_alignment)
-        .max(16)
-}
-
-/// f32 in the uniform binding of the uniform-weight kernels (64 KiB, WebGPU's default limit).
-pub const UNIFORM_WEIGHT_FLOATS: usize = 16384;
-/// Invocations per workgroup of the uniform-weight kernels (`WORKGROUP` in the shader).
-pub(super) const UNIFORM_WORKGROUP: u32 = 64;
-
-/// Outputs (or inputs) per invocation of a uniform-weight kernel (`shaders/_dense_acc.wgsl`):
-/// `width` split into as few blocks of at most `limit` (a multiple of 4, at most 64) as
-/// possible, of equal size rounded up to a multiple of 4, so a 79-wide layer runs two blocks
-/// of 40 rather than 64 and 15 wasted.
-pub(super) fn uniform_block(width: u32, limit: u32) -> u32 {
-    let blocks = width.max(1).div_ceil(limit);
-    padded_to_vec4(width.max(1).div_ceil(blocks))
-}
-
-/// The longest reduction the uniform-weight kernels write out step by step (`MAX_UNROLLED` in
-/// `shaders/_dense_uniform.wgsl`).
-pub(super) const MAX_UNROLLED: u32 = 128;
-
-pub(super) fn uniform_dispatch(ctx: &GpuContext, rows: u32, width: u32, block: u32) -> Result<[u32; 3], GpuError> {
-    let groups = Dispatch1d::for_device(ctx, u64::from(rows), UNIFORM_WORKGROUP)?;
-    Ok([groups.x, groups.y, width.div_ceil(block)])
-}
 
 /// Chunks of rows one weight-gradient dispatch sums, each through its own 64 KiB window
 /// (`dz0` .. `dz7` in `shaders/dense_backward_weight_uniform.wgsl`). With the layer's `dims` and
@@ -470,11 +416,6 @@ impl DensePipelines {
             && (ctx.limits.max_uniform_buffer_binding_size as usize) >= UNIFORM_WEIGHT_FLOATS * 4
             && rows as usize * padded_to_vec4(columns) as usize <= UNIFORM_WEIGHT_FLOATS
     }
-}
-
-/// `n` rounded up to a multiple of 4 (`padded_to_vec4` in `shaders/_dense_tile.wgsl`).
-pub(super) fn padded_to_vec4(n: u32) -> u32 {
-    n.div_ceil(4) * 4
 }
 
 /// Rows and columns of a layer's packed copy for `kind`: [in][out] for the forward, [out][in]
