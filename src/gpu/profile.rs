@@ -51,9 +51,6 @@ pub struct DeviceProfile {
     /// (SwiftShader, natively and in the page, where a CPU device has no name to tell which it
     /// is) ran 16 faster.
     pub widest_uniform_block: u32,
-    /// Training batches kept in flight in the page: one on a CPU device, where the next batch's
-    /// recording competes with the device for the same cores.
-    pub batches_in_flight: usize,
     /// How often the page repaints while it waits (loading, building): on a CPU device each
     /// repaint costs the work it waits for about a second.
     pub repaint_ms: u64,
@@ -78,23 +75,24 @@ impl DeviceProfile {
             chains: lavapipe,
             unrolled_reductions: lavapipe,
             widest_uniform_block: if lavapipe { 64 } else { 16 },
-            batches_in_flight: if software { 1 } else { GPU_BATCHES_IN_FLIGHT },
             repaint_ms: if software { 1000 } else { 100 },
             training_repaint_ms: if software { 3000 } else { 250 },
         }
     }
 
     /// The same device running the `kernels` family whatever it is (`#kernels=`, and tests that
-    /// compare the families on one device), with as many batches in flight as that family's
-    /// devices get.
+    /// compare the families on one device).
     pub fn with_kernels(self, kernels: KernelFamily) -> DeviceProfile {
-        DeviceProfile {
-            kernels,
-            batches_in_flight: match kernels {
-                KernelFamily::UniformWeights => 1,
-                KernelFamily::Tiled => GPU_BATCHES_IN_FLIGHT,
-            },
-            ..self
+        DeviceProfile { kernels, ..self }
+    }
+
+    /// Training batches the page keeps in flight, as the kernel family's devices get them: one
+    /// on a CPU device, where the next batch's recording competes with the device for the same
+    /// cores.
+    pub fn batches_in_flight(&self) -> usize {
+        match self.kernels {
+            KernelFamily::UniformWeights => 1,
+            KernelFamily::Tiled => GPU_BATCHES_IN_FLIGHT,
         }
     }
 }
@@ -128,7 +126,7 @@ mod tests {
         let lavapipe = DeviceProfile::of_adapter(&adapter("llvmpipe (LLVM 15.0.6, 256 bits)", wgpu::DeviceType::Cpu));
         assert_eq!(lavapipe.kernels, KernelFamily::UniformWeights);
         assert!(lavapipe.software && lavapipe.chains && lavapipe.unrolled_reductions);
-        assert_eq!((lavapipe.widest_uniform_block, lavapipe.batches_in_flight), (64, 1));
+        assert_eq!((lavapipe.widest_uniform_block, lavapipe.batches_in_flight()), (64, 1));
 
         let swiftshader = DeviceProfile::of_adapter(&adapter("SwiftShader Device (Subzero)", wgpu::DeviceType::Other));
         assert_eq!(swiftshader.kernels, KernelFamily::UniformWeights);
@@ -138,7 +136,7 @@ mod tests {
         let gpu = DeviceProfile::of_adapter(&adapter("NVIDIA H100", wgpu::DeviceType::DiscreteGpu));
         assert_eq!(gpu.kernels, KernelFamily::Tiled);
         assert!(!gpu.software);
-        assert_eq!(gpu.batches_in_flight, GPU_BATCHES_IN_FLIGHT);
+        assert_eq!(gpu.batches_in_flight(), GPU_BATCHES_IN_FLIGHT);
         assert!(gpu.repaint_ms < swiftshader.repaint_ms && gpu.training_repaint_ms < swiftshader.training_repaint_ms);
     }
 
@@ -147,7 +145,7 @@ mod tests {
         let lavapipe = DeviceProfile::of_adapter(&adapter("llvmpipe", wgpu::DeviceType::Cpu));
         let tiled = lavapipe.with_kernels(KernelFamily::Tiled);
         assert_eq!(tiled.kernels, KernelFamily::Tiled);
-        assert_eq!(tiled.batches_in_flight, GPU_BATCHES_IN_FLIGHT);
+        assert_eq!(tiled.batches_in_flight(), GPU_BATCHES_IN_FLIGHT);
         assert!(tiled.software && tiled.chains);
         assert_eq!(tiled.repaint_ms, lavapipe.repaint_ms);
         assert_eq!(tiled.with_kernels(KernelFamily::UniformWeights), lavapipe);

@@ -82,11 +82,10 @@ pub struct Batches {
 
 impl Batches {
     /// Batches kept in flight on `ctx` (`DeviceProfile::batches_in_flight`: one on a CPU
-    /// rasterizer, [`GPU_BATCHES_IN_FLIGHT`] on a GPU; see the
-    /// module's notes).
+    /// rasterizer, [`GPU_BATCHES_IN_FLIGHT`] on a GPU; see the module's notes).
     pub fn for_device(ctx: &GpuContext, split_steps: bool) -> Batches {
         let mut batches = Batches::new(split_steps);
-        batches.depth = ctx.profile().batches_in_flight;
+        batches.depth = ctx.profile().batches_in_flight();
         batches
     }
 
