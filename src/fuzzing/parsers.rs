@@ -25,7 +25,7 @@ fn pth_limits() -> PthLimits {
 }
 
 /// Every tensor of an opened checkpoint read at its own shape, within the storage budget.
-fn read_all(p: &Pth) -> Outcome {
+fn read_all(p: &Pth, limits: &PthLimits) -> Outcome {
     let names: Vec<String> = p.names().map(String::from).collect();
     let mut refused = Vec::new();
     let mut values = 0usize;
@@ -37,7 +37,7 @@ fn read_all(p: &Pth) -> Outcome {
         }
     }
     // Each value costs at least one byte of storage read, and reads stop at the budget.
-    assert!(values as u64 <= pth_limits().storage_bytes, "{values} values read");
+    assert!(values as u64 <= limits.storage_bytes, "{values} values read");
     if refused.is_empty() {
         Ok(())
     } else {
@@ -47,12 +47,26 @@ fn read_all(p: &Pth) -> Outcome {
 
 /// A `.pth` file as `torch.save` writes it (a zip), opened and every tensor read.
 pub fn pth(data: &[u8]) -> Outcome {
-    let p = Pth::from_bytes_with("fuzz.pth", data.to_vec(), pth_limits()).map_err(|e| e.to_string())?;
-    read_all(&p)
+    let limits = pth_limits();
+    let p = Pth::from_bytes_with("fuzz.pth", data.to_vec(), limits).map_err(|e| e.to_string())?;
+    read_all(&p, &limits)
 }
 
 /// Storages every [`pickle`] input can name: keys `0` to `3`, 64 bytes each.
 const PICKLE_STORAGES: usize = 4;
+
+/// Limits of the `pickle` target: lower again than [`pth_limits`], since its inputs reach the
+/// pickle machine's budgets far more often than whole zips do.
+fn pickle_limits() -> PthLimits {
+    PthLimits {
+        pickle_bytes: 1 << 20,
+        storage_bytes: 1 << 16,
+        pickle: crate::features::pth::PickleLimits {
+            built_bytes: 1 << 20,
+            depth: 64,
+        },
+    }
+}
 
 /// The pickle of a `.pth` (`data.pkl`), zipped here with [`PICKLE_STORAGES`] storages: mutations
 /// of a zip's bytes mostly break it, these reach the pickle machine and the state dict.
@@ -70,7 +84,9 @@ pub fn pickle(data: &[u8]) -> Outcome {
         zip.write_all(bytes).map_err(|e| format!("zip writer: {e}"))?;
     }
     let bytes = zip.finish().map_err(|e| format!("zip writer: {e}"))?.into_inner();
-    pth(&bytes)
+    let limits = pickle_limits();
+    let p = Pth::from_bytes_with("fuzz.pth", bytes, limits).map_err(|e| e.to_string())?;
+    read_all(&p, &limits)
 }
 
 /// Marks the start of the next file in a multi-file binary input (COLMAP's three files).
@@ -133,13 +149,17 @@ pub fn stray_text(data: &[u8]) -> Outcome {
     }
 }
 
-/// An MP4's index as the page reads it to seek a capture's video: the frame size and the time
-/// of each frame, in order.
+/// The `mp4` target's frame cap: far below a capture's (two million), so that inputs whose few
+/// bytes of `stts` claim the whole cap are refused in microseconds; the same code checks both.
+const MP4_FRAMES: u64 = 4096;
+
+/// An MP4's index as the page reads it to seek a capture's video (with [`MP4_FRAMES`] as the
+/// frame cap): the frame size and the time of each frame, in order.
 pub fn mp4(data: &[u8]) -> Outcome {
-    let (size, times) = text_checks::mp4_video(data).map_err(|e| e.to_string())?;
+    let (size, times) = text_checks::mp4_video_capped(data, MP4_FRAMES).map_err(|e| e.to_string())?;
     assert!(size.0 > 0 && size.1 > 0, "accepted frames of {size:?}");
     // Run-length coding lets a few bytes claim many frames: the index's frame cap bounds them.
-    assert!(times.len() <= 2_000_000, "{} frames accepted", times.len());
+    assert!(times.len() as u64 <= MP4_FRAMES, "{} frames accepted", times.len());
     assert!(times.windows(2).all(|w| w[0] <= w[1]), "frame times out of order");
     Ok(())
 }

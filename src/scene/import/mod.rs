@@ -399,6 +399,12 @@ pub mod text_checks {
         Ok((v.size, v.frame_times))
     }
 
+    /// [`mp4_video`] refusing a track of over `max_frames` frames (the fuzzer's low cap).
+    pub fn mp4_video_capped(bytes: &[u8], max_frames: u64) -> Result<((u32, u32), Vec<f64>)> {
+        let v = mp4::parse_capped(bytes, "rgb.mp4", max_frames)?;
+        Ok((v.size, v.frame_times))
+    }
+
     /// A ScanNet pose file (`pose/N.txt`): `None` where it marks a lost frame (non-finite).
     pub fn scannet_pose(bytes: &[u8]) -> Result<Option<Pose>> {
         let file = "pose/0.txt";
