@@ -8,6 +8,7 @@
 //! moments agree within 1e-6 relative, and a parameter within 1e-6 of max(|p|, the total step
 //! length lr·steps) (a step's error is relative to the step, not to a p near zero).
 use scribblefield::field::FieldConfig;
+use scribblefield::field::gpu::stage::Stage;
 use std::ops::Range;
 
 use scribblefield::field::gpu::adam::{AdamBuffers, AdamPass};

@@ -12,6 +12,7 @@ use scribblefield::field::gpu::rays::{
     NO_LABEL, RAY_HAS_CODE, RAY_HITS_BOX, StepUniforms, TARGET_DEPTH, TARGET_FLAGS, TARGET_HEADER_WORDS, TARGET_LABEL,
     TARGET_RGB,
 };
+use scribblefield::field::gpu::stage::Stage;
 use scribblefield::field::reference::loss::{RayTarget, add_opacity, opacity_loss, ray_loss};
 use scribblefield::field::reference::{Channels, activations, render};
 use scribblefield::field::{FieldConfig, bf16};

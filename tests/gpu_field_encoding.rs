@@ -8,6 +8,7 @@ use scribblefield::field::gpu::encoding::{
     PositionEncodePass, WORKGROUP_SIZE,
 };
 use scribblefield::field::gpu::sh_encode::{DirectionShBuffers, DirectionShPass, ShOutputLayout};
+use scribblefield::field::gpu::stage::Stage;
 use scribblefield::field::reference::hash_grid::{self, HashGrid};
 use scribblefield::field::reference::{frequency, sh};
 use scribblefield::field::{Encoding, FieldConfig, bf16};

@@ -6,6 +6,7 @@ use scribblefield::field::bf16;
 use scribblefield::field::gpu::dense::{RowFormat, RowView};
 use scribblefield::field::gpu::head_glue::{GlueBuffers, GlueDims, GlueRows, HeadGluePass, WORKGROUP_SIZE};
 use scribblefield::field::gpu::keep::{HeadRows, NOT_KEPT, workgroup_counts};
+use scribblefield::field::gpu::stage::Stage;
 use scribblefield::gpu::buffers::{read_buffer_blocking, storage_buffer_from, storage_buffer_garbage};
 use scribblefield::gpu::test_support::gpu_for_tests;
 
@@ -166,9 +167,9 @@ fn check_glue(name: &str, semantic_sees_geometry: bool, format: RowFormat) {
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     {
         let mut pass = encoder.begin_compute_pass(&Default::default());
-        glue.record_assemble(&mut pass);
-        glue.record_gather_feature(&mut pass);
-        glue.record_gather_geometry(&mut pass);
+        glue.assemble.record(&mut pass);
+        glue.gather_feature.record(&mut pass);
+        glue.gather_geometry.record(&mut pass);
     }
     ctx.queue.submit([encoder.finish()]);
 

@@ -8,6 +8,7 @@
 use scribblefield::field::gpu::dense::{RowFormat, RowView};
 use scribblefield::field::gpu::keep::{HeadRows, KeepBuffers, KeepPass, KeepShape, NOT_KEPT, workgroup_counts};
 use scribblefield::field::gpu::rays::{RAY_HITS_BOX, StepUniforms, TARGET_FLAGS, TARGET_HEADER_WORDS};
+use scribblefield::field::gpu::stage::Stage;
 use scribblefield::field::reference::render::{self, kept_samples};
 use scribblefield::field::{FieldConfig, bf16};
 use scribblefield::gpu::GpuContext;

@@ -11,6 +11,7 @@ use scribblefield::field::gpu::rays::{
     sample_jitter,
 };
 use scribblefield::field::gpu::scene_buffers::{LabelIndex, SceneBuffers, SceneUniforms};
+use scribblefield::field::gpu::stage::Stage;
 use scribblefield::field::reference::sampling::{self, SamplePlan};
 use scribblefield::field::{FieldConfig, LastSample};
 use scribblefield::gpu::buffers::{fill_with_garbage, read_buffer_blocking, uniform_buffer_from};

@@ -12,6 +12,8 @@
 //! offset; the kernel itself only ever sees one segment.
 use crate::field::config::AdamConfig;
 use crate::field::gpu::encoding::FixedPointTable;
+use crate::field::gpu::stage::{Stage, StepShape, WORD};
+use crate::field::params::ParamLayout;
 use crate::gpu::buffers::uniform_buffer_from;
 use crate::gpu::dispatch::{Dispatch, bind_named};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
@@ -173,11 +175,23 @@ impl AdamPass {
     pub fn segment_count(&self) -> usize {
         self.segments.len()
     }
+}
 
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+impl Stage for AdamPass {
+    fn name(&self) -> &'static str {
+        "adam"
+    }
+
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         for segment in &self.segments {
             segment.record(pass);
         }
+    }
+
+    /// Reads parameters, gradients and both moments (4·P); writes the same, the gradients
+    /// zeroed.
+    fn global_bytes(&self, step: &StepShape) -> u64 {
+        8 * ParamLayout::new(step.cfg).total as u64 * WORD
     }
 }
 

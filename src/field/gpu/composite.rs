@@ -35,6 +35,7 @@ use crate::gpu::{GpuContext, GpuError, KernelFamily, shaders};
 
 use super::rays::{RAY_WORKGROUP_SIZE, TARGET_HEADER_WORDS};
 pub use super::row_view::RowView;
+use super::stage::{Stage, StepShape, WORD};
 
 /// Loss words at the start of a ray's output row: rgb, depth, semantic, feature.
 pub const LOSS_WORDS: usize = 4;
@@ -312,15 +313,36 @@ impl CompositePass {
         }
     }
 
-    /// Records the whole pass: rendering, losses and their backward.
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        self.dispatch.record(pass);
-    }
-
     /// Records the forward alone: the rendered block of `ray_outputs` (the same values
-    /// [`CompositePass::record`] writes there) and, as scratch, the first two words of each
+    /// the whole pass writes there) and, as scratch, the first two words of each
     /// sample's `grad_heads` row. No loss, no gradient: for frames shown, not trained on.
     pub fn record_render(&self, pass: &mut wgpu::ComputePass<'_>) {
         self.render.record(pass);
+    }
+}
+
+impl Stage for CompositePass {
+    fn name(&self) -> &'static str {
+        "composite"
+    }
+
+    /// Records the whole pass: rendering, losses and their backward.
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        self.dispatch.record(pass);
+    }
+
+    /// Reads N h₀, intervals and slots, K head values (f in its format) and R targets; writes
+    /// N·3 (∂L/∂h₀ and scratch), K head gradients and R ray outputs.
+    fn global_bytes(&self, step: &StepShape) -> u64 {
+        let (n, k) = (step.samples(), step.kept());
+        let (_, f) = step.geometry_and_feature();
+        let heads_row = self.layout.grad_stride() as u64;
+        let feature = StepShape::words(step.heads.feature, f);
+        n * (2 * WORD + 8)
+            + k * (heads_row - 1 - f + feature) * WORD
+            + step.target_bytes()
+            + n * 3 * WORD
+            + k * heads_row * WORD
+            + self.layout.ray_output_words() as u64 * WORD
     }
 }

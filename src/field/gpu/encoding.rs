@@ -17,6 +17,7 @@ use std::ops::Range;
 
 use crate::field::config::FieldConfig;
 use crate::field::gpu::fixed_point::decode_table;
+use crate::field::gpu::stage::{Stage, StepShape};
 use crate::field::reference::hash_grid::HashGrid;
 use crate::gpu::buffers::{PendingRead, read_buffer_async, storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::{Dispatch, whole};
@@ -189,11 +190,24 @@ impl PositionEncodePass {
             _uniforms: uniform_buffer,
         })
     }
+}
 
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+impl Stage for PositionEncodePass {
+    fn name(&self) -> &'static str {
+        "encoding"
+    }
+
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         if !self.dispatch.is_empty() {
             self.dispatch.record(pass);
         }
+    }
+
+    /// Reads N positions and the 8 corners × levels × features of the hash table a sample
+    /// touches; writes N·E.
+    fn global_bytes(&self, step: &StepShape) -> u64 {
+        let n = step.samples();
+        n * VEC4_BYTES + n * step.hash_corners() * F32_BYTES + n * step.cfg.encoding_dim() as u64 * F32_BYTES
     }
 }
 
@@ -530,9 +544,15 @@ impl HashGridBackwardPass {
             encoder.clear_buffer(&self.gradient, start, Some(end - start));
         }
     }
+}
+
+impl Stage for HashGridBackwardPass {
+    fn name(&self) -> &'static str {
+        "encoding backward"
+    }
 
     /// Records the accumulation of ∂L/∂table into the (zeroed) gradient buffer.
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         let Some(kernel) = &self.kernel else { return };
         if let Some(scale) = &kernel.scale {
             scale.record(pass);
@@ -540,6 +560,29 @@ impl HashGridBackwardPass {
         for dispatch in &kernel.dispatches {
             dispatch.record(pass);
         }
+    }
+
+    /// Reads N hash-grid gradient rows and positions; an atomic add (a read and a write) per
+    /// corner, level and feature. Fixed point first bounds each level's sums: one more read of
+    /// the gradient rows, an exponent written per level. One invocation per level reads every
+    /// position once per level.
+    fn global_bytes(&self, step: &StepShape) -> u64 {
+        if self.kernel.is_none() {
+            return 0;
+        }
+        let n = step.samples();
+        let levels = u64::from(step.cfg.hash_levels);
+        let gradient_rows = n * step.cfg.hash_encoding_dim() as u64 * F32_BYTES;
+        let adds = n * VEC4_BYTES + gradient_rows + 2 * n * step.hash_corners() * F32_BYTES;
+        let scale = match self.fixed_point_table() {
+            Some(_) => gradient_rows + levels * F32_BYTES,
+            None => 0,
+        };
+        let positions_again = match self.atomics {
+            AtomicAdd::PerLevel => n * VEC4_BYTES * levels.saturating_sub(1),
+            _ => 0,
+        };
+        adds + scale + positions_again
     }
 }
 

@@ -5,7 +5,8 @@
 //! gather run on those rows (indirect dispatches), the geometry gather on every sample.
 use bytemuck::{Pod, Zeroable};
 
-use super::row_view::RowView;
+use super::row_view::{RowFormat, RowView};
+use super::stage::{Stage, StepShape, WORD};
 use crate::gpu::buffers::uniform_buffer_from;
 use crate::gpu::dispatch::{Dispatch, IndirectArgs, whole};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec};
@@ -84,11 +85,19 @@ pub struct GlueRows<'a> {
     pub dispatch: Option<IndirectArgs>,
 }
 
+/// The glue's three stages: the forward and the two gathers of the backward.
 pub struct HeadGluePass {
-    assemble: Dispatch,
-    gather_feature: Dispatch,
-    gather_geometry: Dispatch,
+    pub assemble: GlueAssemble,
+    pub gather_feature: GlueGatherFeature,
+    pub gather_geometry: GlueGatherGeometry,
 }
+
+/// Forward: the colour input's g columns and the whole semantic input.
+pub struct GlueAssemble(Dispatch);
+/// Backward, after the semantic head: dL/df += relu'(f) · dL/d(semantic input)[f part].
+pub struct GlueGatherFeature(Dispatch);
+/// Backward, after all heads: dL/dg into columns 1.. of the density output gradient.
+pub struct GlueGatherGeometry(Dispatch);
 
 async fn stage(
     ctx: &GpuContext,
@@ -215,24 +224,77 @@ impl HeadGluePass {
         )
         .await?;
         Ok(HeadGluePass {
-            assemble,
-            gather_feature,
-            gather_geometry,
+            assemble: GlueAssemble(assemble),
+            gather_feature: GlueGatherFeature(gather_feature),
+            gather_geometry: GlueGatherGeometry(gather_geometry),
         })
     }
+}
 
-    /// Forward: colour input's g columns and the whole semantic input.
-    pub fn record_assemble(&self, pass: &mut wgpu::ComputePass<'_>) {
-        self.assemble.record(pass);
+/// Words of a colour row's g columns after its 16 SH values, stored as `format`.
+fn color_geometry_words(format: RowFormat, g: u64) -> u64 {
+    StepShape::words(format, 16 + g) - StepShape::words(format, 16)
+}
+
+impl Stage for GlueAssemble {
+    fn name(&self) -> &'static str {
+        "glue"
     }
 
-    /// Backward, after the semantic head: dL/df += relu'(f) · dL/d(semantic input)[f part].
-    pub fn record_gather_feature(&self, pass: &mut wgpu::ComputePass<'_>) {
-        self.gather_feature.record(pass);
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        self.0.record(pass);
     }
 
-    /// Backward, after all heads: dL/dg into columns 1.. of the density output gradient.
-    pub fn record_gather_geometry(&self, pass: &mut wgpu::ComputePass<'_>) {
-        self.gather_geometry.record(pass);
+    /// Reads the density (K·(1 + g)) and feature (K·f, in its format) rows; writes the colour
+    /// input's g and the semantic input (K·(f + sg)), each in its format.
+    fn global_bytes(&self, step: &StepShape) -> u64 {
+        let (g, f) = step.geometry_and_feature();
+        let sg = step.cfg.semantic_geometry_dim() as u64;
+        let h = step.heads;
+        WORD * step.kept()
+            * ((1 + g)
+                + StepShape::words(h.feature, f)
+                + color_geometry_words(h.color_input, g)
+                + StepShape::words(h.semantic_input, f + sg))
+    }
+}
+
+impl Stage for GlueGatherFeature {
+    fn name(&self) -> &'static str {
+        "glue backward"
+    }
+
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        self.0.record(pass);
+    }
+
+    /// Reads K·f of the semantic input's gradients (in its format) and K·f feature rows; writes
+    /// K·f.
+    fn global_bytes(&self, step: &StepShape) -> u64 {
+        let (_, f) = step.geometry_and_feature();
+        let h = step.heads;
+        WORD * step.kept() * (StepShape::words(h.feature, f) + f + StepShape::words(h.semantic_gradient, f))
+    }
+}
+
+impl Stage for GlueGatherGeometry {
+    fn name(&self) -> &'static str {
+        "glue backward"
+    }
+
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        self.0.record(pass);
+    }
+
+    /// Reads N slots and ∂L/∂h₀, K·g of the feature input's, K·g of the colour input's and K·sg
+    /// of the semantic input's gradients (each in its format); writes N·(1 + g).
+    fn global_bytes(&self, step: &StepShape) -> u64 {
+        let (g, _) = step.geometry_and_feature();
+        let sg = step.cfg.semantic_geometry_dim() as u64;
+        let (n, k, h) = (step.samples(), step.kept(), step.heads);
+        let gradients = color_geometry_words(h.color_gradient, g)
+            + StepShape::words(h.feature_gradient, g)
+            + StepShape::words(h.semantic_gradient, sg);
+        WORD * (2 * n + k * gradients + n * (1 + g))
     }
 }

@@ -14,6 +14,7 @@ use std::sync::Mutex;
 use bytemuck::{Pod, Zeroable};
 
 use super::row_view::RowView;
+use super::stage::{Stage, StepShape, WORD};
 use crate::gpu::buffers::{STORAGE_USAGE, storage_buffer_from, storage_buffer_zeroed, uniform_buffer_from};
 use crate::gpu::dispatch::{Dispatch, IndirectArgs, bindings_used, whole};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec};
@@ -275,12 +276,28 @@ impl KeepPass {
             _buffers: [ray_kept, ray_first, specs],
         })
     }
+}
+
+impl Stage for KeepPass {
+    fn name(&self) -> &'static str {
+        "keep"
+    }
 
     /// Records the decision, the packing and the gather of the packed head inputs.
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         self.count.record(pass);
         self.scan.record(pass);
         self.compact.record(pass);
         self.gather.record(pass);
+    }
+
+    /// Reads N density outputs (h₀) and intervals twice, R flags and counts, K·(1 + g + 16)
+    /// gathered; writes R counts, N slots, K rows and K·(1 + g + 16) (the SH in the colour
+    /// input's format).
+    fn global_bytes(&self, step: &StepShape) -> u64 {
+        let (n, r, k) = (step.samples(), step.rays(), step.kept());
+        let (g, _) = step.geometry_and_feature();
+        let sh = StepShape::words(step.heads.color_input, 16);
+        WORD * (2 * 3 * n + 3 * r + n + k + 2 * k * (1 + g) + 2 * k * sh)
     }
 }

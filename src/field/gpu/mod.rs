@@ -18,5 +18,6 @@ pub mod rays;
 pub mod row_view;
 pub mod scene_buffers;
 pub mod sh_encode;
+pub mod stage;
 pub mod trainer;
 pub mod view;

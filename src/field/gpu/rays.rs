@@ -25,6 +25,7 @@ use crate::gpu::{GpuContext, GpuError, shaders};
 use crate::scene::Bounds;
 
 use super::scene_buffers::{LabelIndex, SceneBuffers};
+use super::stage::{Stage, StepShape};
 
 /// Invocations per workgroup of the ray kernels (one invocation per ray).
 pub const RAY_WORKGROUP_SIZE: u32 = 64;
@@ -254,9 +255,23 @@ impl RayBatchPass {
             self.labels_generation = scene.labels_generation();
         }
     }
+}
 
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+/// Bytes of one [`RayGeometry`].
+pub(super) const RAY_GEOMETRY_BYTES: u64 = std::mem::size_of::<RayGeometry>() as u64;
+
+impl Stage for RayBatchPass {
+    fn name(&self) -> &'static str {
+        "rays"
+    }
+
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         self.dispatch.record(pass);
+    }
+
+    /// Reads the pixels' targets, R·(8 + f) words; writes R ray geometries and targets.
+    fn global_bytes(&self, step: &StepShape) -> u64 {
+        2 * step.target_bytes() + step.rays() * RAY_GEOMETRY_BYTES
     }
 }
 
@@ -399,8 +414,22 @@ impl SamplePointsPass {
             intervals,
         })
     }
+}
 
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+/// Bytes of one sample's position (vec4) and interval (vec2).
+const SAMPLE_BYTES: u64 = 16 + 8;
+
+impl Stage for SamplePointsPass {
+    fn name(&self) -> &'static str {
+        "samples"
+    }
+
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         self.dispatch.record(pass);
+    }
+
+    /// Reads R ray geometries; writes N positions and intervals.
+    fn global_bytes(&self, step: &StepShape) -> u64 {
+        step.rays() * RAY_GEOMETRY_BYTES + step.samples() * SAMPLE_BYTES
     }
 }

@@ -5,7 +5,9 @@
 use crate::field::gpu::encoding::{
     F32_BYTES, VEC4_BYTES, WORKGROUP_SIZE, check_buffer, check_index_range, check_samples, index_u32,
 };
+use crate::field::gpu::rays::RAY_GEOMETRY_BYTES;
 use crate::field::gpu::row_view::RowFormat;
+use crate::field::gpu::stage::{Stage, StepShape};
 use crate::field::reference::sh::SH_COEFFS;
 use crate::gpu::buffers::uniform_buffer_from;
 use crate::gpu::dispatch::{Dispatch, whole};
@@ -152,10 +154,22 @@ impl DirectionShPass {
             _uniforms: uniform_buffer,
         })
     }
+}
 
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+impl Stage for DirectionShPass {
+    fn name(&self) -> &'static str {
+        "sh"
+    }
+
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         if !self.dispatch.is_empty() {
             self.dispatch.record(pass);
         }
+    }
+
+    /// Reads R ray geometries; writes N·16 values in the colour input's format.
+    fn global_bytes(&self, step: &StepShape) -> u64 {
+        let values = StepShape::words(step.heads.color_input, SH_COEFFS as u64);
+        step.rays() * RAY_GEOMETRY_BYTES + step.samples() * values * F32_BYTES
     }
 }

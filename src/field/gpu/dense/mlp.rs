@@ -7,6 +7,7 @@ use super::spec::DenseLayerSpec;
 use super::uniform::{MlpPacking, uniform_weight_chunks};
 use super::{DensePipelines, ReluMask, RowFormat, RowView};
 use crate::field::gpu::keep::HeadRows;
+use crate::field::gpu::stage::{Stage, StepShape};
 use crate::field::params::MlpLayout;
 use crate::gpu::KernelFamily;
 use crate::gpu::buffers::storage_buffer_zeroed;
@@ -73,6 +74,8 @@ pub struct MlpPass {
     hidden_gradient_rows: RowFormat,
     input: RowView,
     input_grad: Option<RowView>,
+    /// Whether the rows are the samples the keep pass kept (the heads) or every sample.
+    on_kept_rows: bool,
 }
 
 impl MlpPass {
@@ -91,6 +94,7 @@ impl MlpPass {
             gradients,
             kept,
         } = desc;
+        let on_kept_rows = kept.is_some();
         let specs = layer_specs(label, layout, rows)?;
         let layers = specs.len();
         let dims: Vec<u32> = std::iter::once(specs[0].in_dim)
@@ -276,6 +280,7 @@ impl MlpPass {
             hidden_gradient_rows,
             input,
             input_grad,
+            on_kept_rows,
         })
     }
 
@@ -470,5 +475,70 @@ fn hidden_format(
         pipelines.hidden_rows()
     } else {
         RowFormat::F32
+    }
+}
+
+/// One direction of an MLP as a stage of the training step (`MlpPass::forward_stage`,
+/// `MlpPass::backward_stage`).
+pub struct MlpStage<'a> {
+    mlp: &'a MlpPass,
+    name: &'static str,
+    backward: bool,
+}
+
+impl MlpPass {
+    /// The forward as a stage named `name`.
+    pub fn forward_stage(&self, name: &'static str) -> MlpStage<'_> {
+        MlpStage {
+            mlp: self,
+            name,
+            backward: false,
+        }
+    }
+
+    /// The backward as a stage named `name`; fails on a pass built without gradients.
+    pub fn backward_stage(&self, name: &'static str) -> Result<MlpStage<'_>, GpuError> {
+        if self.backward.is_none() {
+            return Err(GpuError::invalid_argument(
+                name,
+                "a backward stage of a pass built without gradients",
+            ));
+        }
+        Ok(MlpStage {
+            mlp: self,
+            name,
+            backward: true,
+        })
+    }
+}
+
+impl Stage for MlpStage<'_> {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        if self.backward {
+            // `backward_stage` checked that the pass has its backward.
+            let _ = self.mlp.record_backward(pass);
+        } else {
+            self.mlp.record_forward(pass);
+        }
+    }
+
+    /// The packing of the weights and every layer's `DenseForward::global_bytes` (forward),
+    /// or every layer's `DenseBackward::global_bytes` (backward), over N rows (the density
+    /// MLP) or K (the heads).
+    fn global_bytes(&self, step: &StepShape) -> u64 {
+        let rows = if self.mlp.on_kept_rows {
+            step.kept()
+        } else {
+            step.samples()
+        };
+        if self.backward {
+            self.mlp.backward_bytes(rows)
+        } else {
+            self.mlp.forward_bytes(rows)
+        }
     }
 }

@@ -70,7 +70,7 @@ mod uniform_shape;
 
 pub use backward::{DenseBackward, DenseGradients};
 pub use layer::DenseForward;
-pub use mlp::{InputRows, MlpGradients, MlpPass, MlpPassDesc, mlp_row_format};
+pub use mlp::{InputRows, MlpGradients, MlpPass, MlpPassDesc, MlpStage, mlp_row_format};
 pub use pipelines::DensePipelines;
 pub use relu_mask::ReluMask;
 pub use spec::{DenseDims, DenseLayerSpec};

@@ -8,7 +8,7 @@
 //!   → colour MLP, semantic MLP → composite + losses + their backward
 //!   → semantic⁻¹ → glue (df) → feature⁻¹ → colour⁻¹ → glue (dg) → density⁻¹ → hash grid⁻¹ → Adam
 //! ```
-//! That order is written once, as `stages::TRAINING_STEP`.
+//! That order is written once, as `steps::Trainer::visit_training_step`.
 //! The same code runs natively and in the browser: nothing here blocks.
 use crate::field::config::FieldConfig;
 use crate::field::params::ParamLayout;
@@ -37,13 +37,12 @@ use super::sh_encode::{DirectionLayout, DirectionShBuffers, DirectionShPass, ShO
 use super::view::view_rays;
 pub use super::view::{DepthGuide, FrameAssembler, RenderedFrame, ViewCamera};
 use crate::field::reference::mlp::{Rounding, StoredRows};
-pub use stages::StageShape;
-use stages::{FIELD_STAGES, TRAINING_STEP};
+pub use steps::StageShape;
 
 mod labels;
 mod render;
-mod stages;
 mod state;
+mod steps;
 pub use state::TrainerState;
 
 const SH: u32 = 16;
@@ -511,9 +510,7 @@ impl Trainer {
                     label: Some("training step"),
                     timestamp_writes: None,
                 });
-                for stage in TRAINING_STEP {
-                    self.record_stage(stage, &mut pass);
-                }
+                self.visit_training_step(&mut |stage| stage.record(&mut pass));
             }
             self.ctx.queue.submit([encoder.finish()]);
         }
@@ -527,14 +524,14 @@ impl Trainer {
             return Ok(None);
         };
         let mut encoder = self.begin_step();
-        for stage in TRAINING_STEP {
+        self.visit_training_step(&mut |stage| {
             let name = stage.name();
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some(name),
                 timestamp_writes: timer.timestamp_writes(name),
             });
-            self.record_stage(stage, &mut pass);
-        }
+            stage.record(&mut pass);
+        });
         timer.resolve(&mut encoder);
         self.ctx.queue.submit([encoder.finish()]);
         Ok(Some(total_by_name(&timer.read(&self.ctx).times().await?)))
@@ -542,7 +539,9 @@ impl Trainer {
 
     /// Stages in one training step (see [`Trainer::submit_stage`]).
     pub fn stage_count(&self) -> usize {
-        TRAINING_STEP.len()
+        let mut count = 0;
+        self.visit_training_step(&mut |_| count += 1);
+        count
     }
 
     /// Records stage `index` of a training step alone in its own command buffer and submits it;
@@ -550,21 +549,29 @@ impl Trainer {
     /// [`Trainer::train`] does. For wall-clock profiling where timestamp queries are missing
     /// (the caller times each submission until the GPU is done). Returns the stage's name.
     pub fn submit_stage(&mut self, index: usize) -> Option<&'static str> {
-        let stage = *TRAINING_STEP.get(index)?;
+        if index >= self.stage_count() {
+            return None;
+        }
         let mut encoder = if index == 0 {
             self.begin_step()
         } else {
             self.ctx.device.create_command_encoder(&Default::default())
         };
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(stage.name()),
-                timestamp_writes: None,
-            });
-            self.record_stage(stage, &mut pass);
-        }
+        let mut name = None;
+        let mut at = 0;
+        self.visit_training_step(&mut |stage| {
+            if at == index {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some(stage.name()),
+                    timestamp_writes: None,
+                });
+                stage.record(&mut pass);
+                name = Some(stage.name());
+            }
+            at += 1;
+        });
         self.ctx.queue.submit([encoder.finish()]);
-        Some(stage.name())
+        name
     }
 
     /// Starts reading the losses of the latest step, unless a read is already under way.

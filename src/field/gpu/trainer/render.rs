@@ -164,9 +164,7 @@ impl Trainer {
             if frame_tile {
                 self.frame_tile.record(&mut pass);
             }
-            for &stage in FIELD_STAGES {
-                self.record_stage(stage, &mut pass);
-            }
+            self.visit_field_stages(&mut |stage| stage.record(&mut pass));
             // The forward alone: a render needs no loss and no gradient.
             self.composite.record_render(&mut pass);
         }

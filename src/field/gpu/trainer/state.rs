@@ -1,7 +1,6 @@
 //! What can be read out of a trainer and put back: its parameters, its gradient (tests), and the
 //! whole resumable state of a run (checkpoints).
 use super::Trainer;
-use super::stages::{StepStage, TRAINING_STEP};
 use crate::gpu::GpuError;
 use crate::gpu::buffers::{PendingRead, read_buffer_async, read_elements_async};
 
@@ -42,9 +41,7 @@ impl Trainer {
                 label: Some("training step without its update"),
                 timestamp_writes: None,
             });
-            for &stage in TRAINING_STEP.iter().filter(|&&s| s != StepStage::Adam) {
-                self.record_stage(stage, &mut pass);
-            }
+            self.visit_step_before_update(&mut |stage| stage.record(&mut pass));
         }
         self.ctx.queue.submit([encoder.finish()]);
         let read = read_buffer_async::<f32>(&self.ctx, &self.optimizer.grads);
