@@ -11,8 +11,7 @@
 //! must be the reference's dZ within bf16 rounding, and dW the sum of the stored values.
 use scribblefield::field::bf16;
 use scribblefield::field::gpu::dense::{
-    DensePipelines, InputRows, MlpGradients, MlpPass, MlpPassDesc, PackedReads, RowFormat, RowView,
-    UNIFORM_WEIGHT_FLOATS,
+    DenseKernels, InputRows, MlpGradients, MlpPass, MlpPassDesc, PackedReads, RowFormat, RowView, UNIFORM_WEIGHT_FLOATS,
 };
 use scribblefield::field::gpu::keep::{HeadRows, workgroup_counts};
 use scribblefield::field::params::{MlpLayout, ParamLayout};
@@ -160,7 +159,7 @@ fn configs() -> Vec<(&'static str, FieldConfig)> {
 
 struct MlpCase<'a> {
     ctx: &'a GpuContext,
-    pipelines: &'a mut DensePipelines,
+    pipelines: &'a mut DenseKernels,
     name: String,
     layout: &'a MlpLayout,
     params: &'a [f32],
@@ -636,7 +635,7 @@ fn every_mlp_matches_the_reference() {
     let Some(ctx) = gpu_for_tests("every_mlp_matches_the_reference") else {
         return;
     };
-    check_every_mlp(&ctx, DensePipelines::new());
+    check_every_mlp(&ctx, DenseKernels::new());
 }
 
 /// The kernels CPU devices run: every layer that fits a uniform binding uses them (the default
@@ -648,13 +647,13 @@ fn every_mlp_matches_the_reference_with_uniform_weights() {
     };
     // With and without the input-gradient chain (the device decides by default).
     for chain in [true, false] {
-        let uniform = DensePipelines::with_family(KernelFamily::UniformWeights).with_input_gradient_chain(chain);
+        let uniform = DenseKernels::with_family(KernelFamily::UniformWeights).with_input_gradient_chain(chain);
         check_every_mlp(&ctx, uniform.with_uniform_block_limit(64));
         // The narrower blocks other CPU devices get (SwiftShader: 16).
         for limit in [16, 4] {
             check_every_mlp(
                 &ctx,
-                DensePipelines::with_family(KernelFamily::UniformWeights)
+                DenseKernels::with_family(KernelFamily::UniformWeights)
                     .with_uniform_block_limit(limit)
                     .with_input_gradient_chain(chain),
             );
@@ -676,7 +675,7 @@ fn every_mlp_matches_the_reference_with_uniform_weights() {
         gradients: None,
         kept: None,
     };
-    let mut pipelines = DensePipelines::with_family(KernelFamily::UniformWeights);
+    let mut pipelines = DenseKernels::with_family(KernelFamily::UniformWeights);
     let mlp = pollster::block_on(MlpPass::new(&ctx, &mut pipelines, desc)).unwrap();
     assert!(mlp.layer_families().all(|f| f == KernelFamily::UniformWeights));
 }
@@ -710,7 +709,7 @@ fn packed_reads_from_storage_give_the_bits_of_uniform_reads() {
         return;
     };
     let pipelines = |reads, limit| {
-        DensePipelines::with_family(KernelFamily::UniformWeights)
+        DenseKernels::with_family(KernelFamily::UniformWeights)
             .with_uniform_block_limit(limit)
             .with_input_gradient_chain(false)
             .with_packed_reads(reads)
@@ -766,7 +765,7 @@ fn unrolled_reductions_give_the_bits_of_loops() {
             let params = layout.init(29);
             for (index, (mlp_name, mlp)) in layout.mlps().into_iter().enumerate() {
                 let run = |unrolled| {
-                    let mut pipelines = DensePipelines::with_family(KernelFamily::UniformWeights)
+                    let mut pipelines = DenseKernels::with_family(KernelFamily::UniformWeights)
                         .with_uniform_block_limit(limit)
                         .with_input_gradient_chain(chain)
                         .with_unrolled_reductions(unrolled);
@@ -805,7 +804,7 @@ fn uniform_mlps_chain_their_input_gradients_where_they_fit() {
     };
     let configs = configs();
     let config = |name: &str| configs.iter().find(|(n, _)| *n == name).unwrap().1.clone();
-    let uniform = || DensePipelines::with_family(KernelFamily::UniformWeights).with_input_gradient_chain(true);
+    let uniform = || DenseKernels::with_family(KernelFamily::UniformWeights).with_input_gradient_chain(true);
     let cases = [
         (
             "small",
@@ -813,7 +812,7 @@ fn uniform_mlps_chain_their_input_gradients_where_they_fit() {
             [true, true, true, true],
         ),
         ("small", uniform().with_uniform_block_limit(16), [false; 4]),
-        ("small", DensePipelines::new(), [false; 4]),
+        ("small", DenseKernels::new(), [false; 4]),
         ("widths 16", uniform().with_uniform_block_limit(16), [true; 4]),
         // 128-wide density and colour layers; the feature MLP's copies span more than one
         // window; the semantic head's one hidden layer of 64 fits.
@@ -882,7 +881,7 @@ fn uniform_mlps_chain_their_input_gradients_where_they_fit() {
     assert!(fused_mlps >= 4, "only {fused_mlps} MLPs fused");
 }
 
-fn check_every_mlp(ctx: &GpuContext, mut pipelines: DensePipelines) {
+fn check_every_mlp(ctx: &GpuContext, mut pipelines: DenseKernels) {
     let ctx = ctx.clone();
     for (config_name, cfg) in configs() {
         cfg.validate().unwrap();
@@ -915,7 +914,7 @@ fn tiny_and_multi_chunk_row_counts_match_the_reference() {
     let layout = ParamLayout::new(&cfg);
     let params = layout.init(5);
     for family in [KernelFamily::Tiled, KernelFamily::UniformWeights] {
-        let mut pipelines = DensePipelines::with_family(family);
+        let mut pipelines = DenseKernels::with_family(family);
         // 1 row; fewer rows than a tile; many weight-gradient chunks with a ragged last one.
         for (rows, seed) in [(1, 1), (61, 2), (5003, 3)] {
             check_mlp(MlpCase {
@@ -946,7 +945,7 @@ fn kept_row_counts_match_the_reference() {
     let layout = ParamLayout::new(&cfg);
     let params = layout.init(7);
     for family in [KernelFamily::Tiled, KernelFamily::UniformWeights] {
-        let mut pipelines = DensePipelines::with_family(family).with_input_gradient_chain(true);
+        let mut pipelines = DenseKernels::with_family(family).with_input_gradient_chain(true);
         for (kept, seed) in [(0, 11), (1, 12), (1500, 13), (3000, 14)] {
             for (mlp_name, mlp, input_grad) in [("colour", &layout.color, false), ("semantic", &layout.semantic, true)]
             {
@@ -972,7 +971,7 @@ fn forward_only_pass_refuses_backward_and_bad_views_are_errors() {
     let Some(ctx) = gpu_for_tests("forward_only_pass_refuses_backward_and_bad_views_are_errors") else {
         return;
     };
-    let mut pipelines = DensePipelines::new();
+    let mut pipelines = DenseKernels::new();
     let layout = ParamLayout::new(&FieldConfig::small());
     let params = storage_buffer_from(&ctx, "params", &layout.init(1)).unwrap();
     let rows = 10;
@@ -1018,10 +1017,10 @@ fn forward_only_pass_refuses_backward_and_bad_views_are_errors() {
         "{error}"
     );
     // The packed-weight kernels take it, and store the hidden outputs as bf16 unless told not to.
-    let mut uniform = DensePipelines::with_family(KernelFamily::UniformWeights);
+    let mut uniform = DenseKernels::with_family(KernelFamily::UniformWeights);
     let mlp = pollster::block_on(MlpPass::new(&ctx, &mut uniform, desc(bf16_input))).unwrap();
     assert_eq!(mlp.hidden_rows(), RowFormat::Bf16);
-    let mut f32_rows = DensePipelines::with_family(KernelFamily::UniformWeights).with_hidden_rows(RowFormat::F32);
+    let mut f32_rows = DenseKernels::with_family(KernelFamily::UniformWeights).with_hidden_rows(RowFormat::F32);
     let mlp = pollster::block_on(MlpPass::new(&ctx, &mut f32_rows, desc(RowView::packed(&input, width)))).unwrap();
     assert_eq!(mlp.hidden_rows(), RowFormat::F32);
 }
@@ -1041,7 +1040,7 @@ fn owned_input_rows_take_the_hidden_rows_format() {
     let mlp = &layout.semantic;
     let (in_dim, out_dim) = (mlp.input_dim() as u32, mlp.output_dim() as u32);
     let output_grad = storage_buffer_garbage::<f32>(&ctx, "output grad", (rows * out_dim) as usize).unwrap();
-    let build = |pipelines: &mut DensePipelines| {
+    let build = |pipelines: &mut DenseKernels| {
         let desc = MlpPassDesc {
             label: "semantic",
             layout: mlp,
@@ -1066,12 +1065,11 @@ fn owned_input_rows_take_the_hidden_rows_format() {
         assert_eq!(grad.format, gradient);
         grad.check("input gradient", rows, in_dim).unwrap();
     };
-    let uniform = build(&mut DensePipelines::with_family(KernelFamily::UniformWeights));
+    let uniform = build(&mut DenseKernels::with_family(KernelFamily::UniformWeights));
     check(&uniform, RowFormat::Bf16, RowFormat::Bf16);
-    let f32_rows =
-        build(&mut DensePipelines::with_family(KernelFamily::UniformWeights).with_hidden_rows(RowFormat::F32));
+    let f32_rows = build(&mut DenseKernels::with_family(KernelFamily::UniformWeights).with_hidden_rows(RowFormat::F32));
     check(&f32_rows, RowFormat::F32, RowFormat::F32);
-    let tiled = build(&mut DensePipelines::with_family(KernelFamily::Tiled));
+    let tiled = build(&mut DenseKernels::with_family(KernelFamily::Tiled));
     check(&tiled, RowFormat::F32, RowFormat::F32);
 }
 
@@ -1099,8 +1097,8 @@ fn owned_bf16_input_gradient_is_the_f32_one_rounded() {
     let input_buffer = storage_buffer_from(&ctx, "input", &input).unwrap();
     let f32_grad = storage_buffer_garbage::<f32>(&ctx, "input grad", rows * in_dim).unwrap();
     for chain in [true, false] {
-        let mut pipelines = DensePipelines::with_family(KernelFamily::UniformWeights).with_input_gradient_chain(chain);
-        let build = |pipelines: &mut DensePipelines, input: InputRows, input_grad: InputRows| {
+        let mut pipelines = DenseKernels::with_family(KernelFamily::UniformWeights).with_input_gradient_chain(chain);
+        let build = |pipelines: &mut DenseKernels, input: InputRows, input_grad: InputRows| {
             let grads = storage_buffer_zeroed::<f32>(&ctx, "grads", layout.total).unwrap();
             let desc = MlpPassDesc {
                 label: "colour",
@@ -1185,7 +1183,7 @@ fn input_gradient_columns_outside_the_range_are_left_alone() {
         (RowFormat::Bf16, 16..width),
         (RowFormat::F32, 0..3),
     ] {
-        let mut pipelines = DensePipelines::with_family(KernelFamily::UniformWeights).with_input_gradient_chain(false);
+        let mut pipelines = DenseKernels::with_family(KernelFamily::UniformWeights).with_input_gradient_chain(false);
         let words = RowView::words(format, rows as u32, width) as usize;
         let mut run = |columns: Option<std::ops::Range<u32>>| -> Vec<u32> {
             let grad = storage_buffer_garbage::<f32>(&ctx, "input grad", words).unwrap();
@@ -1299,7 +1297,7 @@ fn density_mlp_throughput_report() {
         Ok("uniform") => KernelFamily::UniformWeights,
         _ => KernelFamily::Tiled,
     };
-    let mut pipelines = DensePipelines::with_family(family);
+    let mut pipelines = DenseKernels::with_family(family);
     let desc = MlpPassDesc {
         label: "density",
         layout: mlp_layout,

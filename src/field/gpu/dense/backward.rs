@@ -2,7 +2,7 @@
 //! sums reduced in a second pass (tiled or uniform-weight kernels per product, as the forward).
 use std::ops::Range;
 
-use super::pipelines::{DenseKernel, DensePipelines, ProductKind, ProductWeights};
+use super::pipelines::{DenseKernel, DenseKernels, ProductKind, ProductWeights};
 use super::pipelines::{bound, bound_product};
 use super::relu_mask::ReluMask;
 use super::spec::{
@@ -97,7 +97,7 @@ impl DenseBackward {
     /// [`DenseForward::new`], the window of the copy dX reads.
     pub(super) async fn new(
         ctx: &GpuContext,
-        pipelines: &mut DensePipelines,
+        pipelines: &mut DenseKernels,
         spec: &DenseLayerSpec,
         params: &wgpu::Buffer,
         (input, output): (&RowView, &RowView),

@@ -12,7 +12,7 @@
 //! copies the walk multiplies by lie in one 64 KiB window. Otherwise each layer keeps its own
 //! input-gradient kernel.
 use super::pipelines::bound;
-use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
+use super::pipelines::{DenseKernel, DenseKernels, ProductKind};
 use super::spec::{DenseDims, DenseLayerSpec, padded_to_vec4};
 use super::uniform::{MlpPacking, uniform_weight_chunks};
 use super::uniform_shape::{MAX_UNROLLED, UNIFORM_WORKGROUP, uniform_block, uniform_dispatch};
@@ -40,7 +40,7 @@ const CHAIN_STORAGE_BINDINGS: u32 = 8;
 /// as one chain on `ctx`: the block one invocation computes, or `None`.
 pub(super) fn chain_block(
     ctx: &GpuContext,
-    pipelines: &DensePipelines,
+    pipelines: &DenseKernels,
     specs: &[DenseLayerSpec],
     packing: &MlpPacking,
     input_grad: bool,
@@ -103,7 +103,7 @@ pub(super) struct BackwardChain {
 impl BackwardChain {
     pub(super) async fn new(
         ctx: &GpuContext,
-        pipelines: &DensePipelines,
+        pipelines: &DenseKernels,
         packing: &MlpPacking,
         desc: ChainDesc<'_>,
     ) -> Result<BackwardChain, GpuError> {

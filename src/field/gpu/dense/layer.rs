@@ -1,6 +1,6 @@
 //! One dense layer's forward, bound to its buffers (picking the tiled or uniform-weight kernels
 //! per product); its spec is `spec.rs`, its backward `backward.rs`.
-use super::pipelines::{DensePipelines, ProductKind, ProductWeights, bound_product};
+use super::pipelines::{DenseKernels, ProductKind, ProductWeights, bound_product};
 use super::relu_mask::ReluMask;
 use super::spec::{DenseDims, DenseLayerSpec, WORD, check_binding, padded_to_vec4, row_count, row_words};
 use super::{RowFormat, RowView, bf16_rows};
@@ -34,7 +34,7 @@ impl DenseForward {
     #[allow(clippy::too_many_arguments)]
     pub(super) async fn new(
         ctx: &GpuContext,
-        pipelines: &mut DensePipelines,
+        pipelines: &mut DenseKernels,
         spec: &DenseLayerSpec,
         params: &wgpu::Buffer,
         (input, output): (&RowView, &RowView),

@@ -5,7 +5,7 @@ use super::layer::DenseForward;
 use super::pipelines::ProductKind;
 use super::spec::DenseLayerSpec;
 use super::uniform::{MlpPacking, uniform_weight_chunks};
-use super::{DensePipelines, ReluMask, RowFormat, RowView};
+use super::{DenseKernels, ReluMask, RowFormat, RowView};
 use crate::field::gpu::keep::HeadRows;
 use crate::field::gpu::stage::{Stage, StepShape};
 use crate::field::params::MlpLayout;
@@ -81,7 +81,7 @@ pub struct MlpPass {
 impl MlpPass {
     pub async fn new(
         ctx: &GpuContext,
-        pipelines: &mut DensePipelines,
+        pipelines: &mut DenseKernels,
         desc: MlpPassDesc<'_>,
     ) -> Result<MlpPass, GpuError> {
         let MlpPassDesc {
@@ -439,7 +439,7 @@ fn layer_specs(label: &str, layout: &MlpLayout, rows: u32) -> Result<Vec<DenseLa
 /// gradient; `backward`: whether it has one.
 pub fn mlp_row_format(
     ctx: &GpuContext,
-    pipelines: &DensePipelines,
+    pipelines: &DenseKernels,
     layout: &MlpLayout,
     rows: u32,
     input_grad: bool,
@@ -456,7 +456,7 @@ pub fn mlp_row_format(
 /// f32 otherwise (the tiled kernels read f32 alone).
 fn hidden_format(
     ctx: &GpuContext,
-    pipelines: &DensePipelines,
+    pipelines: &DenseKernels,
     specs: &[DenseLayerSpec],
     input_grads: &[bool],
     backward: bool,

@@ -18,7 +18,7 @@
 //! multiply-adds); the invocation grid and chunk depth are override constants picked per
 //! layer shape by [`TileShape`], so 128-wide layers use 64×64 tiles and 1-, 3- or C-wide outputs
 //! tall thin ones. Pipelines are compiled once per (kernel, shape) and device (through
-//! [`DensePipelines`] into the context's pipeline cache) and shared by every layer of every MLP.
+//! [`DenseKernels`] into the context's pipeline cache) and shared by every layer of every MLP.
 //!
 //! On CPU devices (lavapipe, SwiftShader) the forward and the input gradient use a second
 //! family of kernels, [`KernelFamily::UniformWeights`] (`shaders/dense_*_uniform.wgsl`): one
@@ -71,7 +71,7 @@ mod uniform_shape;
 pub use backward::{DenseBackward, DenseGradients};
 pub use layer::DenseForward;
 pub use mlp::{InputRows, MlpGradients, MlpPass, MlpPassDesc, MlpStage, mlp_row_format};
-pub use pipelines::DensePipelines;
+pub use pipelines::DenseKernels;
 pub use relu_mask::ReluMask;
 pub use spec::{DenseDims, DenseLayerSpec};
 pub use tiled::TileShape;

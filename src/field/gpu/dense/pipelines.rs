@@ -96,9 +96,10 @@ impl DenseKernel {
     }
 }
 
-/// Which dense kernel family layers use; compiles (or fetches from the context's cache) the
-/// pipeline for one kernel and its override constants.
-pub struct DensePipelines {
+/// The choice of dense kernels: which family layers use and how its products are shaped, from
+/// the device's profile unless a test forces them. It holds no pipelines: it compiles (or
+/// fetches from the context's cache) the pipeline for one kernel and its override constants.
+pub struct DenseKernels {
     pub(super) family: KernelFamily,
     /// The widest block of outputs one uniform-weight invocation computes; `None`: the device's
     /// (`DeviceProfile::widest_uniform_block`).
@@ -115,20 +116,20 @@ pub struct DensePipelines {
     hidden_rows: RowFormat,
 }
 
-impl Default for DensePipelines {
+impl Default for DenseKernels {
     fn default() -> Self {
-        DensePipelines::with_family(KernelFamily::Tiled)
+        DenseKernels::with_family(KernelFamily::Tiled)
     }
 }
 
-impl DensePipelines {
+impl DenseKernels {
     /// Tiled kernels everywhere.
-    pub fn new() -> DensePipelines {
-        DensePipelines::default()
+    pub fn new() -> DenseKernels {
+        DenseKernels::default()
     }
 
-    pub fn with_family(family: KernelFamily) -> DensePipelines {
-        DensePipelines {
+    pub fn with_family(family: KernelFamily) -> DenseKernels {
+        DenseKernels {
             family,
             uniform_block_limit: None,
             input_gradient_chain: None,
@@ -140,8 +141,8 @@ impl DensePipelines {
 
     /// The same with the hidden outputs of MLPs that run the uniform-weight family stored as
     /// `format` (bf16 by default), so tests and benchmarks can compare both.
-    pub fn with_hidden_rows(self, format: RowFormat) -> DensePipelines {
-        DensePipelines {
+    pub fn with_hidden_rows(self, format: RowFormat) -> DenseKernels {
+        DenseKernels {
             hidden_rows: format,
             ..self
         }
@@ -153,8 +154,8 @@ impl DensePipelines {
 
     /// The same with the uniform-weight family reading its packed copies and dZ as `reads` says
     /// whatever the build, so tests can run both on one device.
-    pub fn with_packed_reads(self, reads: PackedReads) -> DensePipelines {
-        DensePipelines {
+    pub fn with_packed_reads(self, reads: PackedReads) -> DenseKernels {
+        DenseKernels {
             packed_reads: Some(reads),
             ..self
         }
@@ -165,7 +166,7 @@ impl DensePipelines {
     }
 
     /// The uniform-weight family's kernels of a forward, an input gradient and a weight gradient,
-    /// as they read ([`DensePipelines::packed_reads`]).
+    /// as they read ([`DenseKernels::packed_reads`]).
     fn packed_kernel(&self, kind: ProductKind) -> DenseKernel {
         match (kind, self.packed_reads()) {
             (ProductKind::Forward, PackedReads::Uniform) => DenseKernel::ForwardUniform,
@@ -184,8 +185,8 @@ impl DensePipelines {
 
     /// The same with the input-gradient chain on or off whatever the device, so tests can run
     /// it on one device at every block width.
-    pub fn with_input_gradient_chain(self, chain: bool) -> DensePipelines {
-        DensePipelines {
+    pub fn with_input_gradient_chain(self, chain: bool) -> DenseKernels {
+        DenseKernels {
             input_gradient_chain: Some(chain),
             ..self
         }
@@ -197,8 +198,8 @@ impl DensePipelines {
 
     /// The same with the uniform-weight products' reductions written out step by step, or kept
     /// as loops, whatever the device, so tests can run both on one device.
-    pub fn with_unrolled_reductions(self, unrolled: bool) -> DensePipelines {
-        DensePipelines {
+    pub fn with_unrolled_reductions(self, unrolled: bool) -> DenseKernels {
+        DenseKernels {
             unrolled_reductions: Some(unrolled),
             ..self
         }
@@ -208,7 +209,7 @@ impl DensePipelines {
     /// `row_columns` columns in blocks of `block` out step by step, where this device does so,
     /// the weights are read from uniform bindings (what the unrolling is for; unrolled storage
     /// reads compiled for minutes on lavapipe), it is short enough, and the row takes at most
-    /// [`MAX_FIXED_BLOCKS`] blocks, each then its own pipeline ([`DensePipelines::fixed_blocks`]).
+    /// [`MAX_FIXED_BLOCKS`] blocks, each then its own pipeline ([`DenseKernels::fixed_blocks`]).
     pub(super) fn unrolled_constants(
         &self,
         ctx: &GpuContext,
@@ -249,8 +250,8 @@ impl DensePipelines {
 
     /// The same with the uniform-weight kernels' blocks at most `limit` (a multiple of 4 up to 64)
     /// outputs wide whatever the device, so tests can run every width on one device.
-    pub fn with_uniform_block_limit(self, limit: u32) -> DensePipelines {
-        DensePipelines {
+    pub fn with_uniform_block_limit(self, limit: u32) -> DenseKernels {
+        DenseKernels {
             uniform_block_limit: Some(limit),
             ..self
         }
@@ -349,7 +350,7 @@ const ANY_BLOCK: u32 = u32::MAX;
 /// presets in lavapipe's blocks of 64 (the semantic head's 79 inputs, the 128-wide layers).
 const MAX_FIXED_BLOCKS: u32 = 2;
 
-impl DensePipelines {
+impl DenseKernels {
     /// The kernel for one of a layer's weight products, given where the weights are: the
     /// parameters, and the window of the MLP's packed copy for this product if it has one
     /// (`MlpPacking::window`; then the uniform-weight kernel runs, tiled otherwise).
@@ -375,7 +376,7 @@ impl DensePipelines {
             let block = self.uniform_product_block(ctx, columns);
             let mut workgroups = uniform_dispatch(ctx, spec.rows, columns, block)?;
             let (unrolled, unroll_constants) = self.unrolled_constants(ctx, reduced, columns, block);
-            let fixed = DensePipelines::fixed_blocks(unrolled, columns, block);
+            let fixed = DenseKernels::fixed_blocks(unrolled, columns, block);
             if fixed.len() > 1 {
                 workgroups[2] = 1;
             }

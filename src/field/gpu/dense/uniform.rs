@@ -5,7 +5,7 @@
 use std::num::NonZeroU64;
 
 use super::pipelines::bound;
-use super::pipelines::{DenseKernel, DensePipelines, ProductKind};
+use super::pipelines::{DenseKernel, DenseKernels, ProductKind};
 use super::spec::{DenseLayerSpec, padded_to_vec4, range_binding};
 use super::uniform_shape::{
     PackedReads, UNIFORM_WEIGHT_FLOATS, UNIFORM_WORKGROUP, packed_window_alignment, uniform_block,
@@ -117,7 +117,7 @@ pub(super) struct UniformWeightPartials {
 impl UniformWeightPartials {
     pub(super) async fn new(
         ctx: &GpuContext,
-        pipelines: &mut DensePipelines,
+        pipelines: &mut DenseKernels,
         layer: WindowedLayer<'_>,
     ) -> Result<Self, GpuError> {
         let WindowedLayer {
@@ -347,7 +347,7 @@ fn gcd(a: usize, b: usize) -> usize {
     if b == 0 { a } else { gcd(b, a % b) }
 }
 
-impl DensePipelines {
+impl DenseKernels {
     /// The per-chunk weight-gradient kernel, with an explicit layout (its dZ windows are bound
     /// as 64 KiB ranges of a larger buffer, or dZ whole from storage), and its two bind group
     /// layouts.
@@ -460,7 +460,7 @@ impl MlpPacking {
     /// too where `input_grads[k]` (the backward computes dX of that layer).
     pub(super) async fn new(
         ctx: &GpuContext,
-        pipelines: &DensePipelines,
+        pipelines: &DenseKernels,
         label: &str,
         params: &wgpu::Buffer,
         specs: &[DenseLayerSpec],

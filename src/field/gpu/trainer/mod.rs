@@ -24,7 +24,7 @@ use crate::spread::propagate::PropagationCache;
 
 use super::adam::{AdamBuffers, AdamPass};
 use super::composite::{CompositeInputs, CompositeLayout, CompositePass, LOSS_WORDS};
-use super::dense::{DensePipelines, InputRows, MlpGradients, MlpPass, MlpPassDesc, RowFormat, RowView, mlp_row_format};
+use super::dense::{DenseKernels, InputRows, MlpGradients, MlpPass, MlpPassDesc, RowFormat, RowView, mlp_row_format};
 use super::encoding::{
     AtomicAdd, HashGridBackwardBuffers, HashGridBackwardPass, PositionEncodeBuffers, PositionEncodePass,
 };
@@ -179,7 +179,7 @@ impl Trainer {
             },
         )
         .await?;
-        let mut pipelines = DensePipelines::with_family(ctx.profile().kernels);
+        let mut pipelines = DenseKernels::with_family(ctx.profile().kernels);
         // The SH in the colour MLP's row format: it owns its input rows, and the keep pass
         // copies the SH into them.
         let sh_format = mlp_row_format(ctx, &pipelines, &layout.color, n, true, true)?;
