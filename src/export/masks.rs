@@ -2,7 +2,6 @@ use std::io::{Cursor, Read, Write};
 use std::path::{Path, PathBuf};
 
 use image::{DynamicImage, GrayImage, RgbImage};
-use serde::{Deserialize, Serialize};
 use zip::write::SimpleFileOptions;
 
 use super::error::ExportError;
@@ -12,34 +11,12 @@ use crate::labels::{ClassInfo, LabelSet};
 use crate::scene::Scene;
 use crate::scene::error::{Result, SceneError};
 
-pub const MASKS_FORMAT: &str = "scribblefield-masks";
-pub const MASKS_VERSION: u32 = 1;
-
 /// Dense predicted masks of every frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MaskSet {
     pub classes: Vec<ClassInfo>,
     /// Class id per pixel, one image per frame.
     pub masks: Vec<GrayImage>,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct MasksManifest {
-    pub format: String,
-    pub version: u32,
-    pub frames: u32,
-    pub width: u32,
-    pub height: u32,
-    pub classes: Vec<ClassInfo>,
-    /// File of frame i is `files[i]`; previews are under `preview/` with the same names.
-    pub files: Vec<String>,
-    /// The same masks named after the frames in their capture: frame i's is `by_name[i]`
-    /// (under `by-name/`). Empty when the export was made without the scene.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub by_name: Vec<String>,
-    /// The masks keep only this many largest regions of each class but the first.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub objects: Option<u32>,
 }
 
 impl MaskSet {

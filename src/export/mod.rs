@@ -7,6 +7,7 @@
 pub mod animation;
 pub mod coco;
 mod error;
+mod manifest;
 mod masks;
 pub mod names;
 pub mod objects;
@@ -17,7 +18,8 @@ pub mod voc;
 mod writer;
 
 pub use error::ExportError;
-pub use masks::{MaskDirWriter, MaskSet, MasksManifest, read_masks, read_masks_zip, zip_files};
+pub use manifest::MasksManifest;
+pub use masks::{MaskDirWriter, MaskSet, read_masks, read_masks_zip, zip_files};
 pub use options::{ExportOptions, Format};
 pub use writer::{BY_NAME_DIR, ExportWriter, MANIFEST};
 

@@ -7,7 +7,7 @@ use image::{DynamicImage, GrayImage, ImageFormat};
 use super::animation::{self, Animation};
 use super::coco::{self, CocoBuilder};
 use super::error::ExportError;
-use super::masks::{MASKS_FORMAT, MASKS_VERSION, MasksManifest};
+use super::manifest::{MASKS_FORMAT, MASKS_VERSION, MasksManifest};
 use super::names::frame_names;
 use super::options::ExportOptions;
 use super::ply::{self, PointCloud};

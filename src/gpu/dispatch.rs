@@ -3,27 +3,10 @@
 //! ([`bind_named`]), checked against the table `build.rs` generates from the shader
 //! (`shaders::ShaderBinding`: which bindings each entry point uses, by name), so a pass never
 //! lists bindings by position.
-use std::cell::Cell;
-
 use super::context::GpuContext;
 use super::error::GpuError;
-use super::pipeline::{Dispatch1d, KernelSpec, create_compute_pipeline};
+use super::pipeline::{Dispatch1d, KernelSpec, count_dispatch, create_compute_pipeline};
 use super::shaders::{ShaderBinding, bindings_of};
-
-thread_local! {
-    static RECORDED: Cell<u64> = const { Cell::new(0) };
-}
-
-/// Dispatches recorded on this thread so far: every place that records one counts it. A
-/// diagnostic (`bench` counts a training step's by recording one it never submits).
-pub fn dispatches_recorded() -> u64 {
-    RECORDED.with(Cell::get)
-}
-
-/// Counts one recorded dispatch (see [`dispatches_recorded`]).
-pub(crate) fn count_dispatch() {
-    RECORDED.with(|c| c.set(c.get() + 1));
-}
 
 /// A compute pipeline with its bind group 0 and workgroup counts: what a pass records.
 #[derive(Debug)]

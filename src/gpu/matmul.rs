@@ -143,7 +143,7 @@ impl MatmulKernel {
         pass.set_bind_group(0, &job.bind_group, &[]);
         for _ in 0..repeats {
             pass.dispatch_workgroups(job.dims.n.div_ceil(OUTPUT_TILE), job.dims.m.div_ceil(OUTPUT_TILE), 1);
-            super::dispatch::count_dispatch();
+            super::pipeline::count_dispatch();
         }
     }
 

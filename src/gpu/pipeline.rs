@@ -1,9 +1,26 @@
 //! Compute pipelines from the embedded shaders (compiled once per device: see
 //! `gpu::pipeline_cache`) and 1D dispatches that stay within the per-dimension workgroup limit.
 //! Bind groups are made by binding name (`gpu::dispatch`).
+use std::cell::Cell;
+
 use super::context::GpuContext;
 use super::error::GpuError;
 use super::pipeline_cache::PipelineKey;
+
+thread_local! {
+    static RECORDED: Cell<u64> = const { Cell::new(0) };
+}
+
+/// Dispatches recorded on this thread so far: every place that records one counts it. A
+/// diagnostic (`bench` counts a training step's by recording one it never submits).
+pub fn dispatches_recorded() -> u64 {
+    RECORDED.with(Cell::get)
+}
+
+/// Counts one recorded dispatch (see [`dispatches_recorded`]).
+pub(crate) fn count_dispatch() {
+    RECORDED.with(|c| c.set(c.get() + 1));
+}
 
 /// What to build a compute pipeline from.
 #[derive(Debug, Clone, Copy)]
@@ -153,7 +170,7 @@ impl Dispatch1d {
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         pass.dispatch_workgroups(self.x, self.y, 1);
-        super::dispatch::count_dispatch();
+        count_dispatch();
     }
 }
 

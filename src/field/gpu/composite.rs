@@ -33,7 +33,7 @@ use crate::gpu::dispatch::{Dispatch, whole};
 use crate::gpu::pipeline::{Dispatch1d, KernelSpec};
 use crate::gpu::{GpuContext, GpuError, KernelFamily, shaders};
 
-use super::rays::{RAY_WORKGROUP_SIZE, TARGET_HEADER_WORDS};
+use super::rays::{RAY_WORKGROUP_SIZE, TARGET_HEADER_WORDS, target_bytes};
 pub use super::row_view::RowView;
 use super::stage::{Stage, StepShape, WORD};
 
@@ -340,7 +340,7 @@ impl Stage for CompositePass {
         let feature = StepShape::words(step.heads.feature, f);
         n * (2 * WORD + 8)
             + k * (heads_row - 1 - f + feature) * WORD
-            + step.target_bytes()
+            + target_bytes(step)
             + n * 3 * WORD
             + k * heads_row * WORD
             + self.layout.ray_output_words() as u64 * WORD

@@ -25,7 +25,7 @@ use crate::gpu::{GpuContext, GpuError, shaders};
 use crate::scene::Bounds;
 
 use super::scene_buffers::{LabelIndex, SceneBuffers};
-use super::stage::{Stage, StepShape};
+use super::stage::{Stage, StepShape, WORD};
 
 /// Invocations per workgroup of the ray kernels (one invocation per ray).
 pub const RAY_WORKGROUP_SIZE: u32 = 64;
@@ -257,6 +257,11 @@ impl RayBatchPass {
     }
 }
 
+/// Bytes of the batch's targets in `step`: R·(header + f) words.
+pub(super) fn target_bytes(step: &StepShape) -> u64 {
+    step.rays() * WORD * (TARGET_HEADER_WORDS as u64 + u64::from(step.cfg.feature_dim))
+}
+
 /// Bytes of one [`RayGeometry`].
 pub(super) const RAY_GEOMETRY_BYTES: u64 = std::mem::size_of::<RayGeometry>() as u64;
 
@@ -271,7 +276,7 @@ impl Stage for RayBatchPass {
 
     /// Reads the pixels' targets, R·(8 + f) words; writes R ray geometries and targets.
     fn global_bytes(&self, step: &StepShape) -> u64 {
-        2 * step.target_bytes() + step.rays() * RAY_GEOMETRY_BYTES
+        2 * target_bytes(step) + step.rays() * RAY_GEOMETRY_BYTES
     }
 }
 

@@ -75,11 +75,6 @@ impl<'a> StepShape<'a> {
         (u64::from(self.cfg.geometry_dim), u64::from(self.cfg.feature_dim))
     }
 
-    /// Bytes of the batch's targets: R·(header + f) words.
-    pub fn target_bytes(&self) -> u64 {
-        self.rays() * WORD * (crate::field::gpu::rays::TARGET_HEADER_WORDS as u64 + u64::from(self.cfg.feature_dim))
-    }
-
     /// Words of one row of `width` values stored as `format`.
     pub fn words(format: RowFormat, width: u64) -> u64 {
         RowView::words(format, 1, width as u32)

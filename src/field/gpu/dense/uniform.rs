@@ -271,7 +271,7 @@ impl UniformWeightPartials {
         for (windows, count) in &self.windows {
             pass.set_bind_group(1, windows, &[]);
             pass.dispatch_workgroups(self.workgroups[0], self.workgroups[1], *count);
-            crate::gpu::dispatch::count_dispatch();
+            crate::gpu::pipeline::count_dispatch();
         }
     }
 }

@@ -63,7 +63,7 @@ impl Trainer {
     /// samples at most; `bench` passes the mean it measured). The head kernels' dispatches
     /// are indirect: they count as one each whatever they launch.
     pub fn step_shape(&self, samples_to_heads: u64) -> Vec<StageShape> {
-        use crate::gpu::dispatch::dispatches_recorded;
+        use crate::gpu::pipeline::dispatches_recorded;
         let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("counting a step's dispatches (never submitted)"),
         });
