@@ -7,7 +7,7 @@ use scribblefield::field::gpu::encoding::{
     AtomicAdd, BackwardStrategy, HashGridBackwardBuffers, HashGridBackwardPass, PositionEncodeBuffers,
     PositionEncodePass, WORKGROUP_SIZE,
 };
-use scribblefield::field::gpu::sh_encode::{DirectionShBuffers, DirectionShPass, ShOutputLayout};
+use scribblefield::field::gpu::sh_encode::{ShEncodeBuffers, ShEncodePass, ShOutputLayout};
 use scribblefield::field::gpu::stage::Stage;
 use scribblefield::field::reference::hash_grid::{self, HashGrid};
 use scribblefield::field::reference::{frequency, sh};
@@ -549,11 +549,11 @@ fn direction_sh_matches_reference_and_leaves_other_columns() {
         let per_word = if bf16_rows { 2 } else { 1 };
         let directions_buffer = storage_buffer_from(&ctx, "directions", &directions).unwrap();
         let output = storage_buffer_garbage::<f32>(&ctx, "sh output", n * row_stride / per_word).unwrap();
-        let buffers = DirectionShBuffers {
+        let buffers = ShEncodeBuffers {
             directions: &directions_buffer,
             output: &output,
         };
-        let pass = pollster::block_on(DirectionShPass::new(&ctx, n, layout, buffers)).unwrap();
+        let pass = pollster::block_on(ShEncodePass::new(&ctx, n, layout, buffers)).unwrap();
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         pass.record(&mut encoder.begin_compute_pass(&Default::default()));
         ctx.queue.submit([encoder.finish()]);
@@ -617,7 +617,7 @@ fn passes_refuse_buffers_that_are_too_small() {
         ..buffers
     };
     assert!(pollster::block_on(PositionEncodePass::new(&ctx, &cfg, 100, shifted)).is_err());
-    let sh_buffers = DirectionShBuffers {
+    let sh_buffers = ShEncodeBuffers {
         directions: &positions,
         output: &encoding,
     };
@@ -627,7 +627,7 @@ fn passes_refuse_buffers_that_are_too_small() {
         column_offset: 0,
         format: RowFormat::F32,
     };
-    assert!(pollster::block_on(DirectionShPass::new(&ctx, 100, layout, sh_buffers)).is_err());
+    assert!(pollster::block_on(ShEncodePass::new(&ctx, 100, layout, sh_buffers)).is_err());
 }
 
 /// Samples like the trainer's: per ray, 16 stratified over the chord through the unit cube and
@@ -728,11 +728,11 @@ fn encoding_throughput_report() {
         column_offset: 0,
         format: RowFormat::F32,
     };
-    let sh_buffers = DirectionShBuffers {
+    let sh_buffers = ShEncodeBuffers {
         directions: &directions,
         output: &color_in,
     };
-    let sh_pass = pollster::block_on(DirectionShPass::new(&ctx, n, sh_layout, sh_buffers)).unwrap();
+    let sh_pass = pollster::block_on(ShEncodePass::new(&ctx, n, sh_layout, sh_buffers)).unwrap();
 
     eprintln!("adapter: {}", ctx.describe());
     eprintln!("default config (16 levels × 2^19 × 2, 2 octaves), {rays} rays × 64 samples = {n} samples");

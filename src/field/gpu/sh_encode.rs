@@ -42,7 +42,7 @@ impl DirectionLayout {
     pub const RAY_GEOMETRY: DirectionLayout = DirectionLayout { stride: 3, offset: 1 };
 }
 
-/// Where [`DirectionShPass`] writes: 16 columns of a per-sample buffer whose rows also hold
+/// Where [`ShEncodePass`] writes: 16 columns of a per-sample buffer whose rows also hold
 /// other values (the colour MLP's input `[SH 16 | geometry]`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ShOutputLayout {
@@ -56,9 +56,9 @@ pub struct ShOutputLayout {
     pub format: RowFormat,
 }
 
-/// The buffers of [`DirectionShPass`].
+/// The buffers of [`ShEncodePass`].
 #[derive(Debug, Clone, Copy)]
-pub struct DirectionShBuffers<'a> {
+pub struct ShEncodeBuffers<'a> {
     /// One unit direction per ray as `vec4<f32>` (xyz; w unused).
     pub directions: &'a wgpu::Buffer,
     /// Output: N rows of `row_stride` values in `ShOutputLayout::format`; only the SH columns
@@ -68,28 +68,28 @@ pub struct DirectionShBuffers<'a> {
 
 /// Degree-4 SH of each ray's direction, written for each of its samples (see the module docs).
 #[derive(Debug)]
-pub struct DirectionShPass {
+pub struct ShEncodePass {
     dispatch: Dispatch,
     _uniforms: wgpu::Buffer,
 }
 
-impl DirectionShPass {
+impl ShEncodePass {
     pub async fn new(
         ctx: &GpuContext,
         samples: usize,
         layout: ShOutputLayout,
-        buffers: DirectionShBuffers<'_>,
+        buffers: ShEncodeBuffers<'_>,
     ) -> Result<Self, GpuError> {
         Self::with_directions(ctx, samples, layout, DirectionLayout::PACKED, buffers).await
     }
 
-    /// As [`DirectionShPass::new`] with directions laid out as `directions_at` says.
+    /// As [`ShEncodePass::new`] with directions laid out as `directions_at` says.
     pub async fn with_directions(
         ctx: &GpuContext,
         samples: usize,
         layout: ShOutputLayout,
         directions_at: DirectionLayout,
-        buffers: DirectionShBuffers<'_>,
+        buffers: ShEncodeBuffers<'_>,
     ) -> Result<Self, GpuError> {
         const WHAT: &str = "view direction SH";
         check_samples(WHAT, samples)?;
@@ -149,14 +149,14 @@ impl DirectionShPass {
             ("sh_out", buffers.output),
         ]);
         let dispatch = Dispatch::build(ctx, &spec, &bindings, groups).await?;
-        Ok(DirectionShPass {
+        Ok(ShEncodePass {
             dispatch,
             _uniforms: uniform_buffer,
         })
     }
 }
 
-impl Stage for DirectionShPass {
+impl Stage for ShEncodePass {
     fn name(&self) -> &'static str {
         "sh"
     }

@@ -33,7 +33,7 @@ use super::keep::{HeadRows, KeepBuffers, KeepPass, KeepShape};
 use super::rays::{FrameTilePass, RayBatchPass, SamplePointsPass, StepUniforms};
 use super::rays::{NO_LABEL, RayGeometry, TARGET_FLAGS, TARGET_HEADER_WORDS, TARGET_LABEL, TARGET_PIXEL};
 use super::scene_buffers::SceneBuffers;
-use super::sh_encode::{DirectionLayout, DirectionShBuffers, DirectionShPass, ShOutputLayout};
+use super::sh_encode::{DirectionLayout, ShEncodeBuffers, ShEncodePass, ShOutputLayout};
 use super::view::view_rays;
 pub use super::view::{DepthGuide, FrameAssembler, RenderedFrame, ViewCamera};
 use crate::field::reference::mlp::{Rounding, StoredRows};
@@ -108,7 +108,7 @@ pub struct Trainer {
     display_pca: Option<Pca>,
     sample_points: SamplePointsPass,
     encode: PositionEncodePass,
-    sh: DirectionShPass,
+    sh: ShEncodePass,
     density: MlpPass,
     feature: MlpPass,
     color: MlpPass,
@@ -184,7 +184,7 @@ impl Trainer {
         // copies the SH into them.
         let sh_format = mlp_row_format(ctx, &pipelines, &layout.color, n, true, true)?;
         let sh_rows = RowView::zeroed(ctx, "view SH", sh_format, n, SH)?;
-        let sh = DirectionShPass::with_directions(
+        let sh = ShEncodePass::with_directions(
             ctx,
             n as usize,
             ShOutputLayout {
@@ -194,7 +194,7 @@ impl Trainer {
                 format: sh_format,
             },
             DirectionLayout::RAY_GEOMETRY,
-            DirectionShBuffers {
+            ShEncodeBuffers {
                 directions: &ray_batch.rays,
                 output: &sh_rows.buffer,
             },
