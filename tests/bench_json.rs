@@ -57,6 +57,9 @@ fn bench_json_is_one_object_with_every_field() {
     assert!(to_heads > 0.0 && to_heads <= 64.0 * number("samples_per_ray"), "{v}");
     assert!(names_of(&v).contains(&"keep"), "{v}");
     assert!(v["adapter"].is_string() && v["config"] == "tiny", "{v}");
+    // The CLI's own fields: building the trainer compiled at least one kernel per kind of stage
+    // (rays, samples, encoding, SH, composite, dense, glue, keep, hash backward, Adam).
+    assert!(number("build_s") > 0.0 && number("kernels_compiled") >= 15.0, "{v}");
     // Float atomics where the device has them (lavapipe), else one invocation per level on a
     // CPU device and fixed point on a GPU (`AtomicAdd::best_for`).
     let atomics = v["hash_atomics"].as_str().unwrap_or_default();

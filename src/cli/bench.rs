@@ -48,7 +48,13 @@ pub fn run(mut args: BenchArgs) -> CliResult {
     // The demo scene has labels (synthetic scribbles) but no feature codes.
     let scene = bench_scene(&mut cfg)?;
 
+    // Building the trainer uploads the scene and compiles every kernel of the step (the page
+    // shows "building kernels" meanwhile).
+    let build_clock = Stopwatch::start();
     let mut trainer = pollster::block_on(Trainer::new(&ctx, &scene, &cfg, 0))?;
+    ctx.wait_idle()?;
+    let build_seconds = build_clock.elapsed_seconds();
+    let kernels_compiled = ctx.pipeline_cache_stats().compiled;
     trainer.train(args.warmup);
     ctx.wait_idle()?;
     let tally_before = pollster::block_on(trainer.kept_tally())?;
@@ -76,6 +82,8 @@ pub fn run(mut args: BenchArgs) -> CliResult {
             samples_to_heads,
         );
         report.insert("config".into(), args.field.describe().into());
+        report.insert("build_s".into(), build_seconds.into());
+        report.insert("kernels_compiled".into(), kernels_compiled.into());
         let report = serde_json::Value::Object(report);
         println!("{report}");
         return Ok(());
@@ -92,6 +100,7 @@ pub fn run(mut args: BenchArgs) -> CliResult {
         cfg.feature_width,
         cfg.semantic_width
     );
+    println!("built:            {build_seconds:.2} s  (scene uploaded, {kernels_compiled} kernels compiled)");
     println!("step:             {:.4} s  ({:.2} steps/s)", seconds, 1.0 / seconds);
     println!("rays/s:           {:.0}", rays / seconds);
     println!("samples/s:        {:.0}", samples / seconds);

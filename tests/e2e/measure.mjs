@@ -6,6 +6,10 @@
 //   E2E_BIG_SCENE   a large archive served next to the page (e.g. made with
 //                   `scribblefield demo-scene -o www/big.scene.zip --frames 300 --size 320x240`):
 //                   how long it takes to open and how responsive the page stays while decoding
+//   E2E_STARTUP     an archive served next to the page, opened with the page's defaults: how
+//                   long from the scene shown to training (the scene uploaded, the kernels
+//                   built), and how soon two strokes register while the kernels build against
+//                   two drawn while training
 //   E2E_OPTIONS     page options for the training measurements (default below)
 //   E2E_SKIP_TRAIN  set to skip the training measurements
 //   CHROMIUM        browser binary (default /usr/bin/chromium)
@@ -75,6 +79,34 @@ try {
     console.log(`  download ${((decodeStart - m.statuses[0][0]) / 1000).toFixed(1)} s, decode ${((ready - decodeStart) / 1000).toFixed(1)} s`);
     console.log(`  while decoding: ${frames.length} animation frames, longest gap ${gap.toFixed(0)} ms, ` +
       `${progress} progress updates, ${long.length} long tasks (longest ${longest.toFixed(0)} ms)`);
+    await page.close();
+  }
+
+  if (process.env.E2E_STARTUP) {
+    const page = await openPage(context, new URL(`#scene=${process.env.E2E_STARTUP}`, url).href, "startup", consoleLog);
+    let s = await settledStatus(page, 600_000);
+    const shown = Date.now();
+    // Two strokes, each timed from the first mouse event until the page counts it.
+    const twoStrokes = async (what) => {
+      const [x, y, w, h] = s.view;
+      const times = [];
+      for (let i = 0; i < 2; i++) {
+        const before = (await status(page)).strokes;
+        const start = Date.now();
+        await page.mouse.move(x + w * 0.3, y + h * (0.4 + 0.1 * i));
+        await page.mouse.down();
+        await page.mouse.move(x + w * 0.5, y + h * (0.4 + 0.1 * i), { steps: 5 });
+        await page.mouse.up();
+        await waitForStatus(page, (t) => t.strokes === before + 1, "the stroke", 300_000);
+        times.push(((Date.now() - start) / 1000).toFixed(1));
+      }
+      console.log(`startup: strokes ${what} registered ${times.join(" s, ")} s after their first mouse event`);
+    };
+    await twoStrokes(`while the kernels build (training ${s.training})`);
+    s = await waitForStatus(page, (t) => t.training === "running", "training", 600_000);
+    console.log(`startup: scene shown -> training running ${((Date.now() - shown) / 1000).toFixed(1)} s`);
+    s = await waitForStatus(page, (t) => t.steps >= 1, "a step", 600_000);
+    await twoStrokes("while training");
     await page.close();
   }
 

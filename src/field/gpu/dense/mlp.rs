@@ -307,17 +307,23 @@ impl MlpPass {
     /// recorded before it, with no parameter update between (it reads the stored outputs and
     /// the weights the forward packed); fails on a forward-only pass.
     pub fn record_backward(&self, pass: &mut wgpu::ComputePass<'_>) -> Result<(), GpuError> {
-        let backward = self.backward.as_ref().ok_or_else(|| {
+        let backward = self.backward.as_deref().ok_or_else(|| {
             let label = self.forward.first().map_or("mlp", |layer| layer.spec().label.as_str());
             GpuError::invalid_argument(label, "backward recorded on a pass built without gradients")
         })?;
+        self.record_backward_layers(pass, backward);
+        Ok(())
+    }
+
+    /// The input-gradient chain, if any, then `backward` (this pass's backward layers) from the
+    /// last layer down.
+    fn record_backward_layers(&self, pass: &mut wgpu::ComputePass<'_>, backward: &[DenseBackward]) {
         if let Some(chain) = &self.chain {
             chain.record(pass);
         }
         for layer in backward.iter().rev() {
             layer.record(pass);
         }
-        Ok(())
     }
 
     /// Bytes its forward moves through global memory over `rows` rows (the packing of the
@@ -483,7 +489,14 @@ fn hidden_format(
 pub struct MlpStage<'a> {
     mlp: &'a MlpPass,
     name: &'static str,
-    backward: bool,
+    direction: Direction<'a>,
+}
+
+/// Which half of an MLP a stage records; a backward stage holds the pass's backward layers, so
+/// a stage of a pass built without gradients cannot be made.
+enum Direction<'a> {
+    Forward,
+    Backward(&'a [DenseBackward]),
 }
 
 impl MlpPass {
@@ -492,22 +505,20 @@ impl MlpPass {
         MlpStage {
             mlp: self,
             name,
-            backward: false,
+            direction: Direction::Forward,
         }
     }
 
     /// The backward as a stage named `name`; fails on a pass built without gradients.
     pub fn backward_stage(&self, name: &'static str) -> Result<MlpStage<'_>, GpuError> {
-        if self.backward.is_none() {
-            return Err(GpuError::invalid_argument(
-                name,
-                "a backward stage of a pass built without gradients",
-            ));
-        }
+        let layers = self
+            .backward
+            .as_deref()
+            .ok_or_else(|| GpuError::invalid_argument(name, "a backward stage of a pass built without gradients"))?;
         Ok(MlpStage {
             mlp: self,
             name,
-            backward: true,
+            direction: Direction::Backward(layers),
         })
     }
 }
@@ -518,11 +529,9 @@ impl Stage for MlpStage<'_> {
     }
 
     fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
-        if self.backward {
-            // `backward_stage` checked that the pass has its backward.
-            let _ = self.mlp.record_backward(pass);
-        } else {
-            self.mlp.record_forward(pass);
+        match self.direction {
+            Direction::Forward => self.mlp.record_forward(pass),
+            Direction::Backward(layers) => self.mlp.record_backward_layers(pass, layers),
         }
     }
 
@@ -535,10 +544,9 @@ impl Stage for MlpStage<'_> {
         } else {
             step.samples()
         };
-        if self.backward {
-            self.mlp.backward_bytes(rows)
-        } else {
-            self.mlp.forward_bytes(rows)
+        match self.direction {
+            Direction::Forward => self.mlp.forward_bytes(rows),
+            Direction::Backward(_) => self.mlp.backward_bytes(rows),
         }
     }
 }
