@@ -8,8 +8,8 @@
 //                   how long it takes to open and how responsive the page stays while decoding
 //   E2E_STARTUP     an archive served next to the page, opened with the page's defaults: how
 //                   long from the scene shown to training (the scene uploaded, the kernels
-//                   built), and how soon two strokes register while the kernels build against
-//                   two drawn while training
+//                   built, two strokes drawn meanwhile), and how soon those two strokes
+//                   register against two drawn while training
 //   E2E_OPTIONS     page options for the training measurements (default below)
 //   E2E_SKIP_TRAIN  set to skip the training measurements
 //   CHROMIUM        browser binary (default /usr/bin/chromium)
@@ -22,7 +22,7 @@ import { mkdtempSync, rmSync } from "node:fs";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
 import { chromium } from "playwright-core";
-import { CHROMIUM_ARGS, openPage, parseStatus, settledStatus, status, waitForStatus } from "./lib.mjs";
+import { CHROMIUM_ARGS, clearSaves, openPage, parseStatus, settledStatus, status, waitForStatus } from "./lib.mjs";
 
 const url = process.env.E2E_URL;
 if (!url) {
@@ -49,6 +49,14 @@ function watchPage() {
   new PerformanceObserver((list) => {
     for (const e of list.getEntries()) window.__m.longTasks.push([e.startTime, e.duration]);
   }).observe({ type: "longtask", buffered: true });
+}
+
+// A horizontal stroke across the middle of the frame view `[x, y, w, h]`, at `row` of its height.
+async function dragAcross(page, [x, y, w, h], row, steps = 1) {
+  await page.mouse.move(x + w * 0.3, y + h * row);
+  await page.mouse.down();
+  await page.mouse.move(x + w * 0.5, y + h * row, { steps });
+  await page.mouse.up();
 }
 
 let context;
@@ -88,15 +96,11 @@ try {
     const shown = Date.now();
     // Two strokes, each timed from the first mouse event until the page counts it.
     const twoStrokes = async (what) => {
-      const [x, y, w, h] = s.view;
       const times = [];
       for (let i = 0; i < 2; i++) {
         const before = (await status(page)).strokes;
         const start = Date.now();
-        await page.mouse.move(x + w * 0.3, y + h * (0.4 + 0.1 * i));
-        await page.mouse.down();
-        await page.mouse.move(x + w * 0.5, y + h * (0.4 + 0.1 * i), { steps: 5 });
-        await page.mouse.up();
+        await dragAcross(page, s.view, 0.4 + 0.1 * i, 5);
         await waitForStatus(page, (t) => t.strokes === before + 1, "the stroke", 300_000);
         times.push(((Date.now() - start) / 1000).toFixed(1));
       }
@@ -107,6 +111,8 @@ try {
     console.log(`startup: scene shown -> training running ${((Date.now() - shown) / 1000).toFixed(1)} s`);
     s = await waitForStatus(page, (t) => t.steps >= 1, "a step", 600_000);
     await twoStrokes("while training");
+    // The strokes were saved for this scene: the training measurement below starts from none.
+    await clearSaves(page);
     await page.close();
   }
 
@@ -121,11 +127,7 @@ try {
       "training", 600_000);
     console.log(`training: step_ms=${s.step_ms.join("+")} (submit+wait per step) sps=${s.sps} batch=${s.batch}`);
     // A stroke while training runs: how soon the mask is refreshed for it.
-    const [x, y, w, h] = s.view;
-    await page.mouse.move(x + w * 0.3, y + h * 0.5);
-    await page.mouse.down();
-    await page.mouse.move(x + w * 0.5, y + h * 0.5);
-    await page.mouse.up();
+    await dragAcross(page, s.view, 0.5);
     const drawn = Date.now();
     s = await waitForStatus(page, (t) => t.strokes === 1, "the stroke", 60_000);
     const stepAtStroke = s.steps;
